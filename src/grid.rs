@@ -1,0 +1,395 @@
+//! Occupancy grids from sonar arcs: the paper's *simple counting* rule and a Bayesian log-odds grid.
+//!
+//! Each reading is a cone (the sensor's beam) cut at the measured range. Cells on the arc band at
+//! the range (one cell thick) are *hits*; cells inside the cone before the band are *misses*.
+//! Simple counting keeps the two tallies per cell and reports `C = hits / (hits + misses)`.
+//! Near readings are trusted more, as in the paper: under 600 mm a hit counts 10 and a miss 2;
+//! otherwise both count 1. The log-odds grid adds `log(p/(1-p))` of an inverse sensor model per
+//! hit or miss instead, over the very same cells, so the two can be compared like for like.
+
+use crate::geometry::wrap_angle;
+use crate::sonar::PlacedReading;
+use serde::{Deserialize, Serialize};
+
+/// Settings of a grid. Defaults are the paper's office experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GridConfig {
+    /// Cells along x: 80 in the paper's office (120 in the museum).
+    pub width_cells: usize,
+    /// Cells along y: 80 in the paper's office.
+    pub height_cells: usize,
+    /// Cell size: 20 cm in the paper.
+    pub resolution_m: f64,
+    /// World position of the lower-left corner of the grid; the paper puts the origin at (0, 0)
+    /// and starts the robot at (2.5 m, 2.5 m) so all readings fall in the first quadrant.
+    pub origin_m: [f64; 2],
+    /// Readings nearer than this count more: 600 mm in the paper.
+    pub near_range_m: f64,
+    /// Hit weight of a near reading: 10 in the paper.
+    pub near_hit: u32,
+    /// Miss weight of a near reading: 2 in the paper.
+    pub near_miss: u32,
+    /// Hit weight of other readings: 1 in the paper.
+    pub far_hit: u32,
+    /// Miss weight of other readings: 1 in the paper.
+    pub far_miss: u32,
+    /// A cell with occupancy above this is occupied (ours: 0.5, an even split of the evidence).
+    pub occupied_threshold: f64,
+    /// A cell with occupancy below this is free (ours: 0.2).
+    pub free_threshold: f64,
+    /// Whether a reading with no echo marks its whole cone as free. Off by default: a specular
+    /// wall returns no echo, so silence is no proof of free space.
+    pub no_echo_is_free: bool,
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        Self {
+            width_cells: 80,
+            height_cells: 80,
+            resolution_m: 0.2,
+            origin_m: [0.0, 0.0],
+            near_range_m: 0.6,
+            near_hit: 10,
+            near_miss: 2,
+            far_hit: 1,
+            far_miss: 1,
+            occupied_threshold: 0.5,
+            free_threshold: 0.2,
+            no_echo_is_free: false,
+        }
+    }
+}
+
+/// Errors in grid settings.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum GridError {
+    /// A setting is out of range.
+    #[error("grid setting `{key}` = {value} is invalid: {reason}")]
+    Invalid {
+        /// The key.
+        key: &'static str,
+        /// Its value.
+        value: f64,
+        /// What is expected.
+        reason: &'static str,
+    },
+}
+
+impl GridConfig {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), GridError> {
+        let bad = |key, value: f64, reason| Err(GridError::Invalid { key, value, reason });
+        if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
+            return bad("resolution_m", self.resolution_m, "must be a positive number of metres");
+        }
+        if self.width_cells == 0 || self.height_cells == 0 || self.width_cells * self.height_cells > 100_000_000 {
+            return bad("width_cells", self.width_cells as f64, "grid must have between 1 and 1e8 cells");
+        }
+        if !(0.0..=1.0).contains(&self.occupied_threshold) || !(0.0..=1.0).contains(&self.free_threshold) {
+            return bad("occupied_threshold", self.occupied_threshold, "thresholds must lie in [0, 1]");
+        }
+        if !self.origin_m.iter().all(|v| v.is_finite()) {
+            return bad("origin_m", self.origin_m[0], "must be finite");
+        }
+        Ok(())
+    }
+}
+
+/// Grid and Hough settings together: the `mapping:` section of a world or run file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct MappingConfig {
+    /// Occupancy grid.
+    pub grid: GridConfig,
+    /// Hough corner features.
+    pub hough: crate::hough::HoughConfig,
+}
+
+/// What a reading says about a cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CellEvidence {
+    /// On the arc at the measured range.
+    Hit,
+    /// Inside the cone, before the arc.
+    Miss,
+}
+
+/// Geometry shared by both grids: cell indexing and the cone traversal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridGeometry {
+    /// Cells along x.
+    pub width: usize,
+    /// Cells along y.
+    pub height: usize,
+    /// Cell size, metres.
+    pub resolution_m: f64,
+    /// Lower-left corner, metres.
+    pub origin_m: [f64; 2],
+}
+
+impl GridGeometry {
+    /// From the settings.
+    pub fn from_config(c: &GridConfig) -> Self {
+        Self { width: c.width_cells, height: c.height_cells, resolution_m: c.resolution_m, origin_m: c.origin_m }
+    }
+
+    /// Cell containing a world point, as (column, row from the bottom).
+    pub fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let cx = ((x - self.origin_m[0]) / self.resolution_m).floor();
+        let cy = ((y - self.origin_m[1]) / self.resolution_m).floor();
+        if cx < 0.0 || cy < 0.0 || cx >= self.width as f64 || cy >= self.height as f64 {
+            return None;
+        }
+        Some((cx as usize, cy as usize))
+    }
+
+    /// Centre of a cell in the world, metres.
+    pub fn centre(&self, col: usize, row: usize) -> (f64, f64) {
+        (
+            self.origin_m[0] + (col as f64 + 0.5) * self.resolution_m,
+            self.origin_m[1] + (row as f64 + 0.5) * self.resolution_m,
+        )
+    }
+
+    /// Calls `visit(index, evidence)` for each cell the reading says something about.
+    /// `range_m` is the arc radius; with `hit == false` the whole cone up to it is a miss.
+    pub fn for_each_cone_cell(
+        &self,
+        reading: &PlacedReading,
+        half_cone_rad: f64,
+        range_m: f64,
+        hit: bool,
+        mut visit: impl FnMut(usize, CellEvidence),
+    ) {
+        let p = reading.world_from_sensor;
+        let band = 0.5 * self.resolution_m;
+        let reach = range_m + band;
+        let lo = self.cell_index_clamped(p.x - reach, p.y - reach);
+        let hi = self.cell_index_clamped(p.x + reach, p.y + reach);
+        let (Some(lo), Some(hi)) = (lo, hi) else { return };
+        for row in lo.1..=hi.1 {
+            let cy = self.origin_m[1] + (row as f64 + 0.5) * self.resolution_m - p.y;
+            for col in lo.0..=hi.0 {
+                let cx = self.origin_m[0] + (col as f64 + 0.5) * self.resolution_m - p.x;
+                let d = (cx * cx + cy * cy).sqrt();
+                if d > reach {
+                    continue;
+                }
+                // Cells the sensor sits in are always inside the beam.
+                if d > band && wrap_angle(cy.atan2(cx) - p.theta).abs() > half_cone_rad {
+                    continue;
+                }
+                let idx = row * self.width + col;
+                if hit && d >= range_m - band {
+                    visit(idx, CellEvidence::Hit);
+                } else if d < range_m - band {
+                    visit(idx, CellEvidence::Miss);
+                }
+            }
+        }
+    }
+
+    fn cell_index_clamped(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let cx = ((x - self.origin_m[0]) / self.resolution_m).floor();
+        let cy = ((y - self.origin_m[1]) / self.resolution_m).floor();
+        if cx.is_nan() || cy.is_nan() {
+            return None;
+        }
+        Some((
+            cx.clamp(0.0, (self.width - 1) as f64) as usize,
+            cy.clamp(0.0, (self.height - 1) as f64) as usize,
+        ))
+    }
+}
+
+/// A finished occupancy map: per cell the probability of being occupied, or `None` if unseen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancyMap {
+    /// Geometry.
+    pub geometry: GridGeometry,
+    /// Row-major from the bottom row.
+    pub occupancy: Vec<Option<f64>>,
+    /// Above this: occupied.
+    pub occupied_threshold: f64,
+    /// Below this: free.
+    pub free_threshold: f64,
+}
+
+impl OccupancyMap {
+    /// Whether a cell is occupied.
+    pub fn is_occupied(&self, idx: usize) -> bool {
+        self.occupancy.get(idx).copied().flatten().is_some_and(|c| c > self.occupied_threshold)
+    }
+
+    /// Whether a cell is free.
+    pub fn is_free(&self, idx: usize) -> bool {
+        self.occupancy.get(idx).copied().flatten().is_some_and(|c| c < self.free_threshold)
+    }
+
+    /// Number of cells that have been observed.
+    pub fn known_cells(&self) -> usize {
+        self.occupancy.iter().filter(|c| c.is_some()).count()
+    }
+}
+
+/// Both grids insert readings the same way.
+pub trait OccupancyGrid {
+    /// Adds one reading.
+    fn insert(&mut self, reading: &PlacedReading);
+    /// The map so far.
+    fn map(&self) -> OccupancyMap;
+    /// Adds many readings.
+    fn insert_all(&mut self, readings: &[PlacedReading]) {
+        for r in readings {
+            self.insert(r);
+        }
+    }
+}
+
+/// The paper's simple counting grid.
+#[derive(Debug, Clone)]
+pub struct CountingGrid {
+    config: GridConfig,
+    geometry: GridGeometry,
+    half_cone_rad: f64,
+    max_range_m: f64,
+    hits: Vec<u32>,
+    misses: Vec<u32>,
+}
+
+impl CountingGrid {
+    /// An empty grid for sensors with the given beam width and maximum range.
+    pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
+        config.validate()?;
+        let geometry = GridGeometry::from_config(&config);
+        let n = geometry.width * geometry.height;
+        Ok(Self { config, geometry, half_cone_rad: 0.5 * cone_rad, max_range_m, hits: vec![0; n], misses: vec![0; n] })
+    }
+
+    /// Hit and miss tallies of a cell.
+    pub fn counts(&self, idx: usize) -> (u32, u32) {
+        (self.hits.get(idx).copied().unwrap_or(0), self.misses.get(idx).copied().unwrap_or(0))
+    }
+}
+
+fn reading_extent(r: &PlacedReading, max_range_m: f64, no_echo_is_free: bool) -> Option<(f64, bool)> {
+    match r.range_m {
+        Some(range) if range.is_finite() && range >= 0.0 && range <= max_range_m => Some((range, true)),
+        Some(_) | None if no_echo_is_free => Some((max_range_m, false)),
+        _ => None,
+    }
+}
+
+impl OccupancyGrid for CountingGrid {
+    fn insert(&mut self, reading: &PlacedReading) {
+        let Some((range, hit)) = reading_extent(reading, self.max_range_m, self.config.no_echo_is_free) else {
+            return;
+        };
+        let near = hit && range < self.config.near_range_m;
+        let (wh, wm) = if near {
+            (self.config.near_hit, self.config.near_miss)
+        } else {
+            (self.config.far_hit, self.config.far_miss)
+        };
+        let (hits, misses) = (&mut self.hits, &mut self.misses);
+        self.geometry.for_each_cone_cell(reading, self.half_cone_rad, range, hit, |idx, e| match e {
+            CellEvidence::Hit => hits[idx] += wh,
+            CellEvidence::Miss => misses[idx] += wm,
+        });
+    }
+
+    fn map(&self) -> OccupancyMap {
+        let occupancy = self
+            .hits
+            .iter()
+            .zip(&self.misses)
+            .map(|(&h, &m)| if h + m == 0 { None } else { Some(h as f64 / (h + m) as f64) })
+            .collect();
+        OccupancyMap {
+            geometry: self.geometry.clone(),
+            occupancy,
+            occupied_threshold: self.config.occupied_threshold,
+            free_threshold: self.config.free_threshold,
+        }
+    }
+}
+
+/// Log-odds of an occupied cell given a hit: inverse sensor model p = 0.7.
+pub const LOG_ODDS_HIT: f32 = 0.847_298;
+/// Log-odds of an occupied cell given a miss: inverse sensor model p = 0.4.
+pub const LOG_ODDS_MISS: f32 = -0.405_465;
+/// Log-odds are clamped to +-this so a cell can still change its mind.
+pub const LOG_ODDS_CLAMP: f32 = 8.0;
+
+/// A Bayesian log-odds grid over the same cone cells.
+#[derive(Debug, Clone)]
+pub struct LogOddsGrid {
+    config: GridConfig,
+    geometry: GridGeometry,
+    half_cone_rad: f64,
+    max_range_m: f64,
+    log_odds: Vec<f32>,
+    seen: Vec<bool>,
+}
+
+impl LogOddsGrid {
+    /// An empty grid.
+    pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
+        config.validate()?;
+        let geometry = GridGeometry::from_config(&config);
+        let n = geometry.width * geometry.height;
+        Ok(Self { config, geometry, half_cone_rad: 0.5 * cone_rad, max_range_m, log_odds: vec![0.0; n], seen: vec![false; n] })
+    }
+}
+
+impl OccupancyGrid for LogOddsGrid {
+    fn insert(&mut self, reading: &PlacedReading) {
+        let Some((range, hit)) = reading_extent(reading, self.max_range_m, self.config.no_echo_is_free) else {
+            return;
+        };
+        let (lo, seen) = (&mut self.log_odds, &mut self.seen);
+        self.geometry.for_each_cone_cell(reading, self.half_cone_rad, range, hit, |idx, e| {
+            let l = &mut lo[idx];
+            *l = (*l + if e == CellEvidence::Hit { LOG_ODDS_HIT } else { LOG_ODDS_MISS })
+                .clamp(-LOG_ODDS_CLAMP, LOG_ODDS_CLAMP);
+            seen[idx] = true;
+        });
+    }
+
+    fn map(&self) -> OccupancyMap {
+        let occupancy = self
+            .log_odds
+            .iter()
+            .zip(&self.seen)
+            .map(|(&l, &s)| s.then(|| 1.0 - 1.0 / (1.0 + (l as f64).exp())))
+            .collect();
+        OccupancyMap {
+            geometry: self.geometry.clone(),
+            occupancy,
+            occupied_threshold: self.config.occupied_threshold,
+            free_threshold: self.config.free_threshold,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+
+    #[test]
+    fn a_near_reading_marks_arc_occupied_and_cone_free() {
+        let mut g = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 2.1).unwrap();
+        let r = PlacedReading { t_s: 0.0, world_from_sensor: Pose2::new(2.5, 2.5, 0.0), range_m: Some(0.5) };
+        g.insert(&r);
+        let geo = GridGeometry::from_config(&GridConfig::default());
+        let (c, rw) = geo.cell_of(3.0, 2.5).unwrap();
+        assert_eq!(g.counts(rw * geo.width + c), (10, 0));
+        let (c, rw) = geo.cell_of(2.7, 2.5).unwrap();
+        assert_eq!(g.counts(rw * geo.width + c), (0, 2));
+        let m = g.map();
+        assert!(m.is_occupied(rw * geo.width + c + 1) || m.is_occupied(rw * geo.width + c + 2));
+    }
+}

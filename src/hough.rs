@@ -1,0 +1,428 @@
+//! Corner features from sonar arcs by a Hough transform, as in the paper.
+//!
+//! The parameter space is a polar grid about the global origin (100 mm x 1 degree by default).
+//! Every reading with an echo votes along its arc: the arc across the beam is sampled every
+//! [`HoughConfig::arc_sample_m`] and each sample adds one vote to the cell it falls in, so a
+//! reading gives about as many votes to a cell as the cell is wide, whatever its range.
+//! A point reflector (a room corner, a pillar's edge, a door jamb) lies on the arcs of every
+//! reading that sees it, so its cell collects votes from many places; a flat wall only collects
+//! votes near the foot of each perpendicular.
+//!
+//! **Peak rule.** A cell is a feature when (1) its votes reach the threshold (70 in the paper's
+//! office, 50 in the museum), (2) it is the maximum of its (2r+1) x (2r+1) neighbourhood in the
+//! accumulator, and (3) its votes came from positions spread around it: the directions from the
+//! cell to the voting sensors, in 10 degree sectors, must span at least
+//! [`HoughConfig::min_spread_deg`] (60 degrees by default). A wall point is only voted from
+//! near its normal (the arc is tangent to the wall there), so rule 3 rejects it.
+//!
+//! **Windows.** Online, votes are gathered over windows of 70 cm of travel or 70 degrees of turn
+//! (the paper's), each window starting half a window after the previous one so a corner on a
+//! window boundary is not cut in two; features found in several windows are merged. Offline, one
+//! accumulator collects the whole run.
+
+use crate::grid::OccupancyMap;
+use crate::run::{pose_at, StampedPose};
+use crate::sonar::PlacedReading;
+use serde::{Deserialize, Serialize};
+
+/// Settings of the Hough transform. Defaults are the paper's office experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HoughConfig {
+    /// Radial cell size: 100 mm in the paper.
+    pub rho_step_m: f64,
+    /// Angular cell size: 1 degree in the paper.
+    pub phi_step_deg: f64,
+    /// Largest radius covered, metres (ours: 40 m, any home).
+    pub rho_max_m: f64,
+    /// Spacing of vote samples along an arc (ours: 10 mm, a tenth of a cell).
+    pub arc_sample_m: f64,
+    /// A window ends after this much travel: 70 cm in the paper.
+    pub window_travel_m: f64,
+    /// ... or this much turning: 70 degrees in the paper.
+    pub window_turn_deg: f64,
+    /// Votes a feature needs: 70 in the paper's office, 50 in the museum.
+    pub threshold: u32,
+    /// Votes a feature of the offline pass needs; defaults to the online threshold.
+    pub offline_threshold: Option<u32>,
+    /// Half size of the local-maximum neighbourhood, in cells (ours: 2).
+    pub peak_radius_cells: usize,
+    /// Least angular spread of the voting positions as seen from the feature (ours: 60 degrees).
+    pub min_spread_deg: f64,
+    /// Features closer than this are one (ours: 25 cm).
+    pub merge_radius_m: f64,
+}
+
+impl Default for HoughConfig {
+    fn default() -> Self {
+        Self {
+            rho_step_m: 0.1,
+            phi_step_deg: 1.0,
+            rho_max_m: 40.0,
+            arc_sample_m: 0.01,
+            window_travel_m: 0.7,
+            window_turn_deg: 70.0,
+            threshold: 70,
+            offline_threshold: None,
+            peak_radius_cells: 2,
+            min_spread_deg: 60.0,
+            merge_radius_m: 0.25,
+        }
+    }
+}
+
+/// A corner feature.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Feature {
+    /// Position, metres.
+    pub x_m: f64,
+    /// Position, metres.
+    pub y_m: f64,
+    /// Votes of the strongest sighting.
+    pub votes: u32,
+    /// Windows in which it was found (1 for the offline pass).
+    pub sightings: u32,
+    /// Spread of the voting directions, degrees.
+    pub spread_deg: f64,
+    /// What the grid says about it.
+    pub kind: FeatureKind,
+}
+
+/// What kind of point a feature is, judged from the free space around it in the grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FeatureKind {
+    /// Free space on less than 40% of the ring around it: a room corner (concave).
+    Corner,
+    /// Free space on more than 60% of the ring: an edge (convex corner, pillar, jamb).
+    Edge,
+    /// In between, or too little known around it.
+    Unknown,
+}
+
+impl FeatureKind {
+    /// Name as written in `corners.csv`.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            FeatureKind::Corner => "corner",
+            FeatureKind::Edge => "edge",
+            FeatureKind::Unknown => "unknown",
+        }
+    }
+}
+
+/// Sectors used for the spread rule.
+const SPREAD_SECTORS: usize = 36;
+
+/// The polar vote accumulator.
+#[derive(Debug, Clone)]
+pub struct Accumulator {
+    /// Radial bins.
+    pub n_rho: usize,
+    /// Angular bins.
+    pub n_phi: usize,
+    /// Votes, row-major by radius (`rho_bin * n_phi + phi_bin`).
+    pub votes: Vec<u32>,
+    sum_x: Vec<f32>,
+    sum_y: Vec<f32>,
+    sectors: Vec<u64>,
+    touched: Vec<usize>,
+    rho_step: f64,
+    phi_step: f64,
+}
+
+impl Accumulator {
+    /// An empty accumulator.
+    pub fn new(config: &HoughConfig) -> Self {
+        let n_rho = (config.rho_max_m / config.rho_step_m).ceil().max(1.0) as usize;
+        let n_phi = (360.0 / config.phi_step_deg).round().max(1.0) as usize;
+        let n = n_rho * n_phi;
+        Self {
+            n_rho,
+            n_phi,
+            votes: vec![0; n],
+            sum_x: vec![0.0; n],
+            sum_y: vec![0.0; n],
+            sectors: vec![0; n],
+            touched: Vec::new(),
+            rho_step: config.rho_step_m,
+            phi_step: config.phi_step_deg.to_radians(),
+        }
+    }
+
+    fn cell(&self, x: f64, y: f64) -> Option<usize> {
+        let rho = x.hypot(y);
+        let ir = (rho / self.rho_step) as usize;
+        if ir >= self.n_rho || !rho.is_finite() {
+            return None;
+        }
+        let phi = y.atan2(x).rem_euclid(std::f64::consts::TAU);
+        let ip = ((phi / self.phi_step) as usize).min(self.n_phi - 1);
+        Some(ir * self.n_phi + ip)
+    }
+
+    /// Votes along the arc of one reading.
+    pub fn vote(&mut self, reading: &PlacedReading, half_cone_rad: f64, arc_sample_m: f64) {
+        let Some(range) = reading.range_m else { return };
+        if !(range.is_finite() && range > 0.0) {
+            return;
+        }
+        let p = reading.world_from_sensor;
+        let n = ((2.0 * half_cone_rad * range / arc_sample_m).ceil() as usize).max(1);
+        for k in 0..=n {
+            let a = p.theta - half_cone_rad + 2.0 * half_cone_rad * k as f64 / n as f64;
+            let (s, c) = a.sin_cos();
+            let (x, y) = (p.x + range * c, p.y + range * s);
+            let Some(i) = self.cell(x, y) else { continue };
+            if self.votes[i] == 0 {
+                self.touched.push(i);
+            }
+            self.votes[i] += 1;
+            self.sum_x[i] += x as f32;
+            self.sum_y[i] += y as f32;
+            // Direction from the voted point back to the sensor.
+            let back = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU);
+            let sector = ((back / std::f64::consts::TAU) * SPREAD_SECTORS as f64) as usize % SPREAD_SECTORS;
+            self.sectors[i] |= 1 << sector;
+        }
+    }
+
+    /// Forgets all votes.
+    pub fn clear(&mut self) {
+        for &i in &self.touched {
+            self.votes[i] = 0;
+            self.sum_x[i] = 0.0;
+            self.sum_y[i] = 0.0;
+            self.sectors[i] = 0;
+        }
+        self.touched.clear();
+    }
+
+    /// Spread of the voting directions of a cell, degrees: the widest run of voted sectors,
+    /// bridging single empty sectors. A thin wall voted from both sides has two short runs, not
+    /// one wide one.
+    fn spread_deg(&self, i: usize) -> f64 {
+        let mask = self.sectors[i];
+        if mask == 0 {
+            return 0.0;
+        }
+        let on = |k: usize| mask & (1 << (k % SPREAD_SECTORS)) != 0;
+        if (0..SPREAD_SECTORS).all(on) {
+            return 360.0;
+        }
+        let mut best = 0;
+        for start in 0..SPREAD_SECTORS {
+            // Runs start at a voted sector after an empty one.
+            if !on(start) || on(start + SPREAD_SECTORS - 1) {
+                continue;
+            }
+            let mut end = start;
+            let mut k = start + 1;
+            while k < start + SPREAD_SECTORS {
+                if on(k) {
+                    end = k;
+                } else if !on(k + 1) {
+                    break;
+                }
+                k += 1;
+            }
+            best = best.max(end - start + 1);
+        }
+        best as f64 * 360.0 / SPREAD_SECTORS as f64
+    }
+
+    /// Peaks by the module's rule, strongest first.
+    pub fn peaks(&self, threshold: u32, peak_radius: usize, min_spread_deg: f64) -> Vec<Feature> {
+        let mut out = Vec::new();
+        let r = peak_radius as i64;
+        for &i in &self.touched {
+            let v = self.votes[i];
+            if v < threshold {
+                continue;
+            }
+            let (ir, ip) = ((i / self.n_phi) as i64, (i % self.n_phi) as i64);
+            let mut is_max = true;
+            'nb: for dr in -r..=r {
+                let rr = ir + dr;
+                if rr < 0 || rr >= self.n_rho as i64 {
+                    continue;
+                }
+                for dp in -r..=r {
+                    if dr == 0 && dp == 0 {
+                        continue;
+                    }
+                    let pp = (ip + dp).rem_euclid(self.n_phi as i64);
+                    let j = rr as usize * self.n_phi + pp as usize;
+                    // Ties go to the lower index so a flat top gives one peak.
+                    if self.votes[j] > v || (self.votes[j] == v && j < i) {
+                        is_max = false;
+                        break 'nb;
+                    }
+                }
+            }
+            if !is_max {
+                continue;
+            }
+            let spread = self.spread_deg(i);
+            if spread < min_spread_deg {
+                continue;
+            }
+            out.push(Feature {
+                x_m: (self.sum_x[i] / v as f32) as f64,
+                y_m: (self.sum_y[i] / v as f32) as f64,
+                votes: v,
+                sightings: 1,
+                spread_deg: spread,
+                kind: FeatureKind::Unknown,
+            });
+        }
+        out.sort_by(|a, b| b.votes.cmp(&a.votes));
+        out
+    }
+}
+
+/// Merges features closer than `radius_m`: the strongest keeps its position, sightings add up.
+pub fn merge_features(mut features: Vec<Feature>, radius_m: f64) -> Vec<Feature> {
+    features.sort_by(|a, b| b.votes.cmp(&a.votes));
+    let mut out: Vec<Feature> = Vec::new();
+    for f in features {
+        if let Some(m) = out.iter_mut().find(|m| (m.x_m - f.x_m).hypot(m.y_m - f.y_m) < radius_m) {
+            m.sightings += f.sightings;
+            m.spread_deg = m.spread_deg.max(f.spread_deg);
+        } else {
+            out.push(f);
+        }
+    }
+    out
+}
+
+/// Online features: windows of travel or turn along `trajectory`, merged.
+pub fn features_online(
+    readings: &[PlacedReading],
+    trajectory: &[StampedPose],
+    half_cone_rad: f64,
+    config: &HoughConfig,
+) -> Vec<Feature> {
+    // Cumulative travel and turn of the robot at each reading.
+    let mut travel = Vec::with_capacity(readings.len());
+    let mut turn = Vec::with_capacity(readings.len());
+    let (mut s, mut a) = (0.0, 0.0);
+    let mut prev = readings.first().and_then(|r| pose_at(trajectory, r.t_s));
+    for r in readings {
+        if let (Some(p), Some(q)) = (prev, pose_at(trajectory, r.t_s)) {
+            s += (q.x - p.x).hypot(q.y - p.y);
+            a += crate::geometry::wrap_angle(q.theta - p.theta).abs().to_degrees();
+            prev = Some(q);
+        }
+        travel.push(s);
+        turn.push(a);
+    }
+    let mut acc = Accumulator::new(config);
+    let mut found = Vec::new();
+    let mut start = 0;
+    while start < readings.len() {
+        let within = |i: usize| {
+            travel[i] - travel[start] <= config.window_travel_m && turn[i] - turn[start] <= config.window_turn_deg
+        };
+        let mut end = start;
+        while end < readings.len() && within(end) {
+            acc.vote(&readings[end], half_cone_rad, config.arc_sample_m);
+            end += 1;
+        }
+        found.extend(acc.peaks(config.threshold, config.peak_radius_cells, config.min_spread_deg));
+        acc.clear();
+        if end >= readings.len() {
+            break;
+        }
+        // Next window starts half a window on.
+        let mut next = start + 1;
+        while next < end
+            && travel[next] - travel[start] < 0.5 * config.window_travel_m
+            && turn[next] - turn[start] < 0.5 * config.window_turn_deg
+        {
+            next += 1;
+        }
+        start = next;
+    }
+    merge_features(found, config.merge_radius_m)
+}
+
+/// Offline features: one accumulator over the whole run. Returns the accumulator too (for display).
+pub fn features_offline(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    config: &HoughConfig,
+) -> (Vec<Feature>, Accumulator) {
+    let mut acc = Accumulator::new(config);
+    for r in readings {
+        acc.vote(r, half_cone_rad, config.arc_sample_m);
+    }
+    let threshold = config.offline_threshold.unwrap_or(config.threshold);
+    let peaks = acc.peaks(threshold, config.peak_radius_cells, config.min_spread_deg);
+    (merge_features(peaks, config.merge_radius_m), acc)
+}
+
+/// Ring around a feature inspected by [`classify_features`]: 0.3 to 0.6 m.
+const RING_M: (f64, f64) = (0.3, 0.6);
+
+/// Labels each feature a room corner or an edge from the free space around it in the grid.
+pub fn classify_features(features: &mut [Feature], map: &OccupancyMap) {
+    let g = &map.geometry;
+    let reach = (RING_M.1 / g.resolution_m).ceil() as i64;
+    for f in features.iter_mut() {
+        let Some((c0, r0)) = g.cell_of(f.x_m, f.y_m) else { continue };
+        let (mut free, mut known) = (0usize, 0usize);
+        for dr in -reach..=reach {
+            for dc in -reach..=reach {
+                let (c, r) = (c0 as i64 + dc, r0 as i64 + dr);
+                if c < 0 || r < 0 || c >= g.width as i64 || r >= g.height as i64 {
+                    continue;
+                }
+                let (x, y) = g.centre(c as usize, r as usize);
+                let d = (x - f.x_m).hypot(y - f.y_m);
+                if !(RING_M.0..=RING_M.1).contains(&d) {
+                    continue;
+                }
+                let idx = r as usize * g.width + c as usize;
+                if map.occupancy[idx].is_some() {
+                    known += 1;
+                    if map.is_free(idx) {
+                        free += 1;
+                    }
+                }
+            }
+        }
+        f.kind = if known < 4 {
+            FeatureKind::Unknown
+        } else {
+            let frac = free as f64 / known as f64;
+            if frac < 0.4 {
+                FeatureKind::Corner
+            } else if frac > 0.6 {
+                FeatureKind::Edge
+            } else {
+                FeatureKind::Unknown
+            }
+        };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+
+    #[test]
+    fn readings_around_a_point_make_a_peak_there() {
+        let target = (5.0, 4.0);
+        let mut readings = Vec::new();
+        for k in 0..24 {
+            let a = (k as f64 * 5.0 - 60.0).to_radians();
+            let (sx, sy) = (target.0 - 1.2 * a.cos(), target.1 - 1.2 * a.sin());
+            readings.push(PlacedReading { t_s: 0.0, world_from_sensor: Pose2::new(sx, sy, a + 0.05), range_m: Some(1.2) });
+        }
+        let (f, _) = features_offline(&readings, 15f64.to_radians(), &HoughConfig::default());
+        assert!(!f.is_empty());
+        assert!((f[0].x_m - target.0).hypot(f[0].y_m - target.1) < 0.1, "{:?}", f[0]);
+    }
+}

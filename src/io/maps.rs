@@ -1,0 +1,127 @@
+//! Maps on disk: ROS map_server pairs (PGM + YAML), the paper's inverse-grey PNG, the Hough
+//! accumulator image and `corners.csv`.
+
+use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
+use crate::grid::OccupancyMap;
+use crate::hough::{Accumulator, Feature};
+use crate::world::Raster;
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// A ROS map_server YAML file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RosMapYaml {
+    /// Image file, relative to the YAML.
+    pub image: String,
+    /// `trinary`, `scale` or `raw` (map_server's modes); we write `scale`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mode: Option<String>,
+    /// Metres per pixel.
+    pub resolution: f64,
+    /// Pose of the lower-left pixel: x, y, yaw.
+    pub origin: [f64; 3],
+    /// Whether white means occupied.
+    pub negate: u8,
+    /// Occupancy above this is occupied.
+    pub occupied_thresh: f64,
+    /// Occupancy below this is free.
+    pub free_thresh: f64,
+}
+
+/// Grey value ROS uses for unknown cells.
+const ROS_UNKNOWN: u8 = 205;
+
+/// Writes `<stem>.pgm` and `<stem>.yaml` in map_server's convention.
+pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), IoError> {
+    let g = &map.geometry;
+    let mut pixels = vec![ROS_UNKNOWN; g.width * g.height];
+    for row in 0..g.height {
+        for col in 0..g.width {
+            if let Some(c) = map.occupancy[row * g.width + col] {
+                // map_server reads occupancy as (255 - value) / 255.
+                pixels[(g.height - 1 - row) * g.width + col] = (255.0 * (1.0 - c)).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    let pgm = dir.join(format!("{stem}.pgm"));
+    let mut bytes = format!("P5\n# stereotag occupancy grid\n{} {}\n255\n", g.width, g.height).into_bytes();
+    bytes.extend_from_slice(&pixels);
+    write_file(&pgm, &bytes)?;
+    let yaml = RosMapYaml {
+        image: format!("{stem}.pgm"),
+        mode: Some("scale".into()),
+        resolution: g.resolution_m,
+        origin: [g.origin_m[0], g.origin_m[1], 0.0],
+        negate: 0,
+        occupied_thresh: map.occupied_threshold,
+        free_thresh: map.free_threshold,
+    };
+    let path = dir.join(format!("{stem}.yaml"));
+    write_file(&path, to_yaml(&path, &yaml)?.as_bytes())
+}
+
+/// Reads a ROS map as a wall raster: every cell that is not free (occupied or unknown) is an
+/// obstacle, so the unknown space behind walls is solid.
+pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
+    let meta: RosMapYaml = parse_yaml(yaml_path, &read_text(yaml_path)?)?;
+    if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
+        return Err(IoError::content(yaml_path, "`resolution` must be a positive number of metres per pixel"));
+    }
+    if meta.origin.iter().any(|v| !v.is_finite()) || meta.origin[2] != 0.0 {
+        return Err(IoError::content(yaml_path, "`origin` must be finite with yaw 0 (rotated maps are not supported)"));
+    }
+    let image_path = yaml_path.parent().unwrap_or(Path::new(".")).join(&meta.image);
+    let img = image::open(&image_path)
+        .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
+        .to_luma8();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let obstacle = img
+        .pixels()
+        .map(|p| {
+            let v = p.0[0] as f64;
+            let occ = if meta.negate != 0 { v / 255.0 } else { (255.0 - v) / 255.0 };
+            occ > meta.free_thresh
+        })
+        .collect();
+    Ok(Raster { width: w, height: h, obstacle, resolution_m: meta.resolution, origin_m: [meta.origin[0], meta.origin[1]] })
+}
+
+fn save_gray_png(path: &Path, width: usize, height: usize, pixels: Vec<u8>) -> Result<(), IoError> {
+    let img = image::GrayImage::from_raw(width as u32, height as u32, pixels)
+        .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))?;
+    img.save(path).map_err(|e| IoError::content(path, format!("cannot write PNG: {e}")))
+}
+
+/// The paper's display: occupancy normalised to [0, 1] over the map, drawn inverse grey (black =
+/// most occupied, white = free or unseen), north up.
+pub fn save_map_png(path: &Path, map: &OccupancyMap) -> Result<(), IoError> {
+    let g = &map.geometry;
+    let max = map.occupancy.iter().flatten().fold(0.0f64, |a, &b| a.max(b)).max(1e-9);
+    let mut pixels = vec![255u8; g.width * g.height];
+    for row in 0..g.height {
+        for col in 0..g.width {
+            if let Some(c) = map.occupancy[row * g.width + col] {
+                pixels[(g.height - 1 - row) * g.width + col] = (255.0 * (1.0 - c / max)).round() as u8;
+            }
+        }
+    }
+    save_gray_png(path, g.width, g.height, pixels)
+}
+
+/// The accumulator as an image: radius down the rows, angle across, log-scaled votes.
+pub fn save_accumulator_png(path: &Path, acc: &Accumulator) -> Result<(), IoError> {
+    let max = acc.votes.iter().copied().max().unwrap_or(0).max(1) as f64;
+    let pixels = acc.votes.iter().map(|&v| (255.0 * (1.0 + v as f64).ln() / (1.0 + max).ln()).round() as u8).collect();
+    save_gray_png(path, acc.n_phi, acc.n_rho, pixels)
+}
+
+/// Writes `corners.csv`: `x_m,y_m,votes,kind`.
+pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoError> {
+    let mut s = String::from("x_m,y_m,votes,kind\n");
+    for f in features {
+        let _ = writeln!(s, "{:.4},{:.4},{},{}", f.x_m, f.y_m, f.votes, f.kind.as_str());
+    }
+    write_file(path, s.as_bytes())
+}

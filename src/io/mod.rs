@@ -1,0 +1,95 @@
+//! Every file format: run datasets, world files, maps, feature lists and reports.
+//!
+//! Readers check everything a stage relies on (finite numbers, sensor ids, time order) and name
+//! the file and line of the first problem. Writers go through [`OutputDir`], which builds the
+//! output under a temporary name and renames it into place, so a failure leaves nothing half-written.
+
+mod maps;
+mod output;
+mod run;
+mod world;
+
+pub use maps::{save_accumulator_png, save_features_csv, save_map_png, save_ros_map, load_ros_map, RosMapYaml};
+pub use output::OutputDir;
+pub use run::{load_run, read_uci_sonar_ring, save_run};
+pub use world::{load_world, LoadedWorld, WorldFile};
+
+use std::path::{Path, PathBuf};
+
+/// Errors reading or writing files. Each names the file, and the line or key where it can.
+#[derive(Debug, thiserror::Error)]
+pub enum IoError {
+    /// The file could not be opened, read or written.
+    #[error("{path}: {source}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A problem at a line of a text file.
+    #[error("{path}:{line}: {message}")]
+    Line {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: u64,
+        /// What is wrong and what was expected.
+        message: String,
+    },
+    /// A problem with a file as a whole, or a key in it.
+    #[error("{path}: {message}")]
+    Content {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The output directory exists and `--force` was not given.
+    #[error("{path} already exists; pass --force to replace it")]
+    OutputExists {
+        /// The directory.
+        path: PathBuf,
+    },
+}
+
+impl IoError {
+    pub(crate) fn file(path: &Path, source: std::io::Error) -> Self {
+        IoError::File { path: path.to_path_buf(), source }
+    }
+    pub(crate) fn content(path: &Path, message: impl Into<String>) -> Self {
+        IoError::Content { path: path.to_path_buf(), message: message.into() }
+    }
+    pub(crate) fn line(path: &Path, line: u64, message: impl Into<String>) -> Self {
+        IoError::Line { path: path.to_path_buf(), line, message: message.into() }
+    }
+}
+
+/// Reads a whole text file.
+pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
+    std::fs::read_to_string(path).map_err(|e| IoError::file(path, e))
+}
+
+/// Parses YAML into `T`, with the file, line and column of the first error.
+pub fn parse_yaml<T: serde::de::DeserializeOwned>(path: &Path, text: &str) -> Result<T, IoError> {
+    serde_yaml_ng::from_str(text).map_err(|e| match e.location() {
+        Some(loc) => IoError::line(path, loc.line() as u64, format!("column {}: {e}", loc.column())),
+        None => IoError::content(path, e.to_string()),
+    })
+}
+
+/// Serialises to YAML.
+pub(crate) fn to_yaml<T: serde::Serialize>(path: &Path, value: &T) -> Result<String, IoError> {
+    serde_yaml_ng::to_string(value).map_err(|e| IoError::content(path, e.to_string()))
+}
+
+/// Writes a file.
+pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    std::fs::write(path, bytes).map_err(|e| IoError::file(path, e))
+}
+
+/// Writes a value as pretty JSON.
+pub fn save_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), IoError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| IoError::content(path, e.to_string()))?;
+    write_file(path, format!("{text}\n").as_bytes())
+}

@@ -1,0 +1,210 @@
+//! The run dataset directory (DESIGN.md): `run.yaml`, `odometry.csv`, `sonar.csv`, `stereo.csv`,
+//! `ground_truth.csv`.
+
+use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
+use crate::geometry::Pose2;
+use crate::run::{RunDataset, RunMeta, StampedPose, StereoEntry, RUN_FORMAT};
+use crate::sonar::SonarReading;
+use std::fmt::Write as _;
+use std::path::Path;
+
+const POSE_HEADER: &str = "t_s,x_m,y_m,theta_rad";
+const SONAR_HEADER: &str = "t_s,sensor,range_m";
+const STEREO_HEADER: &str = "t_s,left,right";
+
+/// Data lines of a CSV file after checking its header: (1-based line number, fields).
+fn csv_rows<'a>(path: &'a Path, text: &'a str, header: &str) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
+    let mut lines = text.lines().enumerate();
+    let first = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    if first != header {
+        return Err(IoError::line(path, 1, format!("expected the header `{header}`, found `{first}`")));
+    }
+    let n = header.split(',').count();
+    let mut rows = Vec::new();
+    for (i, line) in lines {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != n {
+            return Err(IoError::line(
+                path,
+                i as u64 + 1,
+                format!("expected {n} fields ({header}), found {}", fields.len()),
+            ));
+        }
+        rows.push((i as u64 + 1, fields));
+    }
+    Ok(rows)
+}
+
+fn number(path: &Path, line: u64, name: &str, field: &str) -> Result<f64, IoError> {
+    match field.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) => Err(IoError::line(path, line, format!("{name} is {v}; expected a finite number"))),
+        Err(_) => Err(IoError::line(path, line, format!("{name} `{field}` is not a number"))),
+    }
+}
+
+fn check_time(path: &Path, line: u64, t: f64, last: &mut f64) -> Result<(), IoError> {
+    if t < *last {
+        return Err(IoError::line(path, line, format!("time {t} s goes backwards (previous row {last} s)")));
+    }
+    *last = t;
+    Ok(())
+}
+
+fn read_poses(path: &Path) -> Result<Vec<StampedPose>, IoError> {
+    let text = read_text(path)?;
+    let mut last = f64::NEG_INFINITY;
+    csv_rows(path, &text, POSE_HEADER)?
+        .into_iter()
+        .map(|(line, f)| {
+            let t = number(path, line, "t_s", f[0])?;
+            check_time(path, line, t, &mut last)?;
+            let x = number(path, line, "x_m", f[1])?;
+            let y = number(path, line, "y_m", f[2])?;
+            let th = number(path, line, "theta_rad", f[3])?;
+            Ok(StampedPose { t_s: t, pose: Pose2::new(x, y, th) })
+        })
+        .collect()
+}
+
+fn read_sonar(path: &Path, sensors: usize) -> Result<Vec<SonarReading>, IoError> {
+    let text = read_text(path)?;
+    let mut last = f64::NEG_INFINITY;
+    csv_rows(path, &text, SONAR_HEADER)?
+        .into_iter()
+        .map(|(line, f)| {
+            let t = number(path, line, "t_s", f[0])?;
+            check_time(path, line, t, &mut last)?;
+            let sensor: usize = f[1].parse().map_err(|_| {
+                IoError::line(path, line, format!("sensor `{}` is not a sensor index (0, 1, ...)", f[1]))
+            })?;
+            if sensor >= sensors {
+                return Err(IoError::line(
+                    path,
+                    line,
+                    format!("unknown sensor {sensor}: run.yaml's sonar layout has {sensors} sensors (0..{})", sensors - 1),
+                ));
+            }
+            let range_m = if f[2].is_empty() {
+                None
+            } else {
+                let r = number(path, line, "range_m", f[2])?;
+                if r < 0.0 {
+                    return Err(IoError::line(path, line, format!("range_m is {r}; expected >= 0 or empty for no echo")));
+                }
+                Some(r)
+            };
+            Ok(SonarReading { t_s: t, sensor, range_m })
+        })
+        .collect()
+}
+
+fn read_stereo(path: &Path) -> Result<Vec<StereoEntry>, IoError> {
+    let text = read_text(path)?;
+    let mut last = f64::NEG_INFINITY;
+    csv_rows(path, &text, STEREO_HEADER)?
+        .into_iter()
+        .map(|(line, f)| {
+            let t = number(path, line, "t_s", f[0])?;
+            check_time(path, line, t, &mut last)?;
+            if f[1].is_empty() || f[2].is_empty() {
+                return Err(IoError::line(path, line, "left and right image paths must not be empty"));
+            }
+            Ok(StereoEntry { t_s: t, left: f[1].to_string(), right: f[2].to_string() })
+        })
+        .collect()
+}
+
+/// Reads a run dataset directory.
+pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
+    if !dir.is_dir() {
+        return Err(IoError::content(dir, "not a run directory (expected run.yaml, odometry.csv, sonar.csv)"));
+    }
+    let meta_path = dir.join("run.yaml");
+    let meta: RunMeta = parse_yaml(&meta_path, &read_text(&meta_path)?)?;
+    if meta.format != RUN_FORMAT {
+        return Err(IoError::content(
+            &meta_path,
+            format!("format is `{}`; this stereotag reads `{RUN_FORMAT}`", meta.format),
+        ));
+    }
+    if meta.robot.sonar.sensors.is_empty() {
+        return Err(IoError::content(&meta_path, "robot.sonar.sensors is empty; at least one sonar is needed"));
+    }
+    let layout = &meta.robot.sonar;
+    if !(layout.cone_rad > 0.0 && layout.cone_rad < std::f64::consts::PI && layout.max_range_m > 0.0)
+        || layout.sensors.iter().any(|s| !(s.x_m.is_finite() && s.y_m.is_finite() && s.bearing_rad.is_finite()))
+    {
+        return Err(IoError::content(
+            &meta_path,
+            "robot.sonar: cone_rad must be in (0, pi), max_range_m positive, sensor poses finite",
+        ));
+    }
+    let odometry = read_poses(&dir.join("odometry.csv"))?;
+    if odometry.is_empty() {
+        return Err(IoError::content(&dir.join("odometry.csv"), "no poses: the run needs odometry"));
+    }
+    let sonar = read_sonar(&dir.join("sonar.csv"), meta.robot.sonar.sensors.len())?;
+    let stereo_path = dir.join("stereo.csv");
+    let stereo = if stereo_path.exists() { read_stereo(&stereo_path)? } else { Vec::new() };
+    let gt_path = dir.join("ground_truth.csv");
+    let ground_truth = if gt_path.exists() { Some(read_poses(&gt_path)?) } else { None };
+    Ok(RunDataset { meta, odometry, sonar, stereo, ground_truth })
+}
+
+fn poses_csv(poses: &[StampedPose]) -> String {
+    let mut s = format!("{POSE_HEADER}\n");
+    for p in poses {
+        let _ = writeln!(s, "{:.4},{:.5},{:.5},{:.6}", p.t_s, p.pose.x, p.pose.y, p.pose.theta);
+    }
+    s
+}
+
+/// Writes a run dataset into `dir` (which must exist).
+pub fn save_run(dir: &Path, run: &RunDataset) -> Result<(), IoError> {
+    let meta_path = dir.join("run.yaml");
+    write_file(&meta_path, to_yaml(&meta_path, &run.meta)?.as_bytes())?;
+    write_file(&dir.join("odometry.csv"), poses_csv(&run.odometry).as_bytes())?;
+    let mut s = format!("{SONAR_HEADER}\n");
+    for r in &run.sonar {
+        match r.range_m {
+            Some(m) => writeln!(s, "{:.4},{},{:.4}", r.t_s, r.sensor, m),
+            None => writeln!(s, "{:.4},{},", r.t_s, r.sensor),
+        }
+        .ok();
+    }
+    write_file(&dir.join("sonar.csv"), s.as_bytes())?;
+    let mut s = format!("{STEREO_HEADER}\n");
+    for e in &run.stereo {
+        let _ = writeln!(s, "{:.4},{},{}", e.t_s, e.left, e.right);
+    }
+    write_file(&dir.join("stereo.csv"), s.as_bytes())?;
+    if let Some(gt) = &run.ground_truth {
+        write_file(&dir.join("ground_truth.csv"), poses_csv(gt).as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Reads the UCI wall-following sonar file (`S1..S24,OUTPUT` rows): one range vector per row.
+pub fn read_uci_sonar_ring(path: &Path) -> Result<Vec<Vec<f64>>, IoError> {
+    let text = read_text(path)?;
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('S') {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').collect();
+        let ranges = fields
+            .iter()
+            .take(fields.len().saturating_sub(1))
+            .map(|f| number(path, i as u64 + 1, "range", f.trim()))
+            .collect::<Result<Vec<f64>, _>>()?;
+        rows.push(ranges);
+    }
+    Ok(rows)
+}

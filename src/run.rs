@@ -1,0 +1,153 @@
+//! A robot run: what the robot logged, in the form of DESIGN.md's run dataset.
+//!
+//! Poses are stamped `world_from_robot` transforms. Sonar readings are placed in the world by
+//! interpolating a trajectory at the reading's time and composing with the sensor's mount.
+
+use crate::geometry::Pose2;
+use crate::sonar::{PlacedReading, SonarLayout, SonarReading};
+use serde::{Deserialize, Serialize};
+
+/// Version tag written into `run.yaml`.
+pub const RUN_FORMAT: &str = "stereotag-run/1";
+
+/// A pose at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StampedPose {
+    /// Time, seconds.
+    pub t_s: f64,
+    /// `world_from_robot`.
+    pub pose: Pose2,
+}
+
+/// One stereo pair of the run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StereoEntry {
+    /// Time, seconds.
+    pub t_s: f64,
+    /// Left image, relative to the run directory.
+    pub left: String,
+    /// Right image, relative to the run directory.
+    pub right: String,
+}
+
+/// The robot as `run.yaml` describes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RobotDescription {
+    /// The sonar ring.
+    pub sonar: SonarLayout,
+    /// Stereo rig file (Kalibr camchain YAML), relative to the run directory.
+    #[serde(default)]
+    pub rig: Option<String>,
+    /// `robot_from_left` as `[x, y, z, roll, pitch, yaw]` (metres, radians), if not in the rig file.
+    #[serde(default)]
+    pub robot_from_left: Option<[f64; 6]>,
+}
+
+/// The contents of `run.yaml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunMeta {
+    /// Format tag, [`RUN_FORMAT`].
+    pub format: String,
+    /// The robot.
+    pub robot: RobotDescription,
+    /// World file, relative to the run directory, when the place is known.
+    #[serde(default)]
+    pub world: Option<String>,
+    /// Mapping settings suggested for this run (grid and Hough), if any.
+    #[serde(default)]
+    pub mapping: Option<crate::grid::MappingConfig>,
+    /// Free text.
+    #[serde(default)]
+    pub notes: String,
+}
+
+/// Which trajectory places the readings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PoseSource {
+    /// The robot's dead reckoning.
+    Odometry,
+    /// Ground truth (simulation, motion capture).
+    GroundTruth,
+}
+
+/// A whole run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunDataset {
+    /// `run.yaml`.
+    pub meta: RunMeta,
+    /// `odometry.csv`, time-ordered.
+    pub odometry: Vec<StampedPose>,
+    /// `sonar.csv`, time-ordered.
+    pub sonar: Vec<SonarReading>,
+    /// `stereo.csv`.
+    pub stereo: Vec<StereoEntry>,
+    /// `ground_truth.csv`, when known.
+    pub ground_truth: Option<Vec<StampedPose>>,
+}
+
+/// Pose at time `t_s` by linear interpolation (clamped at the ends); `None` for an empty trajectory.
+pub fn pose_at(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
+    let first = trajectory.first()?;
+    let i = trajectory.partition_point(|p| p.t_s <= t_s);
+    if i == 0 {
+        return Some(first.pose);
+    }
+    let a = trajectory[i - 1];
+    let Some(b) = trajectory.get(i) else { return Some(a.pose) };
+    let span = b.t_s - a.t_s;
+    let f = if span > 0.0 { (t_s - a.t_s) / span } else { 0.0 };
+    Some(a.pose.lerp(&b.pose, f))
+}
+
+impl RunDataset {
+    /// The trajectory of a pose source, if the run has it.
+    pub fn trajectory(&self, source: PoseSource) -> Option<&[StampedPose]> {
+        match source {
+            PoseSource::Odometry => Some(&self.odometry),
+            PoseSource::GroundTruth => self.ground_truth.as_deref(),
+        }
+    }
+
+    /// Every sonar reading placed in the world along the given trajectory.
+    pub fn placed_readings(&self, trajectory: &[StampedPose]) -> Vec<PlacedReading> {
+        place_readings(&self.sonar, &self.meta.robot.sonar, trajectory)
+    }
+}
+
+/// Places readings in the world along a trajectory.
+pub fn place_readings(
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+    trajectory: &[StampedPose],
+) -> Vec<PlacedReading> {
+    readings
+        .iter()
+        .filter_map(|r| {
+            let sensor = layout.sensors.get(r.sensor)?;
+            let robot = pose_at(trajectory, r.t_s)?;
+            Some(PlacedReading {
+                t_s: r.t_s,
+                world_from_sensor: robot.compose(&sensor.robot_from_sensor()),
+                range_m: r.range_m,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolates_between_stamps() {
+        let tr = vec![
+            StampedPose { t_s: 0.0, pose: Pose2::new(0.0, 0.0, 0.0) },
+            StampedPose { t_s: 2.0, pose: Pose2::new(2.0, 0.0, 1.0) },
+        ];
+        let p = pose_at(&tr, 1.0).unwrap();
+        assert!((p.x - 1.0).abs() < 1e-12 && (p.theta - 0.5).abs() < 1e-12);
+        assert_eq!(pose_at(&tr, 5.0).unwrap(), tr[1].pose);
+    }
+}

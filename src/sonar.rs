@@ -1,0 +1,138 @@
+//! Sonar sensors: where they sit on the robot, what a reading is, and the cone they see.
+//!
+//! A sonar sends a cone of sound (30 degrees wide on the paper's robot) and reports the range of
+//! the first echo, or nothing. Mapping treats a reading as an arc: somewhere on the arc of radius
+//! `range_m` across the cone there is an obstacle, and the cone before the arc is free.
+
+use crate::geometry::Pose2;
+use serde::{Deserialize, Serialize};
+
+/// Beam width of the paper's sonars: 30 degrees.
+pub const PAPER_CONE_RAD: f64 = 30.0 * std::f64::consts::PI / 180.0;
+/// Maximum range of the paper's sonars: about 2.1 m.
+pub const PAPER_MAX_RANGE_M: f64 = 2.1;
+
+/// One transducer, in the robot frame (x forward, y left).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SonarSensor {
+    /// Position forward of the robot centre, metres.
+    pub x_m: f64,
+    /// Position left of the robot centre, metres.
+    pub y_m: f64,
+    /// Direction of the beam axis, radians (0 = forward, positive = left).
+    pub bearing_rad: f64,
+}
+
+impl SonarSensor {
+    /// `robot_from_sensor`.
+    pub fn robot_from_sensor(&self) -> Pose2 {
+        Pose2::new(self.x_m, self.y_m, self.bearing_rad)
+    }
+}
+
+/// A robot's sonar ring.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SonarLayout {
+    /// A name for the layout.
+    pub name: String,
+    /// Full beam width, radians.
+    #[serde(default = "default_cone")]
+    pub cone_rad: f64,
+    /// Largest range the sensor reports, metres.
+    #[serde(default = "default_max_range")]
+    pub max_range_m: f64,
+    /// The transducers; a reading's `sensor` is an index into this list.
+    pub sensors: Vec<SonarSensor>,
+}
+
+fn default_cone() -> f64 {
+    PAPER_CONE_RAD
+}
+fn default_max_range() -> f64 {
+    PAPER_MAX_RANGE_M
+}
+
+impl Default for SonarLayout {
+    fn default() -> Self {
+        Self::frontal5()
+    }
+}
+
+impl SonarLayout {
+    /// The paper's robot has five frontal sonars whose bearings it does not give. We choose
+    /// -90, -45, 0, 45 and 90 degrees on a 0.2 m radius: the front half-plane is covered in
+    /// 45 degree steps, and the two side sonars see the wall being followed.
+    pub fn frontal5() -> Self {
+        let radius_m = 0.2;
+        let sensors = [-90.0f64, -45.0, 0.0, 45.0, 90.0]
+            .iter()
+            .map(|deg| {
+                let b = deg.to_radians();
+                SonarSensor { x_m: radius_m * b.cos(), y_m: radius_m * b.sin(), bearing_rad: b }
+            })
+            .collect();
+        Self { name: "frontal5".into(), cone_rad: PAPER_CONE_RAD, max_range_m: PAPER_MAX_RANGE_M, sensors }
+    }
+
+    /// The Pioneer 3-DX 16-sonar ring, from the manufacturer's parameter file `p3dx-sh.p`
+    /// (ARIA 2.9, `SonarUnit i x_mm y_mm heading_deg`). Polaroid 600-series transducers: we keep the
+    /// paper's 30 degree cone and give them a 5 m range.
+    pub fn pioneer16() -> Self {
+        let units: [(f64, f64, f64); 16] = [
+            (69.0, 136.0, 90.0),
+            (114.0, 119.0, 50.0),
+            (148.0, 78.0, 30.0),
+            (166.0, 27.0, 10.0),
+            (166.0, -27.0, -10.0),
+            (148.0, -78.0, -30.0),
+            (114.0, -119.0, -50.0),
+            (69.0, -136.0, -90.0),
+            (-157.0, -136.0, -90.0),
+            (-203.0, -119.0, -130.0),
+            (-237.0, -78.0, -150.0),
+            (-255.0, -27.0, -170.0),
+            (-255.0, 27.0, 170.0),
+            (-237.0, 78.0, 150.0),
+            (-203.0, 119.0, 130.0),
+            (-157.0, 136.0, 90.0),
+        ];
+        let sensors = units
+            .iter()
+            .map(|&(x, y, h)| SonarSensor { x_m: x / 1000.0, y_m: y / 1000.0, bearing_rad: h.to_radians() })
+            .collect();
+        Self { name: "pioneer16".into(), cone_rad: PAPER_CONE_RAD, max_range_m: 5.0, sensors }
+    }
+
+    /// A layout by name: `frontal5` or `pioneer16`.
+    pub fn by_name(name: &str) -> Option<Self> {
+        match name {
+            "frontal5" => Some(Self::frontal5()),
+            "pioneer16" => Some(Self::pioneer16()),
+            _ => None,
+        }
+    }
+}
+
+/// One sonar reading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SonarReading {
+    /// Time, seconds.
+    pub t_s: f64,
+    /// Index into the layout's sensors.
+    pub sensor: usize,
+    /// Range of the first echo, metres; `None` when no echo came back.
+    pub range_m: Option<f64>,
+}
+
+/// A reading placed in the world: the sensor pose (`world_from_sensor`) and the range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacedReading {
+    /// Time, seconds.
+    pub t_s: f64,
+    /// Pose of the transducer in the world; the beam axis is its x axis.
+    pub world_from_sensor: Pose2,
+    /// Range, metres; `None` for no echo.
+    pub range_m: Option<f64>,
+}
