@@ -31,7 +31,11 @@ pub struct Pose2 {
 impl Pose2 {
     /// A pose from its parts; the angle is wrapped.
     pub fn new(x: f64, y: f64, theta: f64) -> Self {
-        Self { x, y, theta: wrap_angle(theta) }
+        Self {
+            x,
+            y,
+            theta: wrap_angle(theta),
+        }
     }
 
     /// The translation as a point.
@@ -52,7 +56,11 @@ impl Pose2 {
     /// The inverse transform (`b_from_a` from `a_from_b`).
     pub fn inverse(&self) -> Pose2 {
         let (s, c) = self.theta.sin_cos();
-        Pose2::new(-c * self.x - s * self.y, s * self.x - c * self.y, -self.theta)
+        Pose2::new(
+            -c * self.x - s * self.y,
+            s * self.x - c * self.y,
+            -self.theta,
+        )
     }
 
     /// `self^-1 * other`: `other` expressed in this pose's frame.
@@ -168,7 +176,10 @@ pub fn ray_hit_circle(
         return None;
     }
     let hit = origin + dir * s;
-    Some(RayHit { range_m: s, normal: (hit - centre) / radius_m })
+    Some(RayHit {
+        range_m: s,
+        normal: (hit - centre) / radius_m,
+    })
 }
 
 #[cfg(test)]
@@ -185,10 +196,14 @@ mod tests {
     #[test]
     fn ray_meets_wall_at_right_range_and_normal() {
         let s = Segment::new(Point2::new(2.0, -1.0), Point2::new(2.0, 1.0));
-        let h = s.ray_hit(Point2::origin(), Vector2::new(1.0, 0.0), 5.0).unwrap();
+        let h = s
+            .ray_hit(Point2::origin(), Vector2::new(1.0, 0.0), 5.0)
+            .unwrap();
         assert!((h.range_m - 2.0).abs() < 1e-12);
         assert!((h.normal - Vector2::new(-1.0, 0.0)).norm() < 1e-12);
-        assert!(s.ray_hit(Point2::origin(), Vector2::new(-1.0, 0.0), 5.0).is_none());
+        assert!(s
+            .ray_hit(Point2::origin(), Vector2::new(-1.0, 0.0), 5.0)
+            .is_none());
     }
 
     #[test]

@@ -38,6 +38,9 @@ pub struct GridConfig {
     pub occupied_threshold: f64,
     /// A cell with occupancy below this is free (ours: 0.2).
     pub free_threshold: f64,
+    /// Cells with less evidence than this (summed weights; updates for log-odds) stay unknown
+    /// (ours: 3, so a lone far hit from a multipath echo behind a wall does not make a wall).
+    pub min_evidence: u32,
     /// Whether a reading with no echo marks its whole cone as free. Off by default: a specular
     /// wall returns no echo, so silence is no proof of free space.
     pub no_echo_is_free: bool,
@@ -57,6 +60,7 @@ impl Default for GridConfig {
             far_miss: 1,
             occupied_threshold: 0.5,
             free_threshold: 0.2,
+            min_evidence: 3,
             no_echo_is_free: false,
         }
     }
@@ -82,13 +86,30 @@ impl GridConfig {
     pub fn validate(&self) -> Result<(), GridError> {
         let bad = |key, value: f64, reason| Err(GridError::Invalid { key, value, reason });
         if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
-            return bad("resolution_m", self.resolution_m, "must be a positive number of metres");
+            return bad(
+                "resolution_m",
+                self.resolution_m,
+                "must be a positive number of metres",
+            );
         }
-        if self.width_cells == 0 || self.height_cells == 0 || self.width_cells * self.height_cells > 100_000_000 {
-            return bad("width_cells", self.width_cells as f64, "grid must have between 1 and 1e8 cells");
+        if self.width_cells == 0
+            || self.height_cells == 0
+            || self.width_cells * self.height_cells > 100_000_000
+        {
+            return bad(
+                "width_cells",
+                self.width_cells as f64,
+                "grid must have between 1 and 1e8 cells",
+            );
         }
-        if !(0.0..=1.0).contains(&self.occupied_threshold) || !(0.0..=1.0).contains(&self.free_threshold) {
-            return bad("occupied_threshold", self.occupied_threshold, "thresholds must lie in [0, 1]");
+        if !(0.0..=1.0).contains(&self.occupied_threshold)
+            || !(0.0..=1.0).contains(&self.free_threshold)
+        {
+            return bad(
+                "occupied_threshold",
+                self.occupied_threshold,
+                "thresholds must lie in [0, 1]",
+            );
         }
         if !self.origin_m.iter().all(|v| v.is_finite()) {
             return bad("origin_m", self.origin_m[0], "must be finite");
@@ -132,7 +153,12 @@ pub struct GridGeometry {
 impl GridGeometry {
     /// From the settings.
     pub fn from_config(c: &GridConfig) -> Self {
-        Self { width: c.width_cells, height: c.height_cells, resolution_m: c.resolution_m, origin_m: c.origin_m }
+        Self {
+            width: c.width_cells,
+            height: c.height_cells,
+            resolution_m: c.resolution_m,
+            origin_m: c.origin_m,
+        }
     }
 
     /// Cell containing a world point, as (column, row from the bottom).
@@ -168,7 +194,9 @@ impl GridGeometry {
         let reach = range_m + band;
         let lo = self.cell_index_clamped(p.x - reach, p.y - reach);
         let hi = self.cell_index_clamped(p.x + reach, p.y + reach);
-        let (Some(lo), Some(hi)) = (lo, hi) else { return };
+        let (Some(lo), Some(hi)) = (lo, hi) else {
+            return;
+        };
         for row in lo.1..=hi.1 {
             let cy = self.origin_m[1] + (row as f64 + 0.5) * self.resolution_m - p.y;
             for col in lo.0..=hi.0 {
@@ -220,12 +248,20 @@ pub struct OccupancyMap {
 impl OccupancyMap {
     /// Whether a cell is occupied.
     pub fn is_occupied(&self, idx: usize) -> bool {
-        self.occupancy.get(idx).copied().flatten().is_some_and(|c| c > self.occupied_threshold)
+        self.occupancy
+            .get(idx)
+            .copied()
+            .flatten()
+            .is_some_and(|c| c > self.occupied_threshold)
     }
 
     /// Whether a cell is free.
     pub fn is_free(&self, idx: usize) -> bool {
-        self.occupancy.get(idx).copied().flatten().is_some_and(|c| c < self.free_threshold)
+        self.occupancy
+            .get(idx)
+            .copied()
+            .flatten()
+            .is_some_and(|c| c < self.free_threshold)
     }
 
     /// Number of cells that have been observed.
@@ -265,18 +301,34 @@ impl CountingGrid {
         config.validate()?;
         let geometry = GridGeometry::from_config(&config);
         let n = geometry.width * geometry.height;
-        Ok(Self { config, geometry, half_cone_rad: 0.5 * cone_rad, max_range_m, hits: vec![0; n], misses: vec![0; n] })
+        Ok(Self {
+            config,
+            geometry,
+            half_cone_rad: 0.5 * cone_rad,
+            max_range_m,
+            hits: vec![0; n],
+            misses: vec![0; n],
+        })
     }
 
     /// Hit and miss tallies of a cell.
     pub fn counts(&self, idx: usize) -> (u32, u32) {
-        (self.hits.get(idx).copied().unwrap_or(0), self.misses.get(idx).copied().unwrap_or(0))
+        (
+            self.hits.get(idx).copied().unwrap_or(0),
+            self.misses.get(idx).copied().unwrap_or(0),
+        )
     }
 }
 
-fn reading_extent(r: &PlacedReading, max_range_m: f64, no_echo_is_free: bool) -> Option<(f64, bool)> {
+fn reading_extent(
+    r: &PlacedReading,
+    max_range_m: f64,
+    no_echo_is_free: bool,
+) -> Option<(f64, bool)> {
     match r.range_m {
-        Some(range) if range.is_finite() && range >= 0.0 && range <= max_range_m => Some((range, true)),
+        Some(range) if range.is_finite() && range >= 0.0 && range <= max_range_m => {
+            Some((range, true))
+        }
         Some(_) | None if no_echo_is_free => Some((max_range_m, false)),
         _ => None,
     }
@@ -284,7 +336,9 @@ fn reading_extent(r: &PlacedReading, max_range_m: f64, no_echo_is_free: bool) ->
 
 impl OccupancyGrid for CountingGrid {
     fn insert(&mut self, reading: &PlacedReading) {
-        let Some((range, hit)) = reading_extent(reading, self.max_range_m, self.config.no_echo_is_free) else {
+        let Some((range, hit)) =
+            reading_extent(reading, self.max_range_m, self.config.no_echo_is_free)
+        else {
             return;
         };
         let near = hit && range < self.config.near_range_m;
@@ -294,10 +348,16 @@ impl OccupancyGrid for CountingGrid {
             (self.config.far_hit, self.config.far_miss)
         };
         let (hits, misses) = (&mut self.hits, &mut self.misses);
-        self.geometry.for_each_cone_cell(reading, self.half_cone_rad, range, hit, |idx, e| match e {
-            CellEvidence::Hit => hits[idx] += wh,
-            CellEvidence::Miss => misses[idx] += wm,
-        });
+        self.geometry.for_each_cone_cell(
+            reading,
+            self.half_cone_rad,
+            range,
+            hit,
+            |idx, e| match e {
+                CellEvidence::Hit => hits[idx] += wh,
+                CellEvidence::Miss => misses[idx] += wm,
+            },
+        );
     }
 
     fn map(&self) -> OccupancyMap {
@@ -305,7 +365,13 @@ impl OccupancyGrid for CountingGrid {
             .hits
             .iter()
             .zip(&self.misses)
-            .map(|(&h, &m)| if h + m == 0 { None } else { Some(h as f64 / (h + m) as f64) })
+            .map(|(&h, &m)| {
+                if h + m < self.config.min_evidence.max(1) {
+                    None
+                } else {
+                    Some(h as f64 / (h + m) as f64)
+                }
+            })
             .collect();
         OccupancyMap {
             geometry: self.geometry.clone(),
@@ -331,7 +397,7 @@ pub struct LogOddsGrid {
     half_cone_rad: f64,
     max_range_m: f64,
     log_odds: Vec<f32>,
-    seen: Vec<bool>,
+    seen: Vec<u32>,
 }
 
 impl LogOddsGrid {
@@ -340,22 +406,37 @@ impl LogOddsGrid {
         config.validate()?;
         let geometry = GridGeometry::from_config(&config);
         let n = geometry.width * geometry.height;
-        Ok(Self { config, geometry, half_cone_rad: 0.5 * cone_rad, max_range_m, log_odds: vec![0.0; n], seen: vec![false; n] })
+        Ok(Self {
+            config,
+            geometry,
+            half_cone_rad: 0.5 * cone_rad,
+            max_range_m,
+            log_odds: vec![0.0; n],
+            seen: vec![0; n],
+        })
     }
 }
 
 impl OccupancyGrid for LogOddsGrid {
     fn insert(&mut self, reading: &PlacedReading) {
-        let Some((range, hit)) = reading_extent(reading, self.max_range_m, self.config.no_echo_is_free) else {
+        let Some((range, hit)) =
+            reading_extent(reading, self.max_range_m, self.config.no_echo_is_free)
+        else {
             return;
         };
         let (lo, seen) = (&mut self.log_odds, &mut self.seen);
-        self.geometry.for_each_cone_cell(reading, self.half_cone_rad, range, hit, |idx, e| {
-            let l = &mut lo[idx];
-            *l = (*l + if e == CellEvidence::Hit { LOG_ODDS_HIT } else { LOG_ODDS_MISS })
+        self.geometry
+            .for_each_cone_cell(reading, self.half_cone_rad, range, hit, |idx, e| {
+                let l = &mut lo[idx];
+                *l = (*l
+                    + if e == CellEvidence::Hit {
+                        LOG_ODDS_HIT
+                    } else {
+                        LOG_ODDS_MISS
+                    })
                 .clamp(-LOG_ODDS_CLAMP, LOG_ODDS_CLAMP);
-            seen[idx] = true;
-        });
+                seen[idx] += 1;
+            });
     }
 
     fn map(&self) -> OccupancyMap {
@@ -363,7 +444,9 @@ impl OccupancyGrid for LogOddsGrid {
             .log_odds
             .iter()
             .zip(&self.seen)
-            .map(|(&l, &s)| s.then(|| 1.0 - 1.0 / (1.0 + (l as f64).exp())))
+            .map(|(&l, &s)| {
+                (s >= self.config.min_evidence.max(1)).then(|| 1.0 - 1.0 / (1.0 + (l as f64).exp()))
+            })
             .collect();
         OccupancyMap {
             geometry: self.geometry.clone(),
@@ -381,15 +464,24 @@ mod tests {
 
     #[test]
     fn a_near_reading_marks_arc_occupied_and_cone_free() {
-        let mut g = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 2.1).unwrap();
-        let r = PlacedReading { t_s: 0.0, world_from_sensor: Pose2::new(2.5, 2.5, 0.0), range_m: Some(0.5) };
+        let config = GridConfig {
+            min_evidence: 1,
+            ..GridConfig::default()
+        };
+        let mut g = CountingGrid::new(config, 30f64.to_radians(), 2.1).unwrap();
+        let r = PlacedReading {
+            t_s: 0.0,
+            world_from_sensor: Pose2::new(2.5, 2.5, 0.0),
+            range_m: Some(0.55),
+        };
         g.insert(&r);
         let geo = GridGeometry::from_config(&GridConfig::default());
-        let (c, rw) = geo.cell_of(3.0, 2.5).unwrap();
+        let (c, rw) = geo.cell_of(3.05, 2.5).unwrap();
         assert_eq!(g.counts(rw * geo.width + c), (10, 0));
         let (c, rw) = geo.cell_of(2.7, 2.5).unwrap();
         assert_eq!(g.counts(rw * geo.width + c), (0, 2));
         let m = g.map();
-        assert!(m.is_occupied(rw * geo.width + c + 1) || m.is_occupied(rw * geo.width + c + 2));
+        assert!(m.is_occupied(rw * geo.width + c + 2));
+        assert!(m.is_free(rw * geo.width + c));
     }
 }

@@ -11,9 +11,13 @@
 //! **Peak rule.** A cell is a feature when (1) its votes reach the threshold (70 in the paper's
 //! office, 50 in the museum), (2) it is the maximum of its (2r+1) x (2r+1) neighbourhood in the
 //! accumulator, and (3) its votes came from positions spread around it: the directions from the
-//! cell to the voting sensors, in 10 degree sectors, must span at least
-//! [`HoughConfig::min_spread_deg`] (60 degrees by default). A wall point is only voted from
-//! near its normal (the arc is tangent to the wall there), so rule 3 rejects it.
+//! cell to the voting sensors, in 5 degree sectors, must span at least
+//! [`HoughConfig::min_spread_deg`] (30 degrees by default). A wall point is only voted from
+//! near its normal (the arc is tangent to the wall there), so rule 3 rejects most of it.
+//!
+//! (4) Finally the grid vetoes features in the middle of a straight wall ([`reject_mid_wall`]):
+//! at the paper's following distances the arcs are short and curved, so a wall point voted from
+//! a stretch of travel gathers directions as wide as a corner's.
 //!
 //! **Windows.** Online, votes are gathered over windows of 70 cm of travel or 70 degrees of turn
 //! (the paper's), each window starting half a window after the previous one so a corner on a
@@ -47,7 +51,7 @@ pub struct HoughConfig {
     pub offline_threshold: Option<u32>,
     /// Half size of the local-maximum neighbourhood, in cells (ours: 2).
     pub peak_radius_cells: usize,
-    /// Least angular spread of the voting positions as seen from the feature (ours: 60 degrees).
+    /// Least angular spread of the voting positions as seen from the feature (ours: 30 degrees).
     pub min_spread_deg: f64,
     /// Features closer than this are one (ours: 25 cm).
     pub merge_radius_m: f64,
@@ -65,7 +69,7 @@ impl Default for HoughConfig {
             threshold: 70,
             offline_threshold: None,
             peak_radius_cells: 2,
-            min_spread_deg: 60.0,
+            min_spread_deg: 30.0,
             merge_radius_m: 0.25,
         }
     }
@@ -112,7 +116,7 @@ impl FeatureKind {
 }
 
 /// Sectors used for the spread rule.
-const SPREAD_SECTORS: usize = 36;
+const SPREAD_SECTORS: usize = 72;
 
 /// The polar vote accumulator.
 #[derive(Debug, Clone)]
@@ -125,7 +129,7 @@ pub struct Accumulator {
     pub votes: Vec<u32>,
     sum_x: Vec<f32>,
     sum_y: Vec<f32>,
-    sectors: Vec<u64>,
+    sectors: Vec<u128>,
     touched: Vec<usize>,
     rho_step: f64,
     phi_step: f64,
@@ -182,8 +186,9 @@ impl Accumulator {
             self.sum_y[i] += y as f32;
             // Direction from the voted point back to the sensor.
             let back = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU);
-            let sector = ((back / std::f64::consts::TAU) * SPREAD_SECTORS as f64) as usize % SPREAD_SECTORS;
-            self.sectors[i] |= 1 << sector;
+            let sector =
+                ((back / std::f64::consts::TAU) * SPREAD_SECTORS as f64) as usize % SPREAD_SECTORS;
+            self.sectors[i] |= 1u128 << sector;
         }
     }
 
@@ -206,7 +211,7 @@ impl Accumulator {
         if mask == 0 {
             return 0.0;
         }
-        let on = |k: usize| mask & (1 << (k % SPREAD_SECTORS)) != 0;
+        let on = |k: usize| mask & (1u128 << (k % SPREAD_SECTORS)) != 0;
         if (0..SPREAD_SECTORS).all(on) {
             return 360.0;
         }
@@ -276,17 +281,20 @@ impl Accumulator {
                 kind: FeatureKind::Unknown,
             });
         }
-        out.sort_by(|a, b| b.votes.cmp(&a.votes));
+        out.sort_by_key(|f| std::cmp::Reverse(f.votes));
         out
     }
 }
 
 /// Merges features closer than `radius_m`: the strongest keeps its position, sightings add up.
 pub fn merge_features(mut features: Vec<Feature>, radius_m: f64) -> Vec<Feature> {
-    features.sort_by(|a, b| b.votes.cmp(&a.votes));
+    features.sort_by_key(|f| std::cmp::Reverse(f.votes));
     let mut out: Vec<Feature> = Vec::new();
     for f in features {
-        if let Some(m) = out.iter_mut().find(|m| (m.x_m - f.x_m).hypot(m.y_m - f.y_m) < radius_m) {
+        if let Some(m) = out
+            .iter_mut()
+            .find(|m| (m.x_m - f.x_m).hypot(m.y_m - f.y_m) < radius_m)
+        {
             m.sightings += f.sightings;
             m.spread_deg = m.spread_deg.max(f.spread_deg);
         } else {
@@ -311,7 +319,9 @@ pub fn features_online(
     for r in readings {
         if let (Some(p), Some(q)) = (prev, pose_at(trajectory, r.t_s)) {
             s += (q.x - p.x).hypot(q.y - p.y);
-            a += crate::geometry::wrap_angle(q.theta - p.theta).abs().to_degrees();
+            a += crate::geometry::wrap_angle(q.theta - p.theta)
+                .abs()
+                .to_degrees();
             prev = Some(q);
         }
         travel.push(s);
@@ -322,14 +332,19 @@ pub fn features_online(
     let mut start = 0;
     while start < readings.len() {
         let within = |i: usize| {
-            travel[i] - travel[start] <= config.window_travel_m && turn[i] - turn[start] <= config.window_turn_deg
+            travel[i] - travel[start] <= config.window_travel_m
+                && turn[i] - turn[start] <= config.window_turn_deg
         };
         let mut end = start;
         while end < readings.len() && within(end) {
             acc.vote(&readings[end], half_cone_rad, config.arc_sample_m);
             end += 1;
         }
-        found.extend(acc.peaks(config.threshold, config.peak_radius_cells, config.min_spread_deg));
+        found.extend(acc.peaks(
+            config.threshold,
+            config.peak_radius_cells,
+            config.min_spread_deg,
+        ));
         acc.clear();
         if end >= readings.len() {
             break;
@@ -362,6 +377,61 @@ pub fn features_offline(
     (merge_features(peaks, config.merge_radius_m), acc)
 }
 
+/// Ring around a feature inspected for wall cells by [`reject_mid_wall`]: 0.25 to 0.7 m.
+const WALL_RING_M: (f64, f64) = (0.25, 0.7);
+/// Axial concentration above which the occupied cells around a feature form one straight line.
+const STRAIGHT_AXIAL: f64 = 0.6;
+/// ... and mean resultant below which that line runs through the feature (both ways).
+const STRAIGHT_THROUGH: f64 = 0.45;
+
+/// Rule 4, from the grid: drops features that sit in the middle of a straight wall. Around a
+/// wall point the occupied cells lie in two opposite directions (their doubled angles agree, their
+/// angles cancel); around a corner they lie in two directions at an angle, around a wall end in
+/// one. Features with fewer than three occupied cells around them are dropped too: a corner is
+/// made of walls.
+pub fn reject_mid_wall(features: Vec<Feature>, map: &OccupancyMap) -> Vec<Feature> {
+    let g = &map.geometry;
+    let reach = (WALL_RING_M.1 / g.resolution_m).ceil() as i64;
+    features
+        .into_iter()
+        .filter(|f| {
+            let Some((c0, r0)) = g.cell_of(f.x_m, f.y_m) else {
+                return false;
+            };
+            let (mut n, mut s1, mut c1, mut s2, mut c2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for dr in -reach..=reach {
+                for dc in -reach..=reach {
+                    let (c, r) = (c0 as i64 + dc, r0 as i64 + dr);
+                    if c < 0 || r < 0 || c >= g.width as i64 || r >= g.height as i64 {
+                        continue;
+                    }
+                    let idx = r as usize * g.width + c as usize;
+                    if !map.is_occupied(idx) {
+                        continue;
+                    }
+                    let (x, y) = g.centre(c as usize, r as usize);
+                    let d = (x - f.x_m).hypot(y - f.y_m);
+                    if !(WALL_RING_M.0..=WALL_RING_M.1).contains(&d) {
+                        continue;
+                    }
+                    let a = (y - f.y_m).atan2(x - f.x_m);
+                    n += 1.0;
+                    s1 += a.sin();
+                    c1 += a.cos();
+                    s2 += (2.0 * a).sin();
+                    c2 += (2.0 * a).cos();
+                }
+            }
+            if n < 3.0 {
+                return false;
+            }
+            let axial = s2.hypot(c2) / n;
+            let through = s1.hypot(c1) / n;
+            !(axial > STRAIGHT_AXIAL && through < STRAIGHT_THROUGH)
+        })
+        .collect()
+}
+
 /// Ring around a feature inspected by [`classify_features`]: 0.3 to 0.6 m.
 const RING_M: (f64, f64) = (0.3, 0.6);
 
@@ -370,7 +440,9 @@ pub fn classify_features(features: &mut [Feature], map: &OccupancyMap) {
     let g = &map.geometry;
     let reach = (RING_M.1 / g.resolution_m).ceil() as i64;
     for f in features.iter_mut() {
-        let Some((c0, r0)) = g.cell_of(f.x_m, f.y_m) else { continue };
+        let Some((c0, r0)) = g.cell_of(f.x_m, f.y_m) else {
+            continue;
+        };
         let (mut free, mut known) = (0usize, 0usize);
         for dr in -reach..=reach {
             for dc in -reach..=reach {
@@ -419,10 +491,18 @@ mod tests {
         for k in 0..24 {
             let a = (k as f64 * 5.0 - 60.0).to_radians();
             let (sx, sy) = (target.0 - 1.2 * a.cos(), target.1 - 1.2 * a.sin());
-            readings.push(PlacedReading { t_s: 0.0, world_from_sensor: Pose2::new(sx, sy, a + 0.05), range_m: Some(1.2) });
+            readings.push(PlacedReading {
+                t_s: 0.0,
+                world_from_sensor: Pose2::new(sx, sy, a + 0.05),
+                range_m: Some(1.2),
+            });
         }
         let (f, _) = features_offline(&readings, 15f64.to_radians(), &HoughConfig::default());
         assert!(!f.is_empty());
-        assert!((f[0].x_m - target.0).hypot(f[0].y_m - target.1) < 0.1, "{:?}", f[0]);
+        assert!(
+            (f[0].x_m - target.0).hypot(f[0].y_m - target.1) < 0.1,
+            "{:?}",
+            f[0]
+        );
     }
 }

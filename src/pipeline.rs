@@ -1,8 +1,12 @@
 //! The sonar half end to end: a run's readings → counting and log-odds grids → Hough features →
 //! scores against the world when it is known. Takes and returns values; [`crate::io`] does files.
 
-use crate::grid::{CountingGrid, GridError, LogOddsGrid, MappingConfig, OccupancyGrid, OccupancyMap};
-use crate::hough::{classify_features, features_offline, features_online, Accumulator, Feature};
+use crate::grid::{
+    CountingGrid, GridError, LogOddsGrid, MappingConfig, OccupancyGrid, OccupancyMap,
+};
+use crate::hough::{
+    classify_features, features_offline, features_online, reject_mid_wall, Accumulator, Feature,
+};
 use crate::run::{PoseSource, RunDataset};
 use crate::score::{score_features, score_map, FeatureScore, MapScore};
 use crate::world::World;
@@ -53,7 +57,11 @@ pub struct SonarScores {
 }
 
 /// Builds the grids and features of a run along the chosen trajectory.
-pub fn map_run(run: &RunDataset, poses: PoseSource, config: &MappingConfig) -> Result<SonarMap, PipelineError> {
+pub fn map_run(
+    run: &RunDataset,
+    poses: PoseSource,
+    config: &MappingConfig,
+) -> Result<SonarMap, PipelineError> {
     let trajectory = run.trajectory(poses).ok_or(PipelineError::NoGroundTruth)?;
     let layout = &run.meta.robot.sonar;
     let mut timings_s = BTreeMap::new();
@@ -75,12 +83,16 @@ pub fn map_run(run: &RunDataset, poses: PoseSource, config: &MappingConfig) -> R
 
     let half = 0.5 * layout.cone_rad;
     let t = Instant::now();
-    let mut online = features_online(&readings, trajectory, half, &config.hough);
+    let mut online = reject_mid_wall(
+        features_online(&readings, trajectory, half, &config.hough),
+        &counting,
+    );
     classify_features(&mut online, &counting);
     timings_s.insert("hough_online".into(), t.elapsed().as_secs_f64());
 
     let t = Instant::now();
-    let (mut offline, accumulator) = features_offline(&readings, half, &config.hough);
+    let (offline, accumulator) = features_offline(&readings, half, &config.hough);
+    let mut offline = reject_mid_wall(offline, &counting);
     classify_features(&mut offline, &counting);
     timings_s.insert("hough_offline".into(), t.elapsed().as_secs_f64());
     timings_s.insert("total".into(), start.elapsed().as_secs_f64());
@@ -100,7 +112,11 @@ pub fn map_run(run: &RunDataset, poses: PoseSource, config: &MappingConfig) -> R
 /// has it (else from odometry).
 pub fn score_sonar_map(map: &SonarMap, run: &RunDataset, world: &World) -> SonarScores {
     let trajectory = run.ground_truth.as_deref().unwrap_or(&run.odometry);
-    let positions: Vec<_> = run.placed_readings(trajectory).iter().map(|r| r.world_from_sensor.position()).collect();
+    let positions: Vec<_> = run
+        .placed_readings(trajectory)
+        .iter()
+        .map(|r| r.world_from_sensor.position())
+        .collect();
     SonarScores {
         counting: score_map(&map.counting, world),
         log_odds: score_map(&map.log_odds, world),
@@ -119,16 +135,28 @@ impl SonarScores {
         put("map.occupied_precision", self.counting.occupied_precision);
         put("map.occupied_recall", self.counting.occupied_recall);
         put("map.free_accuracy", self.counting.free_accuracy);
-        put("map_log_odds.occupied_precision", self.log_odds.occupied_precision);
-        put("map_log_odds.occupied_recall", self.log_odds.occupied_recall);
+        put(
+            "map_log_odds.occupied_precision",
+            self.log_odds.occupied_precision,
+        );
+        put(
+            "map_log_odds.occupied_recall",
+            self.log_odds.occupied_recall,
+        );
         put("map_log_odds.free_accuracy", self.log_odds.free_accuracy);
         put("features.precision", self.features_offline.precision);
         put("features.recall", self.features_offline.recall);
         put("features.count", self.features_offline.features as f64);
-        put("features.reachable_corners", self.features_offline.reachable_corners as f64);
+        put(
+            "features.reachable_corners",
+            self.features_offline.reachable_corners as f64,
+        );
         put("features_online.precision", self.features_online.precision);
         put("features_online.recall", self.features_online.recall);
-        put("features_online.count", self.features_online.features as f64);
+        put(
+            "features_online.count",
+            self.features_online.features as f64,
+        );
         m
     }
 }

@@ -95,9 +95,15 @@ pub fn pose_at(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
         return Some(first.pose);
     }
     let a = trajectory[i - 1];
-    let Some(b) = trajectory.get(i) else { return Some(a.pose) };
+    let Some(b) = trajectory.get(i) else {
+        return Some(a.pose);
+    };
     let span = b.t_s - a.t_s;
-    let f = if span > 0.0 { (t_s - a.t_s) / span } else { 0.0 };
+    let f = if span > 0.0 {
+        (t_s - a.t_s) / span
+    } else {
+        0.0
+    };
     Some(a.pose.lerp(&b.pose, f))
 }
 
@@ -143,8 +149,14 @@ mod tests {
     #[test]
     fn interpolates_between_stamps() {
         let tr = vec![
-            StampedPose { t_s: 0.0, pose: Pose2::new(0.0, 0.0, 0.0) },
-            StampedPose { t_s: 2.0, pose: Pose2::new(2.0, 0.0, 1.0) },
+            StampedPose {
+                t_s: 0.0,
+                pose: Pose2::new(0.0, 0.0, 0.0),
+            },
+            StampedPose {
+                t_s: 2.0,
+                pose: Pose2::new(2.0, 0.0, 1.0),
+            },
         ];
         let p = pose_at(&tr, 1.0).unwrap();
         assert!((p.x - 1.0).abs() < 1e-12 && (p.theta - 0.5).abs() < 1e-12);

@@ -74,7 +74,12 @@ fn any_near(flags: &[bool], g: &GridGeometry, idx: usize) -> bool {
     for dr in -1..=1 {
         for dc in -1..=1 {
             let (c, r) = (c0 + dc, r0 + dr);
-            if c >= 0 && r >= 0 && c < g.width as i64 && r < g.height as i64 && flags[r as usize * g.width + c as usize] {
+            if c >= 0
+                && r >= 0
+                && c < g.width as i64
+                && r < g.height as i64
+                && flags[r as usize * g.width + c as usize]
+            {
                 return true;
             }
         }
@@ -87,7 +92,8 @@ pub fn score_map(map: &OccupancyMap, world: &World) -> MapScore {
     let g = &map.geometry;
     let truth = wall_cells(world, g);
     let occupied: Vec<bool> = (0..truth.len()).map(|i| map.is_occupied(i)).collect();
-    let (mut occ, mut occ_ok, mut walls_seen, mut walls_found, mut free, mut free_ok) = (0, 0, 0, 0, 0, 0);
+    let (mut occ, mut occ_ok, mut walls_seen, mut walls_found, mut free, mut free_ok) =
+        (0, 0, 0, 0, 0, 0);
     for i in 0..truth.len() {
         if occupied[i] {
             occ += 1;
@@ -110,11 +116,21 @@ pub fn score_map(map: &OccupancyMap, world: &World) -> MapScore {
 }
 
 /// Scores features against the world's true corners; `sonar_positions` are where the sonars were.
-pub fn score_features(features: &[Feature], world: &World, sonar_positions: &[Point2<f64>]) -> FeatureScore {
+pub fn score_features(
+    features: &[Feature],
+    world: &World,
+    sonar_positions: &[Point2<f64>],
+) -> FeatureScore {
     let near_corner = |x: f64, y: f64| {
-        world.vertices.iter().any(|v| (v.position.x - x).hypot(v.position.y - y) <= FEATURE_TOLERANCE_M)
+        world
+            .vertices
+            .iter()
+            .any(|v| (v.position.x - x).hypot(v.position.y - y) <= FEATURE_TOLERANCE_M)
     };
-    let good = features.iter().filter(|f| near_corner(f.x_m, f.y_m)).count();
+    let good = features
+        .iter()
+        .filter(|f| near_corner(f.x_m, f.y_m))
+        .count();
     let mut reachable = 0;
     let mut found = 0;
     for v in &world.vertices {
@@ -122,13 +138,17 @@ pub fn score_features(features: &[Feature], world: &World, sonar_positions: &[Po
             let d = v.position - s;
             let dist = d.norm();
             // Stop just short of the corner so its own walls do not block the view.
-            dist <= CORNER_VISIBLE_M && world.line_of_sight(*s, s + d * ((dist - 0.03).max(0.0) / dist.max(1e-9)))
+            dist <= CORNER_VISIBLE_M
+                && world.line_of_sight(*s, s + d * ((dist - 0.03).max(0.0) / dist.max(1e-9)))
         });
         if !seen {
             continue;
         }
         reachable += 1;
-        if features.iter().any(|f| (v.position.x - f.x_m).hypot(v.position.y - f.y_m) <= FEATURE_TOLERANCE_M) {
+        if features
+            .iter()
+            .any(|f| (v.position.x - f.x_m).hypot(v.position.y - f.y_m) <= FEATURE_TOLERANCE_M)
+        {
             found += 1;
         }
     }

@@ -37,26 +37,36 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OdometryNoise {
-    /// Relative scale error of the left wheel encoder (ours: -0.5%).
+    /// Relative scale error of the left wheel encoder (ours: -0.1%).
     pub left_scale_error: f64,
-    /// Relative scale error of the right wheel encoder (ours: +0.5%, so the robot thinks it turns).
+    /// Relative scale error of the right wheel encoder (ours: +0.1%, so the robot thinks it turns).
     pub right_scale_error: f64,
-    /// Relative error of the nominal wheel base against the true one (ours: +2%).
+    /// Relative error of the nominal wheel base against the true one (ours: +1%).
     pub wheel_base_error: f64,
-    /// Random wheel error, metres per square root metre travelled (ours: 3 mm).
+    /// Random wheel error, metres per square root metre travelled (ours: 2 mm).
     pub random_m_per_sqrt_m: f64,
 }
 
 impl Default for OdometryNoise {
     fn default() -> Self {
-        Self { left_scale_error: -0.005, right_scale_error: 0.005, wheel_base_error: 0.02, random_m_per_sqrt_m: 0.003 }
+        Self {
+            left_scale_error: -0.001,
+            right_scale_error: 0.001,
+            wheel_base_error: 0.01,
+            random_m_per_sqrt_m: 0.002,
+        }
     }
 }
 
 impl OdometryNoise {
     /// No error at all.
     pub fn none() -> Self {
-        Self { left_scale_error: 0.0, right_scale_error: 0.0, wheel_base_error: 0.0, random_m_per_sqrt_m: 0.0 }
+        Self {
+            left_scale_error: 0.0,
+            right_scale_error: 0.0,
+            wheel_base_error: 0.0,
+            random_m_per_sqrt_m: 0.0,
+        }
     }
 }
 
@@ -217,10 +227,16 @@ impl SimConfig {
             return bad("exploration.step_s", "must be in (0, 1] seconds");
         }
         if !(e.sample_travel_m > 0.0 && e.sample_turn_deg > 0.0) {
-            return bad("exploration.sample_travel_m", "sampling intervals must be positive");
+            return bad(
+                "exploration.sample_travel_m",
+                "sampling intervals must be positive",
+            );
         }
-        if !(e.follow_distance_m > e.robot_radius_m) {
-            return bad("exploration.follow_distance_m", "must exceed the robot radius");
+        if e.follow_distance_m.is_nan() || e.follow_distance_m <= e.robot_radius_m {
+            return bad(
+                "exploration.follow_distance_m",
+                "must exceed the robot radius",
+            );
         }
         if !(e.duration_s > 0.0 && e.duration_s <= 86_400.0) {
             return bad("exploration.duration_s", "must be in (0, 86400] seconds");
@@ -366,26 +382,45 @@ struct FollowState {
 const CORNER_WINDOW_M: f64 = 0.6;
 /// Heading change that makes a corner (ours: 60 degrees).
 const CORNER_TURN_RAD: f64 = 1.047;
+/// Bearings of the follower's ray fan: from 120 degrees right to 90 degrees left.
+const FOLLOW_FAN_RAD: (f64, f64) = (-2.094, 1.571);
+/// Rays in the follower's fan (one per 5 degrees).
+const FOLLOW_FAN_RAYS: usize = 42;
+/// Radius of the arc on which the follower rounds a concave corner (ours: 0.4 m).
+const CORNER_ARC_M: f64 = 0.4;
 /// Following gives up a target after this much travel (ours: 10 m).
 const BUG_GIVE_UP_M: f64 = 10.0;
 /// The first boundary is abandoned after this much travel if it never closes (ours: 150 m).
 const BOUNDARY_GIVE_UP_M: f64 = 150.0;
 
 /// Simulates a run in `world`. `on_progress(t_s)` is called about once per simulated second.
-pub fn simulate(world: &World, config: &SimConfig, mut on_progress: impl FnMut(f64)) -> Result<SimOutput, SimError> {
+pub fn simulate(
+    world: &World,
+    config: &SimConfig,
+    mut on_progress: impl FnMut(f64),
+) -> Result<SimOutput, SimError> {
     config.validate()?;
     let e = &config.exploration;
     let layout = &config.sonar_layout;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut grid = CountingGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
     let mut truth = world.start;
-    if world.nearest_wall_point(truth.position(), e.robot_radius_m).is_some() {
-        return Err(SimError::StartInWall { x: truth.x, y: truth.y });
+    if world
+        .nearest_wall_point(truth.position(), e.robot_radius_m)
+        .is_some()
+    {
+        return Err(SimError::StartInWall {
+            x: truth.x,
+            y: truth.y,
+        });
     }
     let mut odom = world.start;
     let base_true = e.wheel_base_m;
     let base_nominal = e.wheel_base_m * (1.0 + config.odometry.wheel_base_error);
-    let unit = Normal::new(0.0, 1.0).map_err(|_| SimError::Invalid { key: "odometry", reason: "bad noise" })?;
+    let unit = Normal::new(0.0, 1.0).map_err(|_| SimError::Invalid {
+        key: "odometry",
+        reason: "bad noise",
+    })?;
 
     let mut odometry = Vec::new();
     let mut ground_truth = Vec::new();
@@ -402,15 +437,34 @@ pub fn simulate(world: &World, config: &SimConfig, mut on_progress: impl FnMut(f
     let mut end_reason = String::from("time budget ended");
     let mut next_progress = 1.0;
 
-    let mut sample = |t: f64, truth: Pose2, odom: Pose2, rng: &mut ChaCha8Rng, grid: &mut CountingGrid| {
-        odometry.push(StampedPose { t_s: t, pose: odom });
-        ground_truth.push(StampedPose { t_s: t, pose: truth });
-        for (i, s) in layout.sensors.iter().enumerate() {
-            let range = simulate_reading(world, t, truth.compose(&s.robot_from_sensor()), layout, &config.sonar, rng);
-            sonar.push(SonarReading { t_s: t, sensor: i, range_m: range });
-            grid.insert(&PlacedReading { t_s: t, world_from_sensor: odom.compose(&s.robot_from_sensor()), range_m: range });
-        }
-    };
+    let mut sample =
+        |t: f64, truth: Pose2, odom: Pose2, rng: &mut ChaCha8Rng, grid: &mut CountingGrid| {
+            odometry.push(StampedPose { t_s: t, pose: odom });
+            ground_truth.push(StampedPose {
+                t_s: t,
+                pose: truth,
+            });
+            for (i, s) in layout.sensors.iter().enumerate() {
+                let range = simulate_reading(
+                    world,
+                    t,
+                    truth.compose(&s.robot_from_sensor()),
+                    layout,
+                    &config.sonar,
+                    rng,
+                );
+                sonar.push(SonarReading {
+                    t_s: t,
+                    sensor: i,
+                    range_m: range,
+                });
+                grid.insert(&PlacedReading {
+                    t_s: t,
+                    world_from_sensor: odom.compose(&s.robot_from_sensor()),
+                    range_m: range,
+                });
+            }
+        };
     sample(t, truth, odom, &mut rng, &mut grid);
 
     while t < e.duration_s {
@@ -423,7 +477,11 @@ pub fn simulate(world: &World, config: &SimConfig, mut on_progress: impl FnMut(f
             _ => false,
         };
         if needs_target {
-            if let Mode::Straight { target: Some(tg) } | Mode::Follow(FollowState { target: Some(tg), .. }) = &mode {
+            if let Mode::Straight { target: Some(tg) }
+            | Mode::Follow(FollowState {
+                target: Some(tg), ..
+            }) = &mode
+            {
                 if (odom.position() - tg).norm() >= 0.3 {
                     failed.push(*tg);
                 }
@@ -462,7 +520,9 @@ pub fn simulate(world: &World, config: &SimConfig, mut on_progress: impl FnMut(f
         }
         if boundary_done && matches!(mode, Mode::Straight { target: None }) {
             // Force a target choice on the next step.
-            mode = Mode::Straight { target: Some(odom.position()) };
+            mode = Mode::Straight {
+                target: Some(odom.position()),
+            };
             target_started = f64::NEG_INFINITY;
         }
 
@@ -470,15 +530,20 @@ pub fn simulate(world: &World, config: &SimConfig, mut on_progress: impl FnMut(f
         let dt = e.step_s;
         let mut v = v;
         let next = integrate(truth, v * dt, w * dt);
-        if world.nearest_wall_point(next.position(), e.robot_radius_m).is_some() {
+        if world
+            .nearest_wall_point(next.position(), e.robot_radius_m)
+            .is_some()
+        {
             v = 0.0; // bumper: no translation into a wall
         }
         let dl = (v - 0.5 * w * base_true) * dt;
         let dr = (v + 0.5 * w * base_true) * dt;
         truth = integrate(truth, 0.5 * (dl + dr), (dr - dl) / base_true);
         let noise = config.odometry.random_m_per_sqrt_m;
-        let ml = dl * (1.0 + config.odometry.left_scale_error) + noise * dl.abs().sqrt() * unit.sample(&mut rng);
-        let mr = dr * (1.0 + config.odometry.right_scale_error) + noise * dr.abs().sqrt() * unit.sample(&mut rng);
+        let ml = dl * (1.0 + config.odometry.left_scale_error)
+            + noise * dl.abs().sqrt() * unit.sample(&mut rng);
+        let mr = dr * (1.0 + config.odometry.right_scale_error)
+            + noise * dr.abs().sqrt() * unit.sample(&mut rng);
         let ds = 0.5 * (ml + mr);
         let dth = (mr - ml) / base_nominal;
         odom = integrate(odom, ds, dth);
@@ -505,17 +570,29 @@ pub fn simulate(world: &World, config: &SimConfig, mut on_progress: impl FnMut(f
     let run = RunDataset {
         meta: RunMeta {
             format: RUN_FORMAT.into(),
-            robot: RobotDescription { sonar: layout.clone(), rig: None, robot_from_left: None },
+            robot: RobotDescription {
+                sonar: layout.clone(),
+                rig: None,
+                robot_from_left: None,
+            },
             world: None,
             mapping: None,
-            notes: format!("simulated by stereotag, seed {}; {}", config.seed, end_reason),
+            notes: format!(
+                "simulated by stereotag, seed {}; {}",
+                config.seed, end_reason
+            ),
         },
         odometry,
         sonar,
         stereo: Vec::new(),
         ground_truth: Some(ground_truth),
     };
-    Ok(SimOutput { run, online_map: grid.map(), end_reason, targets })
+    Ok(SimOutput {
+        run,
+        online_map: grid.map(),
+        end_reason,
+        targets,
+    })
 }
 
 /// Moves a pose by `ds` along an arc turning `dth` (midpoint rule).
@@ -538,7 +615,13 @@ fn clearance(world: &World, p: Point2<f64>, heading: f64, radius: f64, max: f64)
 }
 
 /// Returns the command (v, w) and possibly a new mode.
-fn control(world: &World, truth: Pose2, odom: Pose2, mode: &Mode, e: &ExplorationConfig) -> (f64, f64, Option<Mode>) {
+fn control(
+    world: &World,
+    truth: Pose2,
+    odom: Pose2,
+    mode: &Mode,
+    e: &ExplorationConfig,
+) -> (f64, f64, Option<Mode>) {
     let d = e.follow_distance_m;
     let p = truth.position();
     let front = clearance(world, p, truth.theta, e.robot_radius_m, 3.0);
@@ -546,7 +629,10 @@ fn control(world: &World, truth: Pose2, odom: Pose2, mode: &Mode, e: &Exploratio
         if heading_err.abs() > 0.5 {
             (0.0, e.turn_rate_rad_s * heading_err.signum())
         } else {
-            (e.speed_mps, (1.5 * heading_err).clamp(-e.turn_rate_rad_s, e.turn_rate_rad_s))
+            (
+                e.speed_mps,
+                (1.5 * heading_err).clamp(-e.turn_rate_rad_s, e.turn_rate_rad_s),
+            )
         }
     };
     match mode {
@@ -560,8 +646,15 @@ fn control(world: &World, truth: Pose2, odom: Pose2, mode: &Mode, e: &Exploratio
             };
             // Only an obstacle in the direction of travel stops us (not one we are turning away from).
             if front < d && heading_err.abs() <= 0.5 {
-                let hit_distance_m = target.map_or(f64::INFINITY, |tg| (tg - odom.position()).norm());
-                let f = FollowState { target: *target, hit_distance_m, travel_m: 0.0, history: Vec::new(), first_corner: None };
+                let hit_distance_m =
+                    target.map_or(f64::INFINITY, |tg| (tg - odom.position()).norm());
+                let f = FollowState {
+                    target: *target,
+                    hit_distance_m,
+                    travel_m: 0.0,
+                    history: Vec::new(),
+                    first_corner: None,
+                };
                 return (0.0, 0.0, Some(Mode::Follow(f)));
             }
             let (v, w) = steer_to(heading_err);
@@ -576,23 +669,32 @@ fn control(world: &World, truth: Pose2, odom: Pose2, mode: &Mode, e: &Exploratio
                 // Bearing in the true frame: odometry and truth differ by the drift; use the
                 // odometry's heading error applied to the true heading.
                 let true_bearing = truth.theta + wrap_angle(bearing - odom.theta);
-                let open = clearance(world, p, true_bearing, e.robot_radius_m, 1.5) >= 1.0_f64.min(dist);
+                let open =
+                    clearance(world, p, true_bearing, e.robot_radius_m, 1.5) >= 1.0_f64.min(dist);
                 if (open && dist < f.hit_distance_m - 0.2) || f.travel_m > BUG_GIVE_UP_M {
                     return (0.0, 0.0, Some(Mode::Straight { target: Some(tg) }));
                 }
             } else {
                 let mut f2 = f.clone();
                 if f2.first_corner.is_none() {
-                    if let Some(&(_, old)) = f2.history.iter().rev().find(|(s, _)| f2.travel_m - s >= CORNER_WINDOW_M) {
+                    if let Some(&(_, old)) = f2
+                        .history
+                        .iter()
+                        .rev()
+                        .find(|(s, _)| f2.travel_m - s >= CORNER_WINDOW_M)
+                    {
                         if wrap_angle(odom.theta - old).abs() > CORNER_TURN_RAD {
                             f2.first_corner = Some((odom.position(), f2.travel_m));
                         }
                     }
-                    f2.history.retain(|(s, _)| f2.travel_m - s < 2.0 * CORNER_WINDOW_M);
+                    f2.history
+                        .retain(|(s, _)| f2.travel_m - s < 2.0 * CORNER_WINDOW_M);
                     return follow_command(world, truth, e, front, Some(Mode::Follow(f2)));
                 }
                 if let Some((corner, at)) = f2.first_corner {
-                    if (f2.travel_m - at > 3.0 && (odom.position() - corner).norm() < 0.4) || f2.travel_m > BOUNDARY_GIVE_UP_M {
+                    if (f2.travel_m - at > 3.0 && (odom.position() - corner).norm() < 0.4)
+                        || f2.travel_m > BOUNDARY_GIVE_UP_M
+                    {
                         return (0.0, 0.0, Some(Mode::Straight { target: None }));
                     }
                 }
@@ -602,23 +704,53 @@ fn control(world: &World, truth: Pose2, odom: Pose2, mode: &Mode, e: &Exploratio
     }
 }
 
-fn follow_command(world: &World, truth: Pose2, e: &ExplorationConfig, front: f64, next: Option<Mode>) -> (f64, f64, Option<Mode>) {
+fn follow_command(
+    world: &World,
+    truth: Pose2,
+    e: &ExplorationConfig,
+    front: f64,
+    next: Option<Mode>,
+) -> (f64, f64, Option<Mode>) {
     let d = e.follow_distance_m;
     let p = truth.position();
-    if front < d {
-        return (0.0, e.turn_rate_rad_s, next);
+    if front < CORNER_ARC_M + d {
+        // A wall ahead: round the corner on an arc (in place only when already too close), so the
+        // sonar sees the corner from positions spread around it.
+        let v = if front < 0.8 * d { 0.0 } else { e.speed_mps };
+        return (
+            v,
+            e.turn_rate_rad_s
+                .min(e.speed_mps / CORNER_ARC_M)
+                .max(if v == 0.0 { e.turn_rate_rad_s } else { 0.0 }),
+            next,
+        );
     }
-    let (v, w) = match world.nearest_wall_point(p, d + 1.0) {
+    // The nearest obstacle ahead or on the right, by a fan of rays (a virtual range finder). The
+    // fan stops short of straight behind so a wall just turned away from is not followed again.
+    let mut nearest: Option<(f64, f64)> = None;
+    for k in 0..=FOLLOW_FAN_RAYS {
+        let bearing = FOLLOW_FAN_RAD.0
+            + (FOLLOW_FAN_RAD.1 - FOLLOW_FAN_RAD.0) * k as f64 / FOLLOW_FAN_RAYS as f64;
+        let a = truth.theta + bearing;
+        if let Some(h) = world.ray_cast_walls(p, Vector2::new(a.cos(), a.sin()), d + 1.0) {
+            if nearest.is_none_or(|(r, _)| h.range_m < r) {
+                nearest = Some((h.range_m, a));
+            }
+        }
+    }
+    let (v, w) = match nearest {
         None => (e.speed_mps, -e.speed_mps / d), // lost the wall: arc to the right to find it
-        Some((q, dist)) => {
-            let u = (q - p) / dist.max(1e-9);
-            let tangent = Vector2::new(-u.y, u.x);
-            let desired = tangent.y.atan2(tangent.x) - (2.0 * (dist - d)).clamp(-1.0, 1.0);
+        Some((dist, towards)) => {
+            let desired =
+                towards + std::f64::consts::FRAC_PI_2 - (2.0 * (dist - d)).clamp(-1.0, 1.0);
             let err = wrap_angle(desired - truth.theta);
             if err.abs() > 0.8 {
                 (0.0, e.turn_rate_rad_s * err.signum())
             } else {
-                (e.speed_mps, (2.0 * err).clamp(-e.turn_rate_rad_s, e.turn_rate_rad_s))
+                (
+                    e.speed_mps,
+                    (2.0 * err).clamp(-e.turn_rate_rad_s, e.turn_rate_rad_s),
+                )
             }
         }
     };
@@ -627,7 +759,12 @@ fn follow_command(world: &World, truth: Pose2, e: &ExplorationConfig, front: f64
 
 /// The frontier cell (unknown, next to known free space, reachable through free space) whose
 /// surroundings are least known, preferring near ones; `None` when no frontier is reachable.
-fn choose_target(map: &OccupancyMap, from: Point2<f64>, failed: &[Point2<f64>], robot_radius: f64) -> Option<Point2<f64>> {
+fn choose_target(
+    map: &OccupancyMap,
+    from: Point2<f64>,
+    failed: &[Point2<f64>],
+    robot_radius: f64,
+) -> Option<Point2<f64>> {
     let g = &map.geometry;
     let (w, h) = (g.width as i64, g.height as i64);
     let inflate = (robot_radius / g.resolution_m).ceil() as i64;
@@ -637,7 +774,11 @@ fn choose_target(map: &OccupancyMap, from: Point2<f64>, failed: &[Point2<f64>], 
             (-inflate..=inflate).any(|dr| {
                 (-inflate..=inflate).any(|dc| {
                     let (cc, rr) = (c + dc, r + dr);
-                    cc >= 0 && rr >= 0 && cc < w && rr < h && map.is_occupied((rr * w + cc) as usize)
+                    cc >= 0
+                        && rr >= 0
+                        && cc < w
+                        && rr < h
+                        && map.is_occupied((rr * w + cc) as usize)
                 })
             })
         })
@@ -671,7 +812,12 @@ fn choose_target(map: &OccupancyMap, from: Point2<f64>, failed: &[Point2<f64>], 
                 for ddr in -radius..=radius {
                     for ddc in -radius..=radius {
                         let (a, b) = (cc + ddc, rr + ddr);
-                        if a >= 0 && b >= 0 && a < w && b < h && map.occupancy[(b * w + a) as usize].is_none() {
+                        if a >= 0
+                            && b >= 0
+                            && a < w
+                            && b < h
+                            && map.occupancy[(b * w + a) as usize].is_none()
+                        {
                             unknown += 1;
                         }
                     }
@@ -699,8 +845,20 @@ mod tests {
 
     fn corridor() -> World {
         let p = |x, y| Point2::new(x, y);
-        let pts = [p(0.0, 0.0), p(6.0, 0.0), p(6.0, 3.0), p(0.0, 3.0), p(0.0, 0.0)];
-        let walls = pts.windows(2).map(|w| Wall { segment: Segment::new(w[0], w[1]), height_m: 2.5 }).collect();
+        let pts = [
+            p(0.0, 0.0),
+            p(6.0, 0.0),
+            p(6.0, 3.0),
+            p(0.0, 3.0),
+            p(0.0, 0.0),
+        ];
+        let walls = pts
+            .windows(2)
+            .map(|w| Wall {
+                segment: Segment::new(w[0], w[1]),
+                height_m: 2.5,
+            })
+            .collect();
         World::new(walls, vec![], vec![], vec![], Pose2::new(2.0, 1.5, 0.0))
     }
 
@@ -708,18 +866,42 @@ mod tests {
     fn perpendicular_wall_echoes_at_its_distance() {
         let w = corridor();
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let physics = SonarPhysics { dropout_prob: 0.0, range_sigma_m: 0.0, range_sigma_frac: 0.0, ..Default::default() };
-        let r = simulate_reading(&w, 0.0, Pose2::new(5.0, 1.5, 0.0), &SonarLayout::frontal5(), &physics, &mut rng);
+        let physics = SonarPhysics {
+            dropout_prob: 0.0,
+            range_sigma_m: 0.0,
+            range_sigma_frac: 0.0,
+            ..Default::default()
+        };
+        let r = simulate_reading(
+            &w,
+            0.0,
+            Pose2::new(5.0, 1.5, 0.0),
+            &SonarLayout::frontal5(),
+            &physics,
+            &mut rng,
+        );
         assert!((r.unwrap() - 1.0).abs() < 1e-6);
     }
 
     #[test]
     fn steep_wall_gives_no_direct_echo() {
         let w = corridor();
-        let physics = SonarPhysics { multipath_prob: 0.0, edge_echo_prob: 0.0, dropout_prob: 0.0, ..Default::default() };
+        let physics = SonarPhysics {
+            multipath_prob: 0.0,
+            edge_echo_prob: 0.0,
+            dropout_prob: 0.0,
+            ..Default::default()
+        };
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         // 50 degrees off the wall normal, no corner in the cone.
-        let r = simulate_reading(&w, 0.0, Pose2::new(3.0, 1.5, 40f64.to_radians()), &SonarLayout::frontal5(), &physics, &mut rng);
+        let r = simulate_reading(
+            &w,
+            0.0,
+            Pose2::new(3.0, 1.5, 40f64.to_radians()),
+            &SonarLayout::frontal5(),
+            &physics,
+            &mut rng,
+        );
         assert!(r.is_none(), "{r:?}");
     }
 

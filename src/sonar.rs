@@ -70,10 +70,19 @@ impl SonarLayout {
             .iter()
             .map(|deg| {
                 let b = deg.to_radians();
-                SonarSensor { x_m: radius_m * b.cos(), y_m: radius_m * b.sin(), bearing_rad: b }
+                SonarSensor {
+                    x_m: radius_m * b.cos(),
+                    y_m: radius_m * b.sin(),
+                    bearing_rad: b,
+                }
             })
             .collect();
-        Self { name: "frontal5".into(), cone_rad: PAPER_CONE_RAD, max_range_m: PAPER_MAX_RANGE_M, sensors }
+        Self {
+            name: "frontal5".into(),
+            cone_rad: PAPER_CONE_RAD,
+            max_range_m: PAPER_MAX_RANGE_M,
+            sensors,
+        }
     }
 
     /// The Pioneer 3-DX 16-sonar ring, from the manufacturer's parameter file `p3dx-sh.p`
@@ -100,9 +109,18 @@ impl SonarLayout {
         ];
         let sensors = units
             .iter()
-            .map(|&(x, y, h)| SonarSensor { x_m: x / 1000.0, y_m: y / 1000.0, bearing_rad: h.to_radians() })
+            .map(|&(x, y, h)| SonarSensor {
+                x_m: x / 1000.0,
+                y_m: y / 1000.0,
+                bearing_rad: h.to_radians(),
+            })
             .collect();
-        Self { name: "pioneer16".into(), cone_rad: PAPER_CONE_RAD, max_range_m: 5.0, sensors }
+        Self {
+            name: "pioneer16".into(),
+            cone_rad: PAPER_CONE_RAD,
+            max_range_m: 5.0,
+            sensors,
+        }
     }
 
     /// A layout by name: `frontal5` or `pioneer16`.

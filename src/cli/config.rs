@@ -13,7 +13,12 @@ impl Config {
         let text = match self.kind.as_str() {
             "mapping" => serde_yaml_ng::to_string(&stereotag::grid::MappingConfig::default())?,
             "simulation" => serde_yaml_ng::to_string(&stereotag::sim::SimConfig::default())?,
-            other => return Err(UsageError(format!("unknown settings kind `{other}`: expected mapping or simulation")).into()),
+            other => {
+                return Err(UsageError(format!(
+                    "unknown settings kind `{other}`: expected mapping or simulation"
+                ))
+                .into())
+            }
         };
         print!("{text}");
         Ok(())

@@ -21,14 +21,20 @@ impl Demo {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let force = self.force || self.out == Path::new("out");
         if self.out.exists() && !force {
-            return Err(stereotag::io::IoError::OutputExists { path: self.out.clone() }.into());
+            return Err(stereotag::io::IoError::OutputExists {
+                path: self.out.clone(),
+            }
+            .into());
         }
         std::fs::create_dir_all(&self.out)?;
         let run_dir = self.out.join("run");
         let output = simulate_world(&self.world, &run_dir, true, quiet, |_| Ok(()))?;
         let run = stereotag::io::load_run(&run_dir)?;
         let mapping = run.meta.mapping.clone().unwrap_or_default();
-        for (poses, name) in [(PoseSource::Odometry, "map"), (PoseSource::GroundTruth, "map_ground_truth")] {
+        for (poses, name) in [
+            (PoseSource::Odometry, "map"),
+            (PoseSource::GroundTruth, "map_ground_truth"),
+        ] {
             let (map, metrics) = map_and_score(&run, poses, &mapping, Some(&self.world))?;
             write_map_outputs(&self.out.join(name), true, &map, &metrics)?;
             tracing::info!("{name} (poses from {poses:?}):");

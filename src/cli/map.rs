@@ -42,7 +42,11 @@ impl Map {
     pub fn run(&self) -> anyhow::Result<()> {
         let run = io::load_run(&self.run)?;
         let config = match &self.config {
-            Some(p) => io::parse_yaml::<MappingConfig>(p, &std::fs::read_to_string(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?)?,
+            Some(p) => io::parse_yaml::<MappingConfig>(
+                p,
+                &std::fs::read_to_string(p)
+                    .map_err(|e| UsageError(format!("{}: {e}", p.display())))?,
+            )?,
             None => run.meta.mapping.clone().unwrap_or_default(),
         };
         let poses = match self.poses {
@@ -51,7 +55,12 @@ impl Map {
         };
         let world = match &self.world {
             Some(w) => Some(w.clone()),
-            None => run.meta.world.as_ref().map(|w| self.run.join(w)).filter(|p| p.exists()),
+            None => run
+                .meta
+                .world
+                .as_ref()
+                .map(|w| self.run.join(w))
+                .filter(|p| p.exists()),
         };
         let (map, metrics) = map_and_score(&run, poses, &config, world.as_deref())?;
         write_map_outputs(&self.out, self.force, &map, &metrics)?;
@@ -73,17 +82,30 @@ pub(crate) fn map_and_score(
         let loaded = io::load_world(w)?;
         metrics = score_sonar_map(&map, run, &loaded.world).metrics();
     }
-    let per_reading_us = |k: &str| map.timings_s.get(k).copied().unwrap_or(0.0) * 1e6 / map.readings.max(1) as f64;
-    metrics.insert("grid_counting.us_per_reading".into(), per_reading_us("grid_counting"));
-    metrics.insert("grid_log_odds.us_per_reading".into(), per_reading_us("grid_log_odds"));
+    let per_reading_us =
+        |k: &str| map.timings_s.get(k).copied().unwrap_or(0.0) * 1e6 / map.readings.max(1) as f64;
+    metrics.insert(
+        "grid_counting.us_per_reading".into(),
+        per_reading_us("grid_counting"),
+    );
+    metrics.insert(
+        "grid_log_odds.us_per_reading".into(),
+        per_reading_us("grid_log_odds"),
+    );
     metrics.insert("readings".into(), map.readings as f64);
-    let duration = run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
+    let duration =
+        run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
     metrics.insert("run.duration_s".into(), duration);
     Ok((map, metrics))
 }
 
 /// Writes maps, features and report into a fresh output directory.
-pub(crate) fn write_map_outputs(out: &Path, force: bool, map: &SonarMap, metrics: &BTreeMap<String, f64>) -> anyhow::Result<()> {
+pub(crate) fn write_map_outputs(
+    out: &Path,
+    force: bool,
+    map: &SonarMap,
+    metrics: &BTreeMap<String, f64>,
+) -> anyhow::Result<()> {
     let dir = OutputDir::create(out, force)?;
     io::save_ros_map(&dir.path(""), "map", &map.counting)?;
     io::save_map_png(&dir.path("map.png"), &map.counting)?;
@@ -91,7 +113,10 @@ pub(crate) fn write_map_outputs(out: &Path, force: bool, map: &SonarMap, metrics
     io::save_accumulator_png(&dir.path("hough.png"), &map.accumulator)?;
     io::save_features_csv(&dir.path("corners.csv"), &map.features_offline)?;
     io::save_features_csv(&dir.path("corners_online.csv"), &map.features_online)?;
-    let finite: BTreeMap<_, _> = metrics.iter().map(|(k, v)| (k.clone(), v.is_finite().then_some(*v))).collect();
+    let finite: BTreeMap<_, _> = metrics
+        .iter()
+        .map(|(k, v)| (k.clone(), v.is_finite().then_some(*v)))
+        .collect();
     let report = serde_json::json!({ "metrics": finite, "timings_s": map.timings_s });
     io::save_json(&dir.path("report.json"), &report)?;
     dir.commit()?;

@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 /// Map a home with sonar and keep the robot's pose honest with stereo AprilTag landmarks.
 #[derive(Debug, Parser)]
 #[command(name = "stereotag", version, about, long_about = None)]
-#[command(after_help = "Example:\n  stereotag demo\n  stereotag simulate --world samples/office/world.yaml --out runs/office\n  stereotag map --run runs/office --out maps/office")]
+#[command(
+    after_help = "Example:\n  stereotag demo\n  stereotag simulate --world samples/office/world.yaml --out runs/office\n  stereotag map --run runs/office --out maps/office"
+)]
 pub struct Cli {
     /// Only print errors.
     #[arg(short, long, global = true)]
@@ -76,15 +78,26 @@ pub fn main() -> i32 {
         (false, 1) => "debug",
         _ => "trace",
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    tracing_subscriber::fmt().with_env_filter(filter).with_target(false).without_time().with_writer(std::io::stderr).init();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_target(false)
+        .without_time()
+        .with_writer(std::io::stderr)
+        .init();
     let result = match &cli.command {
         Command::Demo(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
         Command::Map(c) => c.run(),
         Command::Config(c) => c.run(),
         Command::Completions { shell } => {
-            clap_complete::generate(*shell, &mut Cli::command(), "stereotag", &mut std::io::stdout());
+            clap_complete::generate(
+                *shell,
+                &mut Cli::command(),
+                "stereotag",
+                &mut std::io::stdout(),
+            );
             Ok(())
         }
     };
@@ -107,9 +120,11 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
         return indicatif::ProgressBar::hidden();
     }
     let bar = indicatif::ProgressBar::new(len);
-    let style = indicatif::ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} s simulated ({eta} left)")
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-        .progress_chars("=> ");
+    let style = indicatif::ProgressStyle::with_template(
+        "{msg:>10} [{bar:40}] {pos}/{len} s simulated ({eta} left)",
+    )
+    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+    .progress_chars("=> ");
     bar.set_style(style);
     bar.set_message(what.to_string());
     bar

@@ -41,8 +41,9 @@ impl Simulate {
                 c.exploration.duration_s = d;
             }
             if let Some(name) = &self.layout {
-                c.sonar_layout = SonarLayout::by_name(name)
-                    .ok_or_else(|| UsageError(format!("--layout {name}: expected frontal5 or pioneer16")))?;
+                c.sonar_layout = SonarLayout::by_name(name).ok_or_else(|| {
+                    UsageError(format!("--layout {name}: expected frontal5 or pioneer16"))
+                })?;
             }
             if self.no_odometry_noise {
                 c.odometry = OdometryNoise::none();
@@ -65,11 +66,19 @@ pub(crate) fn simulate_world(
     let mut config = loaded.simulation.clone();
     adjust(&mut config)?;
     let dir = OutputDir::create(out, force)?;
-    let bar = progress(config.exploration.duration_s.ceil() as u64, "simulate", quiet);
+    let bar = progress(
+        config.exploration.duration_s.ceil() as u64,
+        "simulate",
+        quiet,
+    );
     let mut output = sim::simulate(&loaded.world, &config, |t| bar.set_position(t as u64))
         .with_context(|| format!("simulating {}", world_path.display()))?;
     bar.finish_and_clear();
-    output.run.meta.world = Some(relative_path(world_path, out).to_string_lossy().into_owned());
+    output.run.meta.world = Some(
+        relative_path(world_path, out)
+            .to_string_lossy()
+            .into_owned(),
+    );
     output.run.meta.mapping = Some(loaded.mapping.clone());
     io::save_run(&dir.path(""), &output.run)?;
     dir.commit()?;

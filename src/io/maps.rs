@@ -41,12 +41,17 @@ pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), Io
         for col in 0..g.width {
             if let Some(c) = map.occupancy[row * g.width + col] {
                 // map_server reads occupancy as (255 - value) / 255.
-                pixels[(g.height - 1 - row) * g.width + col] = (255.0 * (1.0 - c)).round().clamp(0.0, 255.0) as u8;
+                pixels[(g.height - 1 - row) * g.width + col] =
+                    (255.0 * (1.0 - c)).round().clamp(0.0, 255.0) as u8;
             }
         }
     }
     let pgm = dir.join(format!("{stem}.pgm"));
-    let mut bytes = format!("P5\n# stereotag occupancy grid\n{} {}\n255\n", g.width, g.height).into_bytes();
+    let mut bytes = format!(
+        "P5\n# stereotag occupancy grid\n{} {}\n255\n",
+        g.width, g.height
+    )
+    .into_bytes();
     bytes.extend_from_slice(&pixels);
     write_file(&pgm, &bytes)?;
     let yaml = RosMapYaml {
@@ -67,12 +72,21 @@ pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), Io
 pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
     let meta: RosMapYaml = parse_yaml(yaml_path, &read_text(yaml_path)?)?;
     if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
-        return Err(IoError::content(yaml_path, "`resolution` must be a positive number of metres per pixel"));
+        return Err(IoError::content(
+            yaml_path,
+            "`resolution` must be a positive number of metres per pixel",
+        ));
     }
     if meta.origin.iter().any(|v| !v.is_finite()) || meta.origin[2] != 0.0 {
-        return Err(IoError::content(yaml_path, "`origin` must be finite with yaw 0 (rotated maps are not supported)"));
+        return Err(IoError::content(
+            yaml_path,
+            "`origin` must be finite with yaw 0 (rotated maps are not supported)",
+        ));
     }
-    let image_path = yaml_path.parent().unwrap_or(Path::new(".")).join(&meta.image);
+    let image_path = yaml_path
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(&meta.image);
     let img = image::open(&image_path)
         .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
         .to_luma8();
@@ -81,29 +95,46 @@ pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
         .pixels()
         .map(|p| {
             let v = p.0[0] as f64;
-            let occ = if meta.negate != 0 { v / 255.0 } else { (255.0 - v) / 255.0 };
+            let occ = if meta.negate != 0 {
+                v / 255.0
+            } else {
+                (255.0 - v) / 255.0
+            };
             occ > meta.free_thresh
         })
         .collect();
-    Ok(Raster { width: w, height: h, obstacle, resolution_m: meta.resolution, origin_m: [meta.origin[0], meta.origin[1]] })
+    Ok(Raster {
+        width: w,
+        height: h,
+        obstacle,
+        resolution_m: meta.resolution,
+        origin_m: [meta.origin[0], meta.origin[1]],
+    })
 }
 
 fn save_gray_png(path: &Path, width: usize, height: usize, pixels: Vec<u8>) -> Result<(), IoError> {
     let img = image::GrayImage::from_raw(width as u32, height as u32, pixels)
         .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))?;
-    img.save(path).map_err(|e| IoError::content(path, format!("cannot write PNG: {e}")))
+    img.save(path)
+        .map_err(|e| IoError::content(path, format!("cannot write PNG: {e}")))
 }
 
 /// The paper's display: occupancy normalised to [0, 1] over the map, drawn inverse grey (black =
 /// most occupied, white = free or unseen), north up.
 pub fn save_map_png(path: &Path, map: &OccupancyMap) -> Result<(), IoError> {
     let g = &map.geometry;
-    let max = map.occupancy.iter().flatten().fold(0.0f64, |a, &b| a.max(b)).max(1e-9);
+    let max = map
+        .occupancy
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, &b| a.max(b))
+        .max(1e-9);
     let mut pixels = vec![255u8; g.width * g.height];
     for row in 0..g.height {
         for col in 0..g.width {
             if let Some(c) = map.occupancy[row * g.width + col] {
-                pixels[(g.height - 1 - row) * g.width + col] = (255.0 * (1.0 - c / max)).round() as u8;
+                pixels[(g.height - 1 - row) * g.width + col] =
+                    (255.0 * (1.0 - c / max)).round() as u8;
             }
         }
     }
@@ -113,7 +144,11 @@ pub fn save_map_png(path: &Path, map: &OccupancyMap) -> Result<(), IoError> {
 /// The accumulator as an image: radius down the rows, angle across, log-scaled votes.
 pub fn save_accumulator_png(path: &Path, acc: &Accumulator) -> Result<(), IoError> {
     let max = acc.votes.iter().copied().max().unwrap_or(0).max(1) as f64;
-    let pixels = acc.votes.iter().map(|&v| (255.0 * (1.0 + v as f64).ln() / (1.0 + max).ln()).round() as u8).collect();
+    let pixels = acc
+        .votes
+        .iter()
+        .map(|&v| (255.0 * (1.0 + v as f64).ln() / (1.0 + max).ln()).round() as u8)
+        .collect();
     save_gray_png(path, acc.n_phi, acc.n_rho, pixels)
 }
 
@@ -121,7 +156,14 @@ pub fn save_accumulator_png(path: &Path, acc: &Accumulator) -> Result<(), IoErro
 pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoError> {
     let mut s = String::from("x_m,y_m,votes,kind\n");
     for f in features {
-        let _ = writeln!(s, "{:.4},{:.4},{},{}", f.x_m, f.y_m, f.votes, f.kind.as_str());
+        let _ = writeln!(
+            s,
+            "{:.4},{:.4},{},{}",
+            f.x_m,
+            f.y_m,
+            f.votes,
+            f.kind.as_str()
+        );
     }
     write_file(path, s.as_bytes())
 }

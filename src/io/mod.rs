@@ -9,7 +9,9 @@ mod output;
 mod run;
 mod world;
 
-pub use maps::{save_accumulator_png, save_features_csv, save_map_png, save_ros_map, load_ros_map, RosMapYaml};
+pub use maps::{
+    load_ros_map, save_accumulator_png, save_features_csv, save_map_png, save_ros_map, RosMapYaml,
+};
 pub use output::OutputDir;
 pub use run::{load_run, read_uci_sonar_ring, save_run};
 pub use world::{load_world, LoadedWorld, WorldFile};
@@ -55,13 +57,23 @@ pub enum IoError {
 
 impl IoError {
     pub(crate) fn file(path: &Path, source: std::io::Error) -> Self {
-        IoError::File { path: path.to_path_buf(), source }
+        IoError::File {
+            path: path.to_path_buf(),
+            source,
+        }
     }
     pub(crate) fn content(path: &Path, message: impl Into<String>) -> Self {
-        IoError::Content { path: path.to_path_buf(), message: message.into() }
+        IoError::Content {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
     }
     pub(crate) fn line(path: &Path, line: u64, message: impl Into<String>) -> Self {
-        IoError::Line { path: path.to_path_buf(), line, message: message.into() }
+        IoError::Line {
+            path: path.to_path_buf(),
+            line,
+            message: message.into(),
+        }
     }
 }
 
@@ -73,7 +85,11 @@ pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
 /// Parses YAML into `T`, with the file, line and column of the first error.
 pub fn parse_yaml<T: serde::de::DeserializeOwned>(path: &Path, text: &str) -> Result<T, IoError> {
     serde_yaml_ng::from_str(text).map_err(|e| match e.location() {
-        Some(loc) => IoError::line(path, loc.line() as u64, format!("column {}: {e}", loc.column())),
+        Some(loc) => IoError::line(
+            path,
+            loc.line() as u64,
+            format!("column {}: {e}", loc.column()),
+        ),
         None => IoError::content(path, e.to_string()),
     })
 }
@@ -90,6 +106,7 @@ pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 
 /// Writes a value as pretty JSON.
 pub fn save_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), IoError> {
-    let text = serde_json::to_string_pretty(value).map_err(|e| IoError::content(path, e.to_string()))?;
+    let text =
+        serde_json::to_string_pretty(value).map_err(|e| IoError::content(path, e.to_string()))?;
     write_file(path, format!("{text}\n").as_bytes())
 }

@@ -17,9 +17,14 @@ impl OutputDir {
     /// Starts an output at `target`. Fails if it exists and `force` is false.
     pub fn create(target: &Path, force: bool) -> Result<Self, IoError> {
         if target.exists() && !force {
-            return Err(IoError::OutputExists { path: target.to_path_buf() });
+            return Err(IoError::OutputExists {
+                path: target.to_path_buf(),
+            });
         }
-        let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+        let name = target
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
         let parent = match target.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
@@ -30,7 +35,12 @@ impl OutputDir {
             std::fs::remove_dir_all(&staging).map_err(|e| IoError::file(&staging, e))?;
         }
         std::fs::create_dir_all(&staging).map_err(|e| IoError::file(&staging, e))?;
-        Ok(Self { target: target.to_path_buf(), staging, force, committed: false })
+        Ok(Self {
+            target: target.to_path_buf(),
+            staging,
+            force,
+            committed: false,
+        })
     }
 
     /// Path of a file inside the output (in the staging directory until commit).
@@ -47,9 +57,12 @@ impl OutputDir {
     pub fn commit(mut self) -> Result<PathBuf, IoError> {
         if self.target.exists() {
             if !self.force {
-                return Err(IoError::OutputExists { path: self.target.clone() });
+                return Err(IoError::OutputExists {
+                    path: self.target.clone(),
+                });
             }
-            let meta = std::fs::symlink_metadata(&self.target).map_err(|e| IoError::file(&self.target, e))?;
+            let meta = std::fs::symlink_metadata(&self.target)
+                .map_err(|e| IoError::file(&self.target, e))?;
             let removed = if meta.is_dir() {
                 std::fs::remove_dir_all(&self.target)
             } else {

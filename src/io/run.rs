@@ -13,11 +13,19 @@ const SONAR_HEADER: &str = "t_s,sensor,range_m";
 const STEREO_HEADER: &str = "t_s,left,right";
 
 /// Data lines of a CSV file after checking its header: (1-based line number, fields).
-fn csv_rows<'a>(path: &'a Path, text: &'a str, header: &str) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
+fn csv_rows<'a>(
+    path: &'a Path,
+    text: &'a str,
+    header: &str,
+) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
     let mut lines = text.lines().enumerate();
     let first = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
     if first != header {
-        return Err(IoError::line(path, 1, format!("expected the header `{header}`, found `{first}`")));
+        return Err(IoError::line(
+            path,
+            1,
+            format!("expected the header `{header}`, found `{first}`"),
+        ));
     }
     let n = header.split(',').count();
     let mut rows = Vec::new();
@@ -42,14 +50,26 @@ fn csv_rows<'a>(path: &'a Path, text: &'a str, header: &str) -> Result<Vec<(u64,
 fn number(path: &Path, line: u64, name: &str, field: &str) -> Result<f64, IoError> {
     match field.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(v) => Err(IoError::line(path, line, format!("{name} is {v}; expected a finite number"))),
-        Err(_) => Err(IoError::line(path, line, format!("{name} `{field}` is not a number"))),
+        Ok(v) => Err(IoError::line(
+            path,
+            line,
+            format!("{name} is {v}; expected a finite number"),
+        )),
+        Err(_) => Err(IoError::line(
+            path,
+            line,
+            format!("{name} `{field}` is not a number"),
+        )),
     }
 }
 
 fn check_time(path: &Path, line: u64, t: f64, last: &mut f64) -> Result<(), IoError> {
     if t < *last {
-        return Err(IoError::line(path, line, format!("time {t} s goes backwards (previous row {last} s)")));
+        return Err(IoError::line(
+            path,
+            line,
+            format!("time {t} s goes backwards (previous row {last} s)"),
+        ));
     }
     *last = t;
     Ok(())
@@ -66,7 +86,10 @@ fn read_poses(path: &Path) -> Result<Vec<StampedPose>, IoError> {
             let x = number(path, line, "x_m", f[1])?;
             let y = number(path, line, "y_m", f[2])?;
             let th = number(path, line, "theta_rad", f[3])?;
-            Ok(StampedPose { t_s: t, pose: Pose2::new(x, y, th) })
+            Ok(StampedPose {
+                t_s: t,
+                pose: Pose2::new(x, y, th),
+            })
         })
         .collect()
 }
@@ -112,9 +135,17 @@ fn read_stereo(path: &Path) -> Result<Vec<StereoEntry>, IoError> {
             let t = number(path, line, "t_s", f[0])?;
             check_time(path, line, t, &mut last)?;
             if f[1].is_empty() || f[2].is_empty() {
-                return Err(IoError::line(path, line, "left and right image paths must not be empty"));
+                return Err(IoError::line(
+                    path,
+                    line,
+                    "left and right image paths must not be empty",
+                ));
             }
-            Ok(StereoEntry { t_s: t, left: f[1].to_string(), right: f[2].to_string() })
+            Ok(StereoEntry {
+                t_s: t,
+                left: f[1].to_string(),
+                right: f[2].to_string(),
+            })
         })
         .collect()
 }
@@ -122,22 +153,36 @@ fn read_stereo(path: &Path) -> Result<Vec<StereoEntry>, IoError> {
 /// Reads a run dataset directory.
 pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     if !dir.is_dir() {
-        return Err(IoError::content(dir, "not a run directory (expected run.yaml, odometry.csv, sonar.csv)"));
+        return Err(IoError::content(
+            dir,
+            "not a run directory (expected run.yaml, odometry.csv, sonar.csv)",
+        ));
     }
     let meta_path = dir.join("run.yaml");
     let meta: RunMeta = parse_yaml(&meta_path, &read_text(&meta_path)?)?;
     if meta.format != RUN_FORMAT {
         return Err(IoError::content(
             &meta_path,
-            format!("format is `{}`; this stereotag reads `{RUN_FORMAT}`", meta.format),
+            format!(
+                "format is `{}`; this stereotag reads `{RUN_FORMAT}`",
+                meta.format
+            ),
         ));
     }
     if meta.robot.sonar.sensors.is_empty() {
-        return Err(IoError::content(&meta_path, "robot.sonar.sensors is empty; at least one sonar is needed"));
+        return Err(IoError::content(
+            &meta_path,
+            "robot.sonar.sensors is empty; at least one sonar is needed",
+        ));
     }
     let layout = &meta.robot.sonar;
-    if !(layout.cone_rad > 0.0 && layout.cone_rad < std::f64::consts::PI && layout.max_range_m > 0.0)
-        || layout.sensors.iter().any(|s| !(s.x_m.is_finite() && s.y_m.is_finite() && s.bearing_rad.is_finite()))
+    if !(layout.cone_rad > 0.0
+        && layout.cone_rad < std::f64::consts::PI
+        && layout.max_range_m > 0.0)
+        || layout
+            .sensors
+            .iter()
+            .any(|s| !(s.x_m.is_finite() && s.y_m.is_finite() && s.bearing_rad.is_finite()))
     {
         return Err(IoError::content(
             &meta_path,
@@ -146,20 +191,41 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     }
     let odometry = read_poses(&dir.join("odometry.csv"))?;
     if odometry.is_empty() {
-        return Err(IoError::content(&dir.join("odometry.csv"), "no poses: the run needs odometry"));
+        return Err(IoError::content(
+            &dir.join("odometry.csv"),
+            "no poses: the run needs odometry",
+        ));
     }
     let sonar = read_sonar(&dir.join("sonar.csv"), meta.robot.sonar.sensors.len())?;
     let stereo_path = dir.join("stereo.csv");
-    let stereo = if stereo_path.exists() { read_stereo(&stereo_path)? } else { Vec::new() };
+    let stereo = if stereo_path.exists() {
+        read_stereo(&stereo_path)?
+    } else {
+        Vec::new()
+    };
     let gt_path = dir.join("ground_truth.csv");
-    let ground_truth = if gt_path.exists() { Some(read_poses(&gt_path)?) } else { None };
-    Ok(RunDataset { meta, odometry, sonar, stereo, ground_truth })
+    let ground_truth = if gt_path.exists() {
+        Some(read_poses(&gt_path)?)
+    } else {
+        None
+    };
+    Ok(RunDataset {
+        meta,
+        odometry,
+        sonar,
+        stereo,
+        ground_truth,
+    })
 }
 
 fn poses_csv(poses: &[StampedPose]) -> String {
     let mut s = format!("{POSE_HEADER}\n");
     for p in poses {
-        let _ = writeln!(s, "{:.4},{:.5},{:.5},{:.6}", p.t_s, p.pose.x, p.pose.y, p.pose.theta);
+        let _ = writeln!(
+            s,
+            "{:.4},{:.5},{:.5},{:.6}",
+            p.t_s, p.pose.x, p.pose.y, p.pose.theta
+        );
     }
     s
 }
@@ -168,7 +234,10 @@ fn poses_csv(poses: &[StampedPose]) -> String {
 pub fn save_run(dir: &Path, run: &RunDataset) -> Result<(), IoError> {
     let meta_path = dir.join("run.yaml");
     write_file(&meta_path, to_yaml(&meta_path, &run.meta)?.as_bytes())?;
-    write_file(&dir.join("odometry.csv"), poses_csv(&run.odometry).as_bytes())?;
+    write_file(
+        &dir.join("odometry.csv"),
+        poses_csv(&run.odometry).as_bytes(),
+    )?;
     let mut s = format!("{SONAR_HEADER}\n");
     for r in &run.sonar {
         match r.range_m {

@@ -5,7 +5,9 @@ use super::{load_ros_map, parse_yaml, read_text, IoError};
 use crate::geometry::{Pose2, Segment};
 use crate::grid::MappingConfig;
 use crate::sim::SimConfig;
-use crate::world::{walls_from_raster, Person, PlacedTarget, Tag, Wall, World, DEFAULT_WALL_HEIGHT_M};
+use crate::world::{
+    walls_from_raster, Person, PlacedTarget, Tag, Wall, World, DEFAULT_WALL_HEIGHT_M,
+};
 use nalgebra::Point2;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -108,7 +110,10 @@ fn finite(path: &Path, key: &str, values: &[f64]) -> Result<(), IoError> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(IoError::content(path, format!("`{key}` must hold finite numbers, found {values:?}")))
+        Err(IoError::content(
+            path,
+            format!("`{key}` must hold finite numbers, found {values:?}"),
+        ))
     }
 }
 
@@ -120,11 +125,17 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
     for (i, w) in file.walls.iter().enumerate() {
         let key = format!("walls[{i}]");
         if w.polyline_m.len() < 2 {
-            return Err(IoError::content(path, format!("`{key}.polyline_m` needs at least two points")));
+            return Err(IoError::content(
+                path,
+                format!("`{key}.polyline_m` needs at least two points"),
+            ));
         }
         let height = w.height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M);
         if !(height.is_finite() && height > 0.0) {
-            return Err(IoError::content(path, format!("`{key}.height_m` must be positive")));
+            return Err(IoError::content(
+                path,
+                format!("`{key}.height_m` must be positive"),
+            ));
         }
         let mut pts: Vec<Point2<f64>> = Vec::new();
         for p in &w.polyline_m {
@@ -136,7 +147,10 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
         }
         for s in pts.windows(2) {
             if (s[1] - s[0]).norm() > 1e-9 {
-                walls.push(Wall { segment: Segment::new(s[0], s[1]), height_m: height });
+                walls.push(Wall {
+                    segment: Segment::new(s[0], s[1]),
+                    height_m: height,
+                });
             }
         }
     }
@@ -148,21 +162,38 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
         if !(simplify.is_finite() && simplify >= 0.0) {
             return Err(IoError::content(path, "`map.simplify_m` must be >= 0"));
         }
-        walls.extend(walls_from_raster(&raster, simplify, m.wall_height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M)));
+        walls.extend(walls_from_raster(
+            &raster,
+            simplify,
+            m.wall_height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M),
+        ));
     }
     if walls.is_empty() {
-        return Err(IoError::content(path, "the world has no walls: give `walls` or `map`"));
+        return Err(IoError::content(
+            path,
+            "the world has no walls: give `walls` or `map`",
+        ));
     }
-    finite(path, "start", &[file.start.x_m, file.start.y_m, file.start.theta_rad])?;
+    finite(
+        path,
+        "start",
+        &[file.start.x_m, file.start.y_m, file.start.theta_rad],
+    )?;
     let mut seen = std::collections::HashSet::new();
     for (i, t) in file.tags.iter().enumerate() {
         finite(path, &format!("tags[{i}].position_m"), &t.position_m)?;
         finite(path, &format!("tags[{i}].yaw_rad"), &[t.yaw_rad])?;
         if !(t.size_m.is_finite() && t.size_m > 0.0) {
-            return Err(IoError::content(path, format!("`tags[{i}].size_m` must be positive, found {}", t.size_m)));
+            return Err(IoError::content(
+                path,
+                format!("`tags[{i}].size_m` must be positive, found {}", t.size_m),
+            ));
         }
         if !seen.insert((t.family.clone(), t.id)) {
-            return Err(IoError::content(path, format!("`tags[{i}]`: id {} of {} appears twice", t.id, t.family)));
+            return Err(IoError::content(
+                path,
+                format!("`tags[{i}]`: id {} of {} appears twice", t.id, t.family),
+            ));
         }
     }
     for (i, p) in file.people.iter().enumerate() {
@@ -176,13 +207,24 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
             finite(path, &format!("people[{i}].path_m"), q)?;
         }
     }
-    file.mapping.grid.validate().map_err(|e| IoError::content(path, format!("`mapping.grid`: {e}")))?;
+    file.mapping
+        .grid
+        .validate()
+        .map_err(|e| IoError::content(path, format!("`mapping.grid`: {e}")))?;
     let start = Pose2::new(file.start.x_m, file.start.y_m, file.start.theta_rad);
     let world = World::new(walls, file.tags, file.targets, file.people, start);
     let mut simulation = file.simulation;
     simulation.grid = file.mapping.grid.clone();
-    let name = file
-        .name
-        .unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
-    Ok(LoadedWorld { path: path.to_path_buf(), name, world, simulation, mapping: file.mapping })
+    let name = file.name.unwrap_or_else(|| {
+        path.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    });
+    Ok(LoadedWorld {
+        path: path.to_path_buf(),
+        name,
+        world,
+        simulation,
+        mapping: file.mapping,
+    })
 }

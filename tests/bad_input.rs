@@ -1,0 +1,251 @@
+//! Bad input gets a clear error naming the file and line, exit status 2, and writes nothing.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+fn stereotag(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A small valid run in `dir`.
+fn good_run(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(
+        dir.join("run.yaml"),
+        "format: stereotag-run/1\nrobot:\n  sonar:\n    name: two\n    sensors:\n      - {x_m: 0.2, y_m: 0.0, bearing_rad: 0.0}\n      - {x_m: 0.0, y_m: 0.2, bearing_rad: 1.5708}\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("odometry.csv"),
+        "t_s,x_m,y_m,theta_rad\n0,2.5,2.5,0\n1,2.6,2.5,0\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("sonar.csv"),
+        "t_s,sensor,range_m\n0,0,1.0\n0,1,\n1,0,0.9\n1,1,1.2\n",
+    )
+    .unwrap();
+}
+
+/// Replaces one file of a good run and checks the error.
+fn check(file: &str, content: &str, expect: &str) {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    std::fs::write(run.join(file), content).unwrap();
+    let out = tmp.path().join("map");
+    let (code, err) = stereotag(&[
+        "map",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{file}: {err}");
+    assert!(
+        err.contains(file) && err.contains(expect),
+        "{file}: expected `{expect}` in: {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!out.exists(), "nothing may be written");
+    let leftovers: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "no staging directory left behind");
+}
+
+#[test]
+fn a_good_run_maps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    let out = tmp.path().join("map");
+    let (code, err) = stereotag(&[
+        "-q",
+        "map",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    for f in [
+        "map.pgm",
+        "map.yaml",
+        "map.png",
+        "hough.png",
+        "corners.csv",
+        "report.json",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    // An existing output is kept without --force ...
+    let (code, err) = stereotag(&[
+        "map",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--force"), "{err}");
+    // ... and replaced with it.
+    let (code, _) = stereotag(&[
+        "-q",
+        "map",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--force",
+    ]);
+    assert_eq!(code, 0);
+}
+
+#[test]
+fn truncated_row() {
+    check(
+        "sonar.csv",
+        "t_s,sensor,range_m\n0,0,1.0\n0,1\n",
+        "sonar.csv:3",
+    );
+}
+
+#[test]
+fn not_a_number() {
+    check(
+        "odometry.csv",
+        "t_s,x_m,y_m,theta_rad\n0,2.5,abc,0\n",
+        "odometry.csv:2",
+    );
+}
+
+#[test]
+fn nan_and_infinity() {
+    check(
+        "odometry.csv",
+        "t_s,x_m,y_m,theta_rad\n0,2.5,NaN,0\n",
+        "finite",
+    );
+    check("sonar.csv", "t_s,sensor,range_m\n0,0,inf\n", "sonar.csv:2");
+}
+
+#[test]
+fn negative_range() {
+    check(
+        "sonar.csv",
+        "t_s,sensor,range_m\n0,0,-0.5\n",
+        "sonar.csv:2: range_m is -0.5",
+    );
+}
+
+#[test]
+fn unknown_sensor() {
+    check(
+        "sonar.csv",
+        "t_s,sensor,range_m\n0,7,1.0\n",
+        "unknown sensor 7",
+    );
+}
+
+#[test]
+fn time_going_backwards() {
+    check(
+        "odometry.csv",
+        "t_s,x_m,y_m,theta_rad\n1,2.5,2.5,0\n0.5,2.5,2.5,0\n",
+        "odometry.csv:3: time 0.5 s goes backwards",
+    );
+}
+
+#[test]
+fn wrong_header() {
+    check(
+        "sonar.csv",
+        "time,sensor,range\n0,0,1.0\n",
+        "sonar.csv:1: expected the header",
+    );
+}
+
+#[test]
+fn yaml_key_of_the_wrong_type() {
+    check(
+        "run.yaml",
+        "format: stereotag-run/1\nrobot:\n  sonar:\n    name: two\n    max_range_m: far\n    sensors: []\n",
+        "run.yaml:5",
+    );
+}
+
+#[test]
+fn yaml_unknown_key() {
+    check(
+        "run.yaml",
+        "format: stereotag-run/1\ncolour: red\nrobot:\n  sonar: {name: a, sensors: []}\n",
+        "unknown field `colour`",
+    );
+}
+
+#[test]
+fn run_from_another_version() {
+    check("run.yaml", "format: stereotag-run/0\nrobot:\n  sonar: {name: a, sensors: [{x_m: 0, y_m: 0, bearing_rad: 0}]}\n", "this stereotag reads");
+}
+
+#[test]
+fn world_with_bad_wall_and_missing_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = tmp.path().join("w.yaml");
+    std::fs::write(
+        &world,
+        "start: {x_m: 1, y_m: 1}\nwalls:\n  - polyline_m: [[0, 0]]\n",
+    )
+    .unwrap();
+    let out = tmp.path().join("run");
+    let (code, err) = stereotag(&[
+        "simulate",
+        "--world",
+        world.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("w.yaml") && err.contains("walls[0].polyline_m"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let (code, err) = stereotag(&[
+        "simulate",
+        "--world",
+        "/nonexistent/world.yaml",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("/nonexistent/world.yaml"), "{err}");
+}
+
+#[test]
+fn start_inside_a_wall() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = tmp.path().join("w.yaml");
+    std::fs::write(&world, "start: {x_m: 0.05, y_m: 1}\nwalls:\n  - {polyline_m: [[0, 0], [4, 0], [4, 3], [0, 3]], closed: true}\n").unwrap();
+    let (code, err) = stereotag(&[
+        "simulate",
+        "--world",
+        world.to_str().unwrap(),
+        "--out",
+        tmp.path().join("r").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("start pose"), "{err}");
+}
