@@ -388,6 +388,8 @@ const FOLLOW_FAN_RAD: (f64, f64) = (-2.094, 1.571);
 const FOLLOW_FAN_RAYS: usize = 42;
 /// Radius of the arc on which the follower rounds a concave corner (ours: 0.4 m).
 const CORNER_ARC_M: f64 = 0.4;
+/// The explored area must have stalled over at least this long to end exploration (ours: 120 s).
+const GROWTH_WINDOW_S: f64 = 120.0;
 /// Following gives up a target after this much travel (ours: 10 m).
 const BUG_GIVE_UP_M: f64 = 10.0;
 /// The first boundary is abandoned after this much travel if it never closes (ours: 150 m).
@@ -433,7 +435,7 @@ pub fn simulate(
     let mut targets: Vec<Point2<f64>> = Vec::new();
     let mut failed: Vec<Point2<f64>> = Vec::new();
     let mut target_started = 0.0;
-    let mut known_history: Vec<usize> = Vec::new();
+    let mut known_history: Vec<(f64, usize)> = Vec::new();
     let mut end_reason = String::from("time budget ended");
     let mut next_progress = 1.0;
 
@@ -487,11 +489,17 @@ pub fn simulate(
                 }
             }
             let map = grid.map();
-            known_history.push(map.known_cells());
-            if known_history.len() >= 4 {
-                let old = known_history[known_history.len() - 4] as f64;
-                let now = *known_history.last().unwrap_or(&0) as f64;
-                if now < old * (1.0 + e.min_growth) {
+            let now = map.known_cells();
+            known_history.push((t, now));
+            // Compare with the area three targets and at least two minutes ago.
+            let old = known_history
+                .iter()
+                .rev()
+                .skip(3)
+                .find(|(t_old, _)| t - t_old >= GROWTH_WINDOW_S)
+                .map(|&(_, k)| k);
+            if let Some(old) = old {
+                if (now as f64) < old as f64 * (1.0 + e.min_growth) {
                     end_reason = "explored area stopped growing".into();
                     break;
                 }

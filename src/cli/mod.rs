@@ -59,7 +59,7 @@ fn is_input_error(err: &anyhow::Error) -> bool {
         e.is::<stereotag::io::IoError>()
             || e.is::<stereotag::grid::GridError>()
             || e.is::<stereotag::pipeline::PipelineError>()
-            || matches!(e.downcast_ref::<stereotag::sim::SimError>(), Some(_))
+            || e.is::<stereotag::sim::SimError>()
             || e.is::<UsageError>()
     })
 }
