@@ -39,7 +39,8 @@ pub struct GridConfig {
     /// A cell with occupancy below this is free (ours: 0.2).
     pub free_threshold: f64,
     /// Cells with less evidence than this (summed weights; updates for log-odds) stay unknown
-    /// (ours: 3, so a lone far hit from a multipath echo behind a wall does not make a wall).
+    /// (ours: 6, six far readings or one near one, so a few far hits from multipath echoes behind
+    /// a wall do not make a wall).
     pub min_evidence: u32,
     /// Whether a reading with no echo marks its whole cone as free. Off by default: a specular
     /// wall returns no echo, so silence is no proof of free space.
@@ -60,7 +61,7 @@ impl Default for GridConfig {
             far_miss: 1,
             occupied_threshold: 0.5,
             free_threshold: 0.2,
-            min_evidence: 3,
+            min_evidence: 6,
             no_echo_is_free: false,
         }
     }
