@@ -8,6 +8,7 @@
 //!
 //! Data flows one way: [`world`] → [`sim`] → [`run`] dataset → [`grid`] → [`hough`] → [`score`].
 
+pub mod camera;
 pub mod geometry;
 pub mod grid;
 pub mod hough;

@@ -1,4 +1,4 @@
-//! Every file format: run datasets, world files, maps, feature lists and reports.
+//! Every file format: run datasets, world files, stereo rigs, maps, feature lists and reports.
 //!
 //! Readers check everything a stage relies on (finite numbers, sensor ids, time order) and name
 //! the file and line of the first problem. Writers go through [`OutputDir`], which builds the
@@ -6,6 +6,7 @@
 
 mod maps;
 mod output;
+mod rig;
 mod run;
 mod world;
 
@@ -13,6 +14,7 @@ pub use maps::{
     load_ros_map, save_accumulator_png, save_features_csv, save_map_png, save_ros_map, RosMapYaml,
 };
 pub use output::OutputDir;
+pub use rig::{load_rig, robot_from_forward_camera, save_rig, Camchain, KalibrCamera};
 pub use run::{load_run, read_uci_sonar_ring, save_run};
 pub use world::{load_world, LoadedWorld, WorldFile};
 

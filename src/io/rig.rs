@@ -1,0 +1,210 @@
+//! Stereo rigs as Kalibr camchain YAML (`cam0`, `cam1`, `cam1.T_cn_cnm1`), with our extras under
+//! `stereotag:` so that Kalibr users and their tools read the files as they are.
+
+use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
+use crate::camera::{Camera, Distortion, StereoRig};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// One camera of a Kalibr camchain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KalibrCamera {
+    /// `pinhole` (the only projection we read).
+    pub camera_model: String,
+    /// `[fu, fv, pu, pv]`.
+    pub intrinsics: Vec<f64>,
+    /// `radtan`, `equidistant` or `none`.
+    pub distortion_model: String,
+    /// radtan: `[k1, k2, p1, p2]` (or with `k3`); equidistant: `[k1, k2, k3, k4]`.
+    pub distortion_coeffs: Vec<f64>,
+    /// `[width, height]`.
+    pub resolution: Vec<u32>,
+    /// This camera from the previous one (cam1: `right_from_left`), 4x4 row-major.
+    #[serde(default, rename = "T_cn_cnm1", skip_serializing_if = "Option::is_none")]
+    pub t_cn_cnm1: Option<Vec<Vec<f64>>>,
+    /// Kalibr's camera-IMU transform (kept, not used).
+    #[serde(default, rename = "T_cam_imu", skip_serializing_if = "Option::is_none")]
+    pub t_cam_imu: Option<Vec<Vec<f64>>>,
+    /// Kalibr's overlap list (kept, not used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cam_overlaps: Option<Vec<u32>>,
+    /// Kalibr's image topic (kept, not used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rostopic: Option<String>,
+    /// Kalibr's camera-IMU time shift (kept, not used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeshift_cam_imu: Option<f64>,
+}
+
+/// Our extra keys.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct StereotagExtras {
+    /// `robot_from_left`, 4x4 row-major.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_from_left: Option<Vec<Vec<f64>>>,
+}
+
+/// A Kalibr camchain file with two cameras.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camchain {
+    /// Left camera.
+    pub cam0: KalibrCamera,
+    /// Right camera.
+    pub cam1: KalibrCamera,
+    /// Our extras.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stereotag: Option<StereotagExtras>,
+}
+
+fn camera_from(path: &Path, key: &str, c: &KalibrCamera) -> Result<Camera, IoError> {
+    let bad = |m: String| IoError::content(path, format!("`{key}.{m}"));
+    if c.camera_model != "pinhole" {
+        return Err(bad(format!(
+            "camera_model` is `{}`; only `pinhole` is supported",
+            c.camera_model
+        )));
+    }
+    let [fx, fy, cx, cy] = c.intrinsics[..] else {
+        return Err(bad(format!(
+            "intrinsics` needs 4 numbers [fu, fv, pu, pv], found {}",
+            c.intrinsics.len()
+        )));
+    };
+    let [width, height] = c.resolution[..] else {
+        return Err(bad("resolution` needs [width, height]".into()));
+    };
+    let d = &c.distortion_coeffs;
+    let distortion = match (c.distortion_model.as_str(), d.len()) {
+        ("none", 0) => Distortion::None,
+        ("radtan", 4) => Distortion::Radtan { k1: d[0], k2: d[1], p1: d[2], p2: d[3], k3: 0.0 },
+        ("radtan", 5) => Distortion::Radtan { k1: d[0], k2: d[1], p1: d[2], p2: d[3], k3: d[4] },
+        ("equidistant", 4) => Distortion::Equidistant { k1: d[0], k2: d[1], k3: d[2], k4: d[3] },
+        (m, n) => {
+            return Err(bad(format!(
+                "distortion_model` `{m}` with {n} coefficients: expected radtan (4 or 5), equidistant (4) or none (0)"
+            )))
+        }
+    };
+    let cam = Camera {
+        fx,
+        fy,
+        cx,
+        cy,
+        distortion,
+        width,
+        height,
+    };
+    cam.validate()
+        .map_err(|e| bad(format!("intrinsics`: {e}")))?;
+    Ok(cam)
+}
+
+fn isometry_from(path: &Path, key: &str, rows: &[Vec<f64>]) -> Result<Isometry3<f64>, IoError> {
+    let shape_ok = rows.len() == 4 && rows.iter().all(|r| r.len() == 4);
+    if !shape_ok || rows.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(IoError::content(
+            path,
+            format!("`{key}` must be a 4x4 matrix of finite numbers"),
+        ));
+    }
+    let r = Matrix3::from_fn(|i, j| rows[i][j]);
+    let err = (r * r.transpose() - Matrix3::identity()).abs().max();
+    let det = r.determinant();
+    if err > 1e-3 || (det - 1.0).abs() > 1e-3 {
+        return Err(IoError::content(
+            path,
+            format!("`{key}` rotation is not a rotation (determinant {det:.4}, orthogonality error {err:.1e})"),
+        ));
+    }
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_eps(
+        &r,
+        1e-9,
+        50,
+        Rotation3::identity(),
+    ));
+    Ok(Isometry3::from_parts(
+        Translation3::new(rows[0][3], rows[1][3], rows[2][3]),
+        rot,
+    ))
+}
+
+fn rows_from(iso: &Isometry3<f64>) -> Vec<Vec<f64>> {
+    let m = iso.to_homogeneous();
+    (0..4)
+        .map(|i| (0..4).map(|j| m[(i, j)]).collect())
+        .collect()
+}
+
+fn kalibr_from(cam: &Camera, t_cn_cnm1: Option<Vec<Vec<f64>>>) -> KalibrCamera {
+    let (model, coeffs) = match cam.distortion {
+        Distortion::None => ("none", vec![]),
+        Distortion::Radtan { k1, k2, p1, p2, k3 } if k3 == 0.0 => ("radtan", vec![k1, k2, p1, p2]),
+        Distortion::Radtan { k1, k2, p1, p2, k3 } => ("radtan", vec![k1, k2, p1, p2, k3]),
+        Distortion::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
+    };
+    KalibrCamera {
+        camera_model: "pinhole".into(),
+        intrinsics: vec![cam.fx, cam.fy, cam.cx, cam.cy],
+        distortion_model: model.into(),
+        distortion_coeffs: coeffs,
+        resolution: vec![cam.width, cam.height],
+        t_cn_cnm1,
+        t_cam_imu: None,
+        cam_overlaps: None,
+        rostopic: None,
+        timeshift_cam_imu: None,
+    }
+}
+
+/// The camera looking straight ahead: camera z forward = robot x, camera x right = robot -y,
+/// camera y down = robot -z.
+pub fn robot_from_forward_camera(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64> {
+    let r = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
+    Isometry3::from_parts(
+        Translation3::new(x_m, y_m, z_m),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
+/// Reads a Kalibr camchain YAML file as a stereo rig. Without `stereotag.robot_from_left` the
+/// left camera is taken to look straight ahead from the robot centre, 0.3 m up.
+pub fn load_rig(path: &Path) -> Result<StereoRig, IoError> {
+    let chain: Camchain = parse_yaml(path, &read_text(path)?)?;
+    let left = camera_from(path, "cam0", &chain.cam0)?;
+    let right = camera_from(path, "cam1", &chain.cam1)?;
+    let t =
+        chain.cam1.t_cn_cnm1.as_ref().ok_or_else(|| {
+            IoError::content(path, "`cam1.T_cn_cnm1` (right_from_left) is missing")
+        })?;
+    let right_from_left = isometry_from(path, "cam1.T_cn_cnm1", t)?;
+    let robot_from_left = match chain
+        .stereotag
+        .as_ref()
+        .and_then(|s| s.robot_from_left.as_ref())
+    {
+        Some(rows) => isometry_from(path, "stereotag.robot_from_left", rows)?,
+        None => robot_from_forward_camera(0.0, 0.0, 0.3),
+    };
+    Ok(StereoRig {
+        left,
+        right,
+        right_from_left,
+        robot_from_left,
+    })
+}
+
+/// Writes a stereo rig as a Kalibr camchain YAML file.
+pub fn save_rig(path: &Path, rig: &StereoRig) -> Result<(), IoError> {
+    let chain = Camchain {
+        cam0: kalibr_from(&rig.left, None),
+        cam1: kalibr_from(&rig.right, Some(rows_from(&rig.right_from_left))),
+        stereotag: Some(StereotagExtras {
+            robot_from_left: Some(rows_from(&rig.robot_from_left)),
+        }),
+    };
+    write_file(path, to_yaml(path, &chain)?.as_bytes())
+}
