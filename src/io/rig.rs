@@ -142,7 +142,13 @@ fn rows_from(iso: &Isometry3<f64>) -> Vec<Vec<f64>> {
 fn kalibr_from(cam: &Camera, t_cn_cnm1: Option<Vec<Vec<f64>>>) -> KalibrCamera {
     let (model, coeffs) = match cam.distortion {
         Distortion::None => ("none", vec![]),
-        Distortion::Radtan { k1, k2, p1, p2, k3: 0.0 } => ("radtan", vec![k1, k2, p1, p2]),
+        Distortion::Radtan {
+            k1,
+            k2,
+            p1,
+            p2,
+            k3: 0.0,
+        } => ("radtan", vec![k1, k2, p1, p2]),
         Distortion::Radtan { k1, k2, p1, p2, k3 } => ("radtan", vec![k1, k2, p1, p2, k3]),
         Distortion::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
     };
