@@ -18,4 +18,5 @@ pub mod run;
 pub mod score;
 pub mod sim;
 pub mod sonar;
+pub mod tags;
 pub mod world;

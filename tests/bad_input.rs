@@ -249,3 +249,41 @@ fn start_inside_a_wall() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("start pose"), "{err}");
 }
+
+#[test]
+fn detect_names_a_missing_or_corrupt_image() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = tmp.path().join("bad.png");
+    std::fs::write(&bad, b"not a png").unwrap();
+    for (path, expect) in [
+        (bad.to_str().unwrap(), "cannot decode"),
+        ("/nonexistent/left.png", "No such file"),
+    ] {
+        let (code, err) = stereotag(&["detect", path]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(path) && err.contains(expect), "{err}");
+    }
+    let (code, err) = stereotag(&["detect", "--family", "tag99", bad.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.contains("tag36h11"), "{err}");
+}
+
+#[test]
+fn detect_prints_the_design_json() {
+    let Some(photo) = common::shared("apriltag_test/34139872896_defdb2f8d9_c.jpg") else {
+        return;
+    };
+    let out = Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .args(["detect", "--decimate", "1", photo.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let dets = v["detections"].as_array().unwrap();
+    assert!(dets.len() >= 10, "{}", dets.len());
+    for d in dets {
+        assert_eq!(d["family"], "tag36h11");
+        assert_eq!(d["corners_px"].as_array().unwrap().len(), 4);
+        assert!(d["centre_px"][0].is_f64() && d["hamming"].is_u64() && d["id"].is_u64());
+    }
+}

@@ -3,6 +3,7 @@
 
 mod config;
 mod demo;
+mod detect;
 mod map;
 mod simulate;
 
@@ -40,6 +41,10 @@ enum Command {
     ///
     /// Example: stereotag map --run runs/office --out maps/office --poses ground-truth
     Map(map::Map),
+    /// Detect AprilTags in images; prints JSON (corners in the AprilTag C library's order).
+    ///
+    /// Example: stereotag detect --backend kornia --decimate 1 photo.jpg
+    Detect(detect::Detect),
     /// Print a settings file with its defaults.
     ///
     /// Example: stereotag config --default mapping > mapping.yaml
@@ -61,6 +66,7 @@ fn is_input_error(err: &anyhow::Error) -> bool {
             || e.is::<stereotag::pipeline::PipelineError>()
             || e.is::<stereotag::sim::SimError>()
             || e.is::<UsageError>()
+            || e.is::<stereotag::tags::TagError>()
     })
 }
 
@@ -90,6 +96,7 @@ pub fn main() -> i32 {
         Command::Demo(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
         Command::Map(c) => c.run(),
+        Command::Detect(c) => c.run(),
         Command::Config(c) => c.run(),
         Command::Completions { shell } => {
             clap_complete::generate(

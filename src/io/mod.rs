@@ -24,12 +24,12 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// The file could not be opened, read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     File {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A problem at a line of a text file.
     #[error("{path}:{line}: {message}")]
@@ -61,7 +61,7 @@ impl IoError {
     pub(crate) fn file(path: &Path, source: std::io::Error) -> Self {
         IoError::File {
             path: path.to_path_buf(),
-            source,
+            cause: source,
         }
     }
     pub(crate) fn content(path: &Path, message: impl Into<String>) -> Self {
@@ -77,6 +77,32 @@ impl IoError {
             message: message.into(),
         }
     }
+}
+
+/// Reads an image as 8-bit grey. Colour becomes Rec. 601 luma (`0.299 R + 0.587 G + 0.114 B`, as
+/// JPEG's Y plane, OpenCV's `cvtColor` and the AprilTag C library's loader); 16-bit is scaled to 8 bits.
+pub fn load_gray(path: &Path) -> Result<image::GrayImage, IoError> {
+    let img = image::ImageReader::open(path)
+        .map_err(|e| IoError::file(path, e))?
+        .with_guessed_format()
+        .map_err(|e| IoError::file(path, e))?
+        .decode()
+        .map_err(|e| IoError::content(path, format!("cannot decode the image: {e}")))?;
+    if !img.color().has_color() {
+        return Ok(img.to_luma8());
+    }
+    let rgb = img.to_rgb8();
+    let (w, h) = rgb.dimensions();
+    let luma = rgb
+        .pixels()
+        .map(|p| {
+            (0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64)
+                .round()
+                .min(255.0) as u8
+        })
+        .collect();
+    image::GrayImage::from_raw(w, h, luma)
+        .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))
 }
 
 /// Reads a whole text file.
