@@ -104,3 +104,35 @@ fn bad_rigs_name_the_file_and_key() {
         );
     }
 }
+
+#[test]
+fn rig_export_writes_opencv_and_ros_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("export");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .args([
+            "-q",
+            "rig",
+            common::root()
+                .join("calibration/rigs/default.yaml")
+                .to_str()
+                .unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let info = std::fs::read_to_string(out.join("right.yaml")).unwrap();
+    assert!(info.contains("distortion_model: plumb_bob") && info.contains("projection_matrix:"));
+    // P2[0][3] = f * Tx with Tx = -baseline: -459.5 * 0.12.
+    assert!(info.contains("-55.14,"), "{info}");
+    let cv = std::fs::read_to_string(out.join("opencv_stereo.yaml")).unwrap();
+    assert!(cv.starts_with("%YAML:1.0") && cv.contains("Q: !!opencv-matrix"));
+    assert!(
+        !cv.contains('e'.to_string().as_str()) || !cv.contains("e-"),
+        "no exponents for YAML 1.1 readers"
+    );
+    let back = load_rig(&out.join("camchain.yaml")).unwrap();
+    assert!((back.baseline_m() - 0.12).abs() < 1e-12);
+}

@@ -5,6 +5,7 @@ mod config;
 mod demo;
 mod detect;
 mod map;
+mod rig;
 mod simulate;
 
 use clap::{CommandFactory, Parser, Subcommand};
@@ -45,6 +46,10 @@ enum Command {
     ///
     /// Example: stereotag detect --backend kornia --decimate 1 photo.jpg
     Detect(detect::Detect),
+    /// Check a stereo rig file and export it for OpenCV and ROS (with its Bouguet rectification).
+    ///
+    /// Example: stereotag rig calibration/rigs/default.yaml --out rig_export
+    Rig(rig::Rig),
     /// Print a settings file with its defaults.
     ///
     /// Example: stereotag config --default mapping > mapping.yaml
@@ -97,6 +102,7 @@ pub fn main() -> i32 {
         Command::Simulate(c) => c.run(cli.quiet),
         Command::Map(c) => c.run(),
         Command::Detect(c) => c.run(),
+        Command::Rig(c) => c.run(),
         Command::Config(c) => c.run(),
         Command::Completions { shell } => {
             clap_complete::generate(

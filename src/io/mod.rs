@@ -14,7 +14,10 @@ pub use maps::{
     load_ros_map, save_accumulator_png, save_features_csv, save_map_png, save_ros_map, RosMapYaml,
 };
 pub use output::OutputDir;
-pub use rig::{load_rig, robot_from_forward_camera, save_rig, Camchain, KalibrCamera};
+pub use rig::{
+    load_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig, Camchain,
+    KalibrCamera,
+};
 pub use run::{load_run, read_uci_sonar_ring, save_run};
 pub use world::{load_world, LoadedWorld, WorldFile};
 

@@ -214,3 +214,119 @@ pub fn save_rig(path: &Path, rig: &StereoRig) -> Result<(), IoError> {
     };
     write_file(path, to_yaml(path, &chain)?.as_bytes())
 }
+
+/// Fixed-point numbers (12 decimals, trailing zeros dropped): YAML 1.1 readers such as PyYAML,
+/// which ROS uses, read `1e-5` as a string.
+fn fmt_list(values: &[f64]) -> String {
+    values
+        .iter()
+        .map(|v| {
+            let s = format!("{v:.12}");
+            let s = s.trim_end_matches('0');
+            if s.ends_with('.') {
+                format!("{s}0")
+            } else {
+                s.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn camera_matrix(c: &Camera) -> [f64; 9] {
+    [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0]
+}
+
+/// Distortion as OpenCV and ROS list it, with ROS's model name.
+fn distortion_list(c: &Camera) -> (&'static str, Vec<f64>) {
+    match c.distortion {
+        Distortion::None => ("plumb_bob", vec![0.0; 5]),
+        Distortion::Radtan { k1, k2, p1, p2, k3 } => ("plumb_bob", vec![k1, k2, p1, p2, k3]),
+        Distortion::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
+    }
+}
+
+fn rotation_list(r: &nalgebra::Rotation3<f64>) -> Vec<f64> {
+    let m = r.matrix();
+    (0..3)
+        .flat_map(|i| (0..3).map(move |j| m[(i, j)]))
+        .collect()
+}
+
+/// Writes the rig and its rectification as OpenCV FileStorage YAML (the keys of
+/// `stereoCalibrate` + `stereoRectify`: M1 D1 M2 D2 R T R1 R2 P1 P2 Q).
+pub fn save_opencv_stereo(
+    path: &Path,
+    rig: &StereoRig,
+    rect: &crate::camera::Rectification,
+) -> Result<(), IoError> {
+    let mat = |name: &str, rows: usize, cols: usize, data: &[f64]| {
+        format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n", fmt_list(data))
+    };
+    let (_, d1) = distortion_list(&rig.left);
+    let (_, d2) = distortion_list(&rig.right);
+    let r = rotation_list(&rig.right_from_left.rotation.to_rotation_matrix());
+    let t = rig.right_from_left.translation.vector;
+    let p1: Vec<f64> = rect.left_projection().iter().flatten().copied().collect();
+    let p2: Vec<f64> = rect.right_projection().iter().flatten().copied().collect();
+    let (f, [cx, cy]) = (rect.focal_px, rect.principal_px);
+    let q = [
+        1.0,
+        0.0,
+        0.0,
+        -cx,
+        0.0,
+        1.0,
+        0.0,
+        -cy,
+        0.0,
+        0.0,
+        0.0,
+        f,
+        0.0,
+        0.0,
+        -1.0 / rect.baseline_x_m,
+        0.0,
+    ];
+    let mut s = format!(
+        "%YAML:1.0\n---\nimage_width: {}\nimage_height: {}\n",
+        rig.left.width, rig.left.height
+    );
+    s += &mat("M1", 3, 3, &camera_matrix(&rig.left));
+    s += &mat("D1", 1, d1.len(), &d1);
+    s += &mat("M2", 3, 3, &camera_matrix(&rig.right));
+    s += &mat("D2", 1, d2.len(), &d2);
+    s += &mat("R", 3, 3, &r);
+    s += &mat("T", 3, 1, &[t.x, t.y, t.z]);
+    s += &mat("R1", 3, 3, &rotation_list(&rect.left_rotation));
+    s += &mat("R2", 3, 3, &rotation_list(&rect.right_rotation));
+    s += &mat("P1", 3, 4, &p1);
+    s += &mat("P2", 3, 4, &p2);
+    s += &mat("Q", 4, 4, &q);
+    write_file(path, s.as_bytes())
+}
+
+/// Writes one camera of a rectified rig as a ROS `camera_info` YAML (camera_calibration_parsers).
+pub fn save_camera_info(
+    path: &Path,
+    name: &str,
+    camera: &Camera,
+    rotation: &nalgebra::Rotation3<f64>,
+    projection: &[[f64; 4]; 3],
+) -> Result<(), IoError> {
+    let (model, d) = distortion_list(camera);
+    let p: Vec<f64> = projection.iter().flatten().copied().collect();
+    let s = format!(
+        "image_width: {}\nimage_height: {}\ncamera_name: {name}\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
+         distortion_model: {model}\ndistortion_coefficients:\n  rows: 1\n  cols: {}\n  data: [{}]\n\
+         rectification_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\nprojection_matrix:\n  rows: 3\n  cols: 4\n  data: [{}]\n",
+        camera.width,
+        camera.height,
+        fmt_list(&camera_matrix(camera)),
+        d.len(),
+        fmt_list(&d),
+        fmt_list(&rotation_list(rotation)),
+        fmt_list(&p),
+    );
+    write_file(path, s.as_bytes())
+}
