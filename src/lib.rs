@@ -18,5 +18,6 @@ pub mod run;
 pub mod score;
 pub mod sim;
 pub mod sonar;
+pub mod stereo;
 pub mod tags;
 pub mod world;

@@ -287,3 +287,21 @@ fn detect_prints_the_design_json() {
         assert!(d["centre_px"][0].is_f64() && d["hamming"].is_u64() && d["id"].is_u64());
     }
 }
+
+#[test]
+fn stereo_detect_checks_the_rig_against_the_images() {
+    let Some(photo) = common::shared("apriltag_test/34139872896_defdb2f8d9_c.jpg") else {
+        return;
+    };
+    let rig = common::root().join("calibration/rigs/default.yaml");
+    let p = photo.to_str().unwrap();
+    let (code, err) = stereotag(&["detect", "--rig", rig.to_str().unwrap(), p, p]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("799x533") && err.contains("640x480") && err.contains(p),
+        "{err}"
+    );
+    let (code, err) = stereotag(&["detect", "--rig", rig.to_str().unwrap(), p]);
+    assert_eq!(code, 2);
+    assert!(err.contains("exactly two images"), "{err}");
+}

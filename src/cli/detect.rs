@@ -1,6 +1,7 @@
 use super::UsageError;
 use std::path::PathBuf;
 use stereotag::io;
+use stereotag::stereo::{triangulate_tags, StereoConfig};
 use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
 
 /// Which detector.
@@ -18,9 +19,15 @@ pub struct Detect {
     /// Images (any format the image crate reads; colour and 16-bit are converted to 8-bit grey).
     #[arg(required = true)]
     images: Vec<PathBuf>,
-    /// Stereo rig file: detect in a LEFT RIGHT pair and triangulate (not built yet).
+    /// Stereo rig file (Kalibr camchain): the images are a LEFT RIGHT pair; tags are triangulated.
     #[arg(long)]
     rig: Option<PathBuf>,
+    /// Tag edge length in metres, to reject pairs whose triangulated size disagrees.
+    #[arg(long)]
+    tag_size_m: Option<f64>,
+    /// Corner noise assumed for the covariance, pixels.
+    #[arg(long, default_value_t = 0.2)]
+    sigma_px: f64,
     /// Detector backend.
     #[arg(long, value_enum, default_value = "apriltag-c")]
     backend: Backend,
@@ -40,13 +47,6 @@ pub struct Detect {
 
 impl Detect {
     pub fn run(&self) -> anyhow::Result<()> {
-        if self.rig.is_some() {
-            return Err(UsageError(
-                "detect --rig (stereo triangulation) is not built yet; detect each image alone"
-                    .into(),
-            )
-            .into());
-        }
         let families = self
             .family
             .iter()
@@ -78,6 +78,9 @@ impl Detect {
             .iter()
             .map(|p| io::load_gray(p))
             .collect::<Result<Vec<_>, _>>()?;
+        if let Some(rig_path) = &self.rig {
+            return self.run_stereo(rig_path, &images, detector.as_mut());
+        }
         let mut all = Vec::new();
         for (path, image) in self.images.iter().zip(&images) {
             for d in detector.detect(image)? {
@@ -91,6 +94,59 @@ impl Detect {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({ "detections": all }))?
+        );
+        Ok(())
+    }
+
+    fn run_stereo(
+        &self,
+        rig_path: &std::path::Path,
+        images: &[image::GrayImage],
+        detector: &mut dyn TagDetector,
+    ) -> anyhow::Result<()> {
+        let [left, right] = images else {
+            return Err(UsageError(format!(
+                "--rig needs exactly two images, LEFT and RIGHT; got {}",
+                images.len()
+            ))
+            .into());
+        };
+        let rig = io::load_rig(rig_path)?;
+        for (img, cam, path) in [
+            (left, &rig.left, &self.images[0]),
+            (right, &rig.right, &self.images[1]),
+        ] {
+            if img.dimensions() != (cam.width, cam.height) {
+                return Err(UsageError(format!(
+                    "{}: image is {}x{} but the rig {} says {}x{}",
+                    path.display(),
+                    img.width(),
+                    img.height(),
+                    rig_path.display(),
+                    cam.width,
+                    cam.height
+                ))
+                .into());
+            }
+        }
+        let rect = rig.rectify();
+        let config = StereoConfig {
+            sigma_px: self.sigma_px,
+            ..StereoConfig::default()
+        };
+        let (tags, rejected) = triangulate_tags(
+            &rig,
+            &rect,
+            &detector.detect(left)?,
+            &detector.detect(right)?,
+            self.tag_size_m,
+            &config,
+        );
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({ "detections": tags, "rejected": rejected })
+            )?
         );
         Ok(())
     }
