@@ -14,6 +14,7 @@ pub mod grid;
 pub mod hough;
 pub mod io;
 pub mod pipeline;
+pub mod render;
 pub mod run;
 pub mod score;
 pub mod sim;

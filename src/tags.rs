@@ -1,6 +1,12 @@
 //! AprilTag detection behind one trait, with two real backends: kornia-apriltag (pure Rust) and
 //! the AprilRobotics C library (through the `apriltag` crate, built from the source it ships).
 //!
+//! **Pixel convention.** Both libraries report positions with the top-left pixel's *corner* at
+//! (0, 0) (its centre at (0.5, 0.5)): on rendered tags seen head-on, kornia's corners sit
+//! +0.500 / +0.502 px and the C library's +0.446 / +0.454 px from the truth in the centre
+//! convention. We shift both by [`LIBRARY_TO_CENTRE_PX`] so every position we report has the
+//! top-left pixel's centre at (0, 0), as OpenCV, Kalibr and DESIGN.md.
+//!
 //! Both return corners in the C library's order: counter-clockwise around the tag in the image
 //! as the tag is drawn (tag frame corners (-1, 1), (1, 1), (1, -1), (-1, -1) with y up; in the
 //! image the first corner is the tag's bottom-left), pixel centres at integer coordinates.
@@ -9,6 +15,13 @@
 
 use image::GrayImage;
 use serde::Serialize;
+
+/// Shift from the libraries' pixel-corner convention to the pixel-centre convention.
+pub const LIBRARY_TO_CENTRE_PX: f64 = -0.5;
+
+fn to_centre_convention(p: [f64; 2]) -> [f64; 2] {
+    [p[0] + LIBRARY_TO_CENTRE_PX, p[1] + LIBRARY_TO_CENTRE_PX]
+}
 
 /// Tag families both backends support.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -208,14 +221,14 @@ impl TagDetector for KorniaDetector {
                 let family = families.iter().find(|f| f.kornia() == d.tag_family_kind)?;
                 let corners_px = C_TAG_CORNERS.map(|(x, y)| {
                     let c = d.quad.homography_project(x, y);
-                    [c.x as f64, c.y as f64]
+                    to_centre_convention([c.x as f64, c.y as f64])
                 });
                 Some(TagDetection {
                     id: d.id as u32,
                     family: family.name(),
                     hamming: d.hamming as u32,
                     corners_px,
-                    centre_px: [d.center.x as f64, d.center.y as f64],
+                    centre_px: to_centre_convention([d.center.x as f64, d.center.y as f64]),
                 })
             })
             .collect();
@@ -274,8 +287,8 @@ impl TagDetector for CDetector {
                 id: d.id() as u32,
                 family,
                 hamming: d.hamming() as u32,
-                corners_px: d.corners(),
-                centre_px: d.center(),
+                corners_px: d.corners().map(to_centre_convention),
+                centre_px: to_centre_convention(d.center()),
             })
             .collect();
         Ok(sort_detections(out))

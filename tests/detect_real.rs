@@ -28,9 +28,11 @@ fn parse_expected(text: &str) -> Vec<Expected> {
 }
 
 /// Largest corner distance between an expected tag and a detection, corners in the same order.
+/// The expected file is the C library's own output, in its pixel-corner convention.
 fn corner_error(e: &[[f64; 2]; 4], d: &TagDetection) -> f64 {
+    let shift = stereotag::tags::LIBRARY_TO_CENTRE_PX;
     (0..4)
-        .map(|i| (e[i][0] - d.corners_px[i][0]).hypot(e[i][1] - d.corners_px[i][1]))
+        .map(|i| (e[i][0] + shift - d.corners_px[i][0]).hypot(e[i][1] + shift - d.corners_px[i][1]))
         .fold(0.0, f64::max)
 }
 

@@ -5,6 +5,7 @@ mod config;
 mod demo;
 mod detect;
 mod map;
+mod render;
 mod rig;
 mod simulate;
 
@@ -46,6 +47,10 @@ enum Command {
     ///
     /// Example: stereotag detect --backend kornia --decimate 1 photo.jpg
     Detect(detect::Detect),
+    /// Render the stereo pair a robot sees at a pose, with ground truth of every tag in view.
+    ///
+    /// Example: stereotag render --world samples/office/world.yaml --pose 1.2,5.8,2.3 --out pair
+    Render(render::Render),
     /// Check a stereo rig file and export it for OpenCV and ROS (with its Bouguet rectification).
     ///
     /// Example: stereotag rig calibration/rigs/default.yaml --out rig_export
@@ -72,6 +77,7 @@ fn is_input_error(err: &anyhow::Error) -> bool {
             || e.is::<stereotag::sim::SimError>()
             || e.is::<UsageError>()
             || e.is::<stereotag::tags::TagError>()
+            || e.is::<stereotag::render::RenderError>()
     })
 }
 
@@ -103,6 +109,7 @@ pub fn main() -> i32 {
         Command::Map(c) => c.run(),
         Command::Detect(c) => c.run(),
         Command::Rig(c) => c.run(),
+        Command::Render(c) => c.run(),
         Command::Config(c) => c.run(),
         Command::Completions { shell } => {
             clap_complete::generate(
