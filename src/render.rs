@@ -410,8 +410,27 @@ pub fn render_pair(
         config,
         config.seed.wrapping_mul(2) + 1,
     );
+    let truth = truths(world, &scene.tags, rig, &wl, config);
+    Ok(RenderedPair {
+        left,
+        right,
+        world_from_robot,
+        world_from_left: wl,
+        tags: truth,
+    })
+}
+
+/// Ground truth of the tags visible in both cameras.
+fn truths(
+    world: &World,
+    paints: &[TagPaint],
+    rig: &StereoRig,
+    wl: &Isometry3<f64>,
+    config: &RenderConfig,
+) -> Vec<TagTruth> {
+    let wr = wl * rig.right_from_left.inverse();
     let mut truth = Vec::new();
-    for (tag, paint) in world.tags.iter().zip(&scene.tags) {
+    for (tag, paint) in world.tags.iter().zip(paints) {
         let corners = paint.corners(tag.size_m);
         let see = |cam: &Camera, world_from_cam: &Isometry3<f64>| -> Option<[[f64; 2]; 4]> {
             let eye = world_from_cam.translation.vector;
@@ -444,7 +463,7 @@ pub fn render_pair(
             }
             Some(out)
         };
-        let (Some(l), Some(r)) = (see(&rig.left, &wl), see(&rig.right, &wr)) else {
+        let (Some(l), Some(r)) = (see(&rig.left, wl), see(&rig.right, &wr)) else {
             continue;
         };
         let c_left = wl.inverse_transform_point(&Point3::from(paint.centre));
@@ -458,11 +477,81 @@ pub fn render_pair(
             centre_in_left_m: [c_left.x, c_left.y, c_left.z],
         });
     }
-    Ok(RenderedPair {
-        left,
-        right,
-        world_from_robot,
-        world_from_left: wl,
-        tags: truth,
-    })
+    truth
+}
+
+/// The tags a robot at `world_from_robot` sees in both cameras, without rendering.
+pub fn visible_tags(
+    world: &World,
+    rig: &StereoRig,
+    world_from_robot: Pose2,
+    config: &RenderConfig,
+) -> Result<Vec<TagTruth>, RenderError> {
+    let paints = world
+        .tags
+        .iter()
+        .map(tag_paint)
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(truths(
+        world,
+        &paints,
+        rig,
+        &world_from_left(rig, &world_from_robot),
+        config,
+    ))
+}
+
+/// When to take stereo pictures along a run: whenever a tag is in view of both cameras within
+/// `max_range_m`, at most once per `min_travel_m` of travel or `min_turn_rad` of turn.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CapturePolicy {
+    /// Farthest tag worth a picture (ours: 3 m).
+    pub max_range_m: f64,
+    /// Least travel between pictures (ours: 0.3 m).
+    pub min_travel_m: f64,
+    /// Least turn between pictures (ours: 15 degrees).
+    pub min_turn_rad: f64,
+}
+
+impl Default for CapturePolicy {
+    fn default() -> Self {
+        Self {
+            max_range_m: 3.0,
+            min_travel_m: 0.3,
+            min_turn_rad: 15f64.to_radians(),
+        }
+    }
+}
+
+/// The stamped true poses at which pictures are taken.
+pub fn plan_captures(
+    world: &World,
+    rig: &StereoRig,
+    trajectory: &[crate::run::StampedPose],
+    policy: &CapturePolicy,
+    config: &RenderConfig,
+) -> Result<Vec<crate::run::StampedPose>, RenderError> {
+    let paints = world
+        .tags
+        .iter()
+        .map(tag_paint)
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut out: Vec<crate::run::StampedPose> = Vec::new();
+    for p in trajectory {
+        if let Some(last) = out.last() {
+            let moved = (p.pose.x - last.pose.x).hypot(p.pose.y - last.pose.y);
+            let turned = crate::geometry::wrap_angle(p.pose.theta - last.pose.theta).abs();
+            if moved < policy.min_travel_m && turned < policy.min_turn_rad {
+                continue;
+            }
+        }
+        let seen = truths(world, &paints, rig, &world_from_left(rig, &p.pose), config);
+        if seen
+            .iter()
+            .any(|t| Vector3::from(t.centre_in_left_m).norm() <= policy.max_range_m)
+        {
+            out.push(*p);
+        }
+    }
+    Ok(out)
 }

@@ -27,3 +27,29 @@ fn simulated_run_round_trips() {
     }
     assert!(back.ground_truth.is_some());
 }
+
+#[test]
+fn simulate_takes_stereo_pictures_when_tags_are_in_view() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .current_dir(common::root())
+        .args([
+            "-q",
+            "simulate",
+            "--world",
+            "samples/office/world.yaml",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let run = load_run(&out).unwrap();
+    assert!(run.stereo.len() >= 5, "{} pairs", run.stereo.len());
+    for e in &run.stereo {
+        assert!(out.join(&e.left).exists() && out.join(&e.right).exists());
+    }
+    let rig = stereotag::io::load_rig(&out.join(run.meta.robot.rig.as_deref().unwrap())).unwrap();
+    assert_eq!(rig.left.width, 640);
+}

@@ -28,7 +28,8 @@ impl Demo {
         }
         std::fs::create_dir_all(&self.out)?;
         let run_dir = self.out.join("run");
-        let output = simulate_world(&self.world, &run_dir, true, quiet, |_| Ok(()))?;
+        let rig = Path::new("calibration/rigs/default.yaml");
+        let output = simulate_world(&self.world, &run_dir, Some(rig), true, quiet, |_| Ok(()))?;
         let run = stereotag::io::load_run(&run_dir)?;
         let mapping = run.meta.mapping.clone().unwrap_or_default();
         for (poses, name) in [

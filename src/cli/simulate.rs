@@ -26,6 +26,12 @@ pub struct Simulate {
     /// Perfect odometry (no wheel errors).
     #[arg(long)]
     no_odometry_noise: bool,
+    /// Stereo rig for the pictures taken when a tag is in view.
+    #[arg(long, default_value = "calibration/rigs/default.yaml")]
+    rig: PathBuf,
+    /// Take no stereo pictures (sonar and odometry only).
+    #[arg(long)]
+    no_stereo: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -33,7 +39,8 @@ pub struct Simulate {
 
 impl Simulate {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
-        simulate_world(&self.world, &self.out, self.force, quiet, |c| {
+        let rig = (!self.no_stereo).then_some(self.rig.as_path());
+        simulate_world(&self.world, &self.out, rig, self.force, quiet, |c| {
             if let Some(s) = self.seed {
                 c.seed = s;
             }
@@ -58,6 +65,7 @@ impl Simulate {
 pub(crate) fn simulate_world(
     world_path: &Path,
     out: &Path,
+    rig_path: Option<&Path>,
     force: bool,
     quiet: bool,
     adjust: impl FnOnce(&mut sim::SimConfig) -> anyhow::Result<()>,
@@ -80,6 +88,9 @@ pub(crate) fn simulate_world(
             .into_owned(),
     );
     output.run.meta.mapping = Some(loaded.mapping.clone());
+    if let Some(rig_path) = rig_path.filter(|_| !loaded.world.tags.is_empty()) {
+        take_pictures(&loaded.world, rig_path, &dir, &mut output, quiet)?;
+    }
     io::save_run(&dir.path(""), &output.run)?;
     dir.commit()?;
     let last = output.run.odometry.last().map_or(0.0, |p| p.t_s);
@@ -93,4 +104,53 @@ pub(crate) fn simulate_world(
         out.display()
     );
     Ok(output)
+}
+
+/// Renders a stereo pair wherever a tag is in view and lists them in `stereo.csv`.
+fn take_pictures(
+    world: &stereotag::world::World,
+    rig_path: &Path,
+    dir: &OutputDir,
+    output: &mut SimOutput,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    use stereotag::render::{plan_captures, render_pair, CapturePolicy, RenderConfig};
+    let rig = io::load_rig(rig_path)?;
+    let truth = output.run.ground_truth.clone().unwrap_or_default();
+    let config = RenderConfig::default();
+    let plan = plan_captures(world, &rig, &truth, &CapturePolicy::default(), &config)?;
+    std::fs::create_dir_all(dir.path("stereo/left"))?;
+    std::fs::create_dir_all(dir.path("stereo/right"))?;
+    let bar = progress(plan.len() as u64, "render", quiet);
+    for (k, p) in plan.iter().enumerate() {
+        let pair = render_pair(
+            world,
+            &rig,
+            p.pose,
+            &RenderConfig {
+                seed: k as u64 + 1,
+                ..config.clone()
+            },
+        )?;
+        let (left, right) = (
+            format!("stereo/left/{k:06}.png"),
+            format!("stereo/right/{k:06}.png"),
+        );
+        pair.left
+            .save(dir.path(&left))
+            .with_context(|| format!("writing {left}"))?;
+        pair.right
+            .save(dir.path(&right))
+            .with_context(|| format!("writing {right}"))?;
+        output.run.stereo.push(stereotag::run::StereoEntry {
+            t_s: p.t_s,
+            left,
+            right,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    io::save_rig(&dir.path("rig.yaml"), &rig)?;
+    output.run.meta.robot.rig = Some("rig.yaml".into());
+    Ok(())
 }
