@@ -1,7 +1,7 @@
 use super::UsageError;
 use std::path::PathBuf;
 use stereotag::io;
-use stereotag::stereo::{triangulate_tags, StereoConfig};
+use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
 use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
 
 /// Which detector.
@@ -134,11 +134,12 @@ impl Detect {
             sigma_px: self.sigma_px,
             ..StereoConfig::default()
         };
+        let (in_left, in_right) = detect_pair(detector, left, right)?;
         let (tags, rejected) = triangulate_tags(
             &rig,
             &rect,
-            &detector.detect(left)?,
-            &detector.detect(right)?,
+            &in_left,
+            &in_right,
             self.tag_size_m,
             &config,
         );
