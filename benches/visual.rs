@@ -6,13 +6,15 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use std::path::Path;
 use stereotag::geometry::Pose2;
-use stereotag::render::{render_pair, RenderConfig};
+use stereotag::render::{render_pair, RenderConfig, Renderer};
 use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
 use stereotag::tags::{CDetector, DetectorConfig, TagDetector};
 
 fn visual(c: &mut Criterion) {
-    let world = stereotag::io::load_world(Path::new("samples/office/world.yaml")).expect("office sample");
-    let rig = stereotag::io::load_rig(Path::new("calibration/rigs/default.yaml")).expect("default rig");
+    let world =
+        stereotag::io::load_world(Path::new("samples/office/world.yaml")).expect("office sample");
+    let rig =
+        stereotag::io::load_rig(Path::new("calibration/rigs/default.yaml")).expect("default rig");
     let pose = Pose2::new(1.0, 6.3, 2.35);
     let pair = render_pair(&world.world, &rig, pose, &RenderConfig::default()).expect("render");
     let rect = rig.rectify();
@@ -29,15 +31,29 @@ fn visual(c: &mut Criterion) {
     group.bench_function("stereotag_band_and_triangulate", |b| {
         b.iter(|| {
             let (l, r) = detect_pair(&mut ours, &pair.left, &pair.right).unwrap();
-            black_box(triangulate_tags(&rig, &rect, &l, &r, Some(0.16), &StereoConfig::default()))
+            black_box(triangulate_tags(
+                &rig,
+                &rect,
+                &l,
+                &r,
+                Some(0.16),
+                &StereoConfig::default(),
+            ))
         })
     });
     group.finish();
 
     let mut group = c.benchmark_group("render");
     group.sample_size(10);
+    let renderer = Renderer::new(&rig);
     group.bench_function("render_pair_640x480_4spp", |b| {
-        b.iter(|| black_box(render_pair(&world.world, &rig, pose, &RenderConfig::default()).unwrap()))
+        b.iter(|| {
+            black_box(
+                renderer
+                    .render(&world.world, pose, &RenderConfig::default())
+                    .unwrap(),
+            )
+        })
     });
     group.finish();
 }

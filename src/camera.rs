@@ -255,6 +255,97 @@ impl StereoRig {
     }
 }
 
+/// A rectified stereo pair (Bouguet's method, as OpenCV's `stereoRectify` with `alpha = -1`
+/// and zero disparity at infinity): each camera is turned half of the way towards the other so the
+/// image planes become coplanar, then both are turned so the baseline runs along the new x axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rectification {
+    /// `rectified_from_left` rotation (OpenCV `R1`).
+    pub left_rotation: nalgebra::Rotation3<f64>,
+    /// `rectified_from_right` rotation (OpenCV `R2`).
+    pub right_rotation: nalgebra::Rotation3<f64>,
+    /// Focal length of both rectified cameras, pixels.
+    pub focal_px: f64,
+    /// Principal point of both rectified cameras, pixels.
+    pub principal_px: [f64; 2],
+    /// Signed x offset of the right camera in the rectified frame, metres (negative for a
+    /// right camera to the right, as OpenCV's `P2[0][3] / f`).
+    pub baseline_x_m: f64,
+}
+
+impl Rectification {
+    /// OpenCV `P1` (3x4, row-major).
+    pub fn left_projection(&self) -> [[f64; 4]; 3] {
+        let (f, [cx, cy]) = (self.focal_px, self.principal_px);
+        [[f, 0.0, cx, 0.0], [0.0, f, cy, 0.0], [0.0, 0.0, 1.0, 0.0]]
+    }
+
+    /// OpenCV `P2` (3x4, row-major).
+    pub fn right_projection(&self) -> [[f64; 4]; 3] {
+        let (f, [cx, cy]) = (self.focal_px, self.principal_px);
+        [
+            [f, 0.0, cx, f * self.baseline_x_m],
+            [0.0, f, cy, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ]
+    }
+
+    /// Pixel in the rectified image of a raw pixel of one camera; `None` if it cannot be undistorted.
+    pub fn rectify_pixel(
+        &self,
+        camera: &Camera,
+        rotation: &nalgebra::Rotation3<f64>,
+        px: &Point2<f64>,
+    ) -> Option<Point2<f64>> {
+        let n = camera.unproject(px)?;
+        let r = rotation * Vector3::new(n.x, n.y, 1.0);
+        (r.z > 1e-9).then(|| {
+            Point2::new(
+                self.focal_px * r.x / r.z + self.principal_px[0],
+                self.focal_px * r.y / r.z + self.principal_px[1],
+            )
+        })
+    }
+}
+
+impl StereoRig {
+    /// Bouguet rectification of the rig. The rectified focal length is the smaller of the two
+    /// cameras' fy and the principal point their mean, so no image is magnified.
+    pub fn rectify(&self) -> Rectification {
+        use nalgebra::Rotation3;
+        let r = self.right_from_left.rotation.to_rotation_matrix();
+        let t = self.right_from_left.translation.vector;
+        // Half rotations: the right camera turns back by half, the left forward by half.
+        let half = Rotation3::from_scaled_axis(r.scaled_axis() * -0.5);
+        let r_left = half.inverse();
+        let t_half = half * t;
+        // New x axis along the baseline (pointing from right to left camera centre as OpenCV).
+        let e1 = t_half.normalize() * if t_half.x > 0.0 { 1.0 } else { -1.0 };
+        let e2 = Vector3::new(-e1.y, e1.x, 0.0).normalize();
+        let e3 = e1.cross(&e2);
+        let align = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_rows(&[
+            e1.transpose(),
+            e2.transpose(),
+            e3.transpose(),
+        ]));
+        let left_rotation = align * r_left;
+        let right_rotation = align * half;
+        // In the rectified frames the right camera is the left one moved by `right_rotation * t`,
+        // which lies along x by construction.
+        let baseline_x_m = (right_rotation * t).x;
+        Rectification {
+            left_rotation,
+            right_rotation,
+            focal_px: self.left.fy.min(self.right.fy),
+            principal_px: [
+                0.5 * (self.left.cx + self.right.cx),
+                0.5 * (self.left.cy + self.right.cy),
+            ],
+            baseline_x_m,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -352,97 +443,6 @@ mod tests {
         assert!(cameras()[0]
             .project(&Vector3::new(0.0, 0.0, -1.0))
             .is_none());
-    }
-}
-
-/// A rectified stereo pair (Bouguet's method, as OpenCV's `stereoRectify` with `alpha = -1`
-/// and zero disparity at infinity): each camera is turned half of the way towards the other so the
-/// image planes become coplanar, then both are turned so the baseline runs along the new x axis.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Rectification {
-    /// `rectified_from_left` rotation (OpenCV `R1`).
-    pub left_rotation: nalgebra::Rotation3<f64>,
-    /// `rectified_from_right` rotation (OpenCV `R2`).
-    pub right_rotation: nalgebra::Rotation3<f64>,
-    /// Focal length of both rectified cameras, pixels.
-    pub focal_px: f64,
-    /// Principal point of both rectified cameras, pixels.
-    pub principal_px: [f64; 2],
-    /// Signed x offset of the right camera in the rectified frame, metres (negative for a
-    /// right camera to the right, as OpenCV's `P2[0][3] / f`).
-    pub baseline_x_m: f64,
-}
-
-impl Rectification {
-    /// OpenCV `P1` (3x4, row-major).
-    pub fn left_projection(&self) -> [[f64; 4]; 3] {
-        let (f, [cx, cy]) = (self.focal_px, self.principal_px);
-        [[f, 0.0, cx, 0.0], [0.0, f, cy, 0.0], [0.0, 0.0, 1.0, 0.0]]
-    }
-
-    /// OpenCV `P2` (3x4, row-major).
-    pub fn right_projection(&self) -> [[f64; 4]; 3] {
-        let (f, [cx, cy]) = (self.focal_px, self.principal_px);
-        [
-            [f, 0.0, cx, f * self.baseline_x_m],
-            [0.0, f, cy, 0.0],
-            [0.0, 0.0, 1.0, 0.0],
-        ]
-    }
-
-    /// Pixel in the rectified image of a raw pixel of one camera; `None` if it cannot be undistorted.
-    pub fn rectify_pixel(
-        &self,
-        camera: &Camera,
-        rotation: &nalgebra::Rotation3<f64>,
-        px: &Point2<f64>,
-    ) -> Option<Point2<f64>> {
-        let n = camera.unproject(px)?;
-        let r = rotation * Vector3::new(n.x, n.y, 1.0);
-        (r.z > 1e-9).then(|| {
-            Point2::new(
-                self.focal_px * r.x / r.z + self.principal_px[0],
-                self.focal_px * r.y / r.z + self.principal_px[1],
-            )
-        })
-    }
-}
-
-impl StereoRig {
-    /// Bouguet rectification of the rig. The rectified focal length is the smaller of the two
-    /// cameras' fy and the principal point their mean, so no image is magnified.
-    pub fn rectify(&self) -> Rectification {
-        use nalgebra::Rotation3;
-        let r = self.right_from_left.rotation.to_rotation_matrix();
-        let t = self.right_from_left.translation.vector;
-        // Half rotations: the right camera turns back by half, the left forward by half.
-        let half = Rotation3::from_scaled_axis(r.scaled_axis() * -0.5);
-        let r_left = half.inverse();
-        let t_half = half * t;
-        // New x axis along the baseline (pointing from right to left camera centre as OpenCV).
-        let e1 = t_half.normalize() * if t_half.x > 0.0 { 1.0 } else { -1.0 };
-        let e2 = Vector3::new(-e1.y, e1.x, 0.0).normalize();
-        let e3 = e1.cross(&e2);
-        let align = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_rows(&[
-            e1.transpose(),
-            e2.transpose(),
-            e3.transpose(),
-        ]));
-        let left_rotation = align * r_left;
-        let right_rotation = align * half;
-        // In the rectified frames the right camera is the left one moved by `right_rotation * t`,
-        // which lies along x by construction.
-        let baseline_x_m = (right_rotation * t).x;
-        Rectification {
-            left_rotation,
-            right_rotation,
-            focal_px: self.left.fy.min(self.right.fy),
-            principal_px: [
-                0.5 * (self.left.cx + self.right.cx),
-                0.5 * (self.left.cy + self.right.cy),
-            ],
-            baseline_x_m,
-        }
     }
 }
 

@@ -274,29 +274,25 @@ struct Scene<'a> {
 impl Scene<'_> {
     /// Albedo and distance of the first surface along a ray.
     fn trace(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> (f64, f64) {
-        let mut best = (f64::INFINITY, 0.5);
-        // Floor and ceiling.
+        // Find the nearest surface first, shade it once.
+        enum Surface {
+            Sky,
+            Floor,
+            Ceiling,
+            Wall(usize),
+        }
+        let mut best = (f64::INFINITY, Surface::Sky);
         if dir.z < -1e-9 {
-            let t = -origin.z / dir.z;
-            let p = origin + dir * t;
-            best = (
-                t,
-                0.35 + 0.08 * texture(p.x * 8.0, p.y * 8.0)
-                    + 0.04 * texture(p.x * 40.0, p.y * 40.0),
-            );
+            best = (-origin.z / dir.z, Surface::Floor);
         } else if dir.z > 1e-9 {
-            let t = (self.ceiling_m - origin.z) / dir.z;
-            best = (
-                t,
-                0.8 + 0.02 * texture(origin.x + dir.x * t, origin.y + dir.y * t),
-            );
+            best = ((self.ceiling_m - origin.z) / dir.z, Surface::Ceiling);
         }
         let o2 = Point2::new(origin.x, origin.y);
         let horiz = Vector2::new(dir.x, dir.y);
         let hn = horiz.norm();
         if hn > 1e-12 {
             let d2 = horiz / hn;
-            for w in &self.world.walls {
+            for (i, w) in self.world.walls.iter().enumerate() {
                 let Some(h) = w.segment.ray_hit(o2, d2, best.0 * hn) else {
                     continue;
                 };
@@ -305,13 +301,24 @@ impl Scene<'_> {
                 if z < 0.0 || z > w.height_m || t >= best.0 {
                     continue;
                 }
-                let along = (o2 + d2 * h.range_m - w.segment.a).norm();
-                let albedo = 0.62
-                    + 0.06 * texture(along * 6.0, z * 6.0)
-                    + 0.03 * texture(along * 30.0, z * 30.0);
-                best = (t, albedo);
+                best = (t, Surface::Wall(i));
             }
         }
+        let t = best.0;
+        let p = origin + dir * t;
+        let albedo = match best.1 {
+            Surface::Sky => 0.5,
+            Surface::Floor => {
+                0.35 + 0.08 * texture(p.x * 8.0, p.y * 8.0) + 0.04 * texture(p.x * 40.0, p.y * 40.0)
+            }
+            Surface::Ceiling => 0.8 + 0.02 * texture(p.x, p.y),
+            Surface::Wall(i) => {
+                let along = (Point2::new(p.x, p.y) - self.world.walls[i].segment.a).norm();
+                0.62 + 0.06 * texture(along * 6.0, p.z * 6.0)
+                    + 0.03 * texture(along * 30.0, p.z * 30.0)
+            }
+        };
+        let mut best = (t, albedo);
         for tag in &self.tags {
             if let Some((t, albedo)) = tag.hit(origin, dir) {
                 if t < best.0 + 0.002 {
@@ -332,16 +339,46 @@ pub fn world_from_left(rig: &StereoRig, world_from_robot: &Pose2) -> Isometry3<f
     robot * rig.robot_from_left
 }
 
+/// Unit ray directions in the camera frame of the four samples of every pixel, row-major.
+#[derive(Debug, Clone)]
+struct RayTable {
+    rays: Vec<Option<[Vector3<f64>; 4]>>,
+}
+
+/// The 2x2 sample grid inside a pixel.
+const SAMPLE_OFFSETS: [(f64, f64); 4] =
+    [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
+
+impl RayTable {
+    fn new(camera: &Camera) -> Self {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let rays = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let (col, row) = ((i % w) as f64, (i / w) as f64);
+                let mut out = [Vector3::zeros(); 4];
+                for (k, (du, dv)) in SAMPLE_OFFSETS.iter().enumerate() {
+                    let n = camera.unproject(&Point2::new(col + du, row + dv))?;
+                    out[k] = Vector3::new(n.x, n.y, 1.0).normalize();
+                }
+                Some(out)
+            })
+            .collect();
+        Self { rays }
+    }
+}
+
 fn render_camera(
     scene: &Scene,
     camera: &Camera,
+    table: &RayTable,
     world_from_camera: &Isometry3<f64>,
     config: &RenderConfig,
     seed: u64,
 ) -> GrayImage {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let origin = world_from_camera.translation.vector;
-    let offsets = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
+    let rotation = world_from_camera.rotation.to_rotation_matrix();
     let half_diag2 = (0.5 * w as f64).powi(2) + (0.5 * h as f64).powi(2);
     let mut radiance = vec![0.0f64; w * h];
     radiance
@@ -349,13 +386,12 @@ fn render_camera(
         .enumerate()
         .for_each(|(row, out)| {
             for (col, px) in out.iter_mut().enumerate() {
+                let Some(rays) = &table.rays[row * w + col] else {
+                    continue;
+                };
                 let mut sum = 0.0;
-                for (du, dv) in offsets {
-                    let p = Point2::new(col as f64 + du, row as f64 + dv);
-                    let Some(n) = camera.unproject(&p) else {
-                        continue;
-                    };
-                    let dir = world_from_camera.rotation * Vector3::new(n.x, n.y, 1.0).normalize();
+                for ray in rays {
+                    let dir = rotation * ray;
                     let (t, albedo) = scene.trace(&origin, &dir);
                     let light = if t.is_finite() {
                         1.0 / (1.0 + (t / config.light_half_distance_m).powi(2))
@@ -369,55 +405,102 @@ fn render_camera(
                 *px = 0.25 * sum * (1.0 - config.vignetting * r2.min(1.0));
             }
         });
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let noise = Normal::new(0.0, config.noise_sigma.max(0.0))
         .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero sigma"));
-    let pixels = radiance
-        .iter()
-        .map(|r| {
-            (r * 255.0 + noise.sample(&mut rng))
-                .round()
-                .clamp(0.0, 255.0) as u8
-        })
-        .collect();
+    // One noise stream per row (seed, row): deterministic whatever the thread count.
+    let mut pixels = vec![0u8; w * h];
+    pixels
+        .par_chunks_mut(w)
+        .zip(radiance.par_chunks(w))
+        .enumerate()
+        .for_each(|(row, (out, rad))| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+                seed.wrapping_mul(1_000_003).wrapping_add(row as u64),
+            );
+            for (o, r) in out.iter_mut().zip(rad) {
+                *o = (r * 255.0 + noise.sample(&mut rng))
+                    .round()
+                    .clamp(0.0, 255.0) as u8;
+            }
+        });
     GrayImage::from_raw(w as u32, h as u32, pixels).unwrap_or_default()
 }
 
-/// Renders the stereo pair seen from a robot pose.
+/// A renderer for one rig: the rays of every pixel sample are computed once, so rendering many
+/// pairs costs only the tracing.
+#[derive(Debug, Clone)]
+pub struct Renderer {
+    rig: StereoRig,
+    left: RayTable,
+    right: RayTable,
+}
+
+impl Renderer {
+    /// Prepares the ray tables of both cameras.
+    pub fn new(rig: &StereoRig) -> Self {
+        Self {
+            rig: rig.clone(),
+            left: RayTable::new(&rig.left),
+            right: RayTable::new(&rig.right),
+        }
+    }
+
+    /// Renders the stereo pair seen from a robot pose.
+    pub fn render(
+        &self,
+        world: &World,
+        world_from_robot: Pose2,
+        config: &RenderConfig,
+    ) -> Result<RenderedPair, RenderError> {
+        let rig = &self.rig;
+        let tags = world
+            .tags
+            .iter()
+            .map(tag_paint)
+            .collect::<Result<Vec<_>, _>>()?;
+        let scene = Scene {
+            world,
+            tags,
+            ceiling_m: config.ceiling_m,
+        };
+        let wl = world_from_left(rig, &world_from_robot);
+        let wr = wl * rig.right_from_left.inverse();
+        let left = render_camera(
+            &scene,
+            &rig.left,
+            &self.left,
+            &wl,
+            config,
+            config.seed.wrapping_mul(2),
+        );
+        let right = render_camera(
+            &scene,
+            &rig.right,
+            &self.right,
+            &wr,
+            config,
+            config.seed.wrapping_mul(2) + 1,
+        );
+        let truth = truths(world, &scene.tags, rig, &wl, config);
+        Ok(RenderedPair {
+            left,
+            right,
+            world_from_robot,
+            world_from_left: wl,
+            tags: truth,
+        })
+    }
+}
+
+/// Renders the stereo pair seen from a robot pose (prepares a [`Renderer`] each call; keep one
+/// to render many pairs).
 pub fn render_pair(
     world: &World,
     rig: &StereoRig,
     world_from_robot: Pose2,
     config: &RenderConfig,
 ) -> Result<RenderedPair, RenderError> {
-    let tags = world
-        .tags
-        .iter()
-        .map(tag_paint)
-        .collect::<Result<Vec<_>, _>>()?;
-    let scene = Scene {
-        world,
-        tags,
-        ceiling_m: config.ceiling_m,
-    };
-    let wl = world_from_left(rig, &world_from_robot);
-    let wr = wl * rig.right_from_left.inverse();
-    let left = render_camera(&scene, &rig.left, &wl, config, config.seed.wrapping_mul(2));
-    let right = render_camera(
-        &scene,
-        &rig.right,
-        &wr,
-        config,
-        config.seed.wrapping_mul(2) + 1,
-    );
-    let truth = truths(world, &scene.tags, rig, &wl, config);
-    Ok(RenderedPair {
-        left,
-        right,
-        world_from_robot,
-        world_from_left: wl,
-        tags: truth,
-    })
+    Renderer::new(rig).render(world, world_from_robot, config)
 }
 
 /// Ground truth of the tags visible in both cameras.

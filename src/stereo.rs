@@ -236,6 +236,46 @@ pub fn triangulate_tags(
     (tags, rejected)
 }
 
+/// Rows of margin around the left tags' rows searched in the right image (ours: 24 px, room for
+/// the vertical disparity of a mis-rectified rig and the lens distortion differences).
+pub const EPIPOLAR_BAND_MARGIN_PX: u32 = 24;
+
+/// Detects tags in a stereo pair: the whole left image, then only the band of rows of the right
+/// image where the left tags' epipolar lines run (the rig is horizontal, so corresponding points
+/// share rows up to distortion and calibration error).
+pub fn detect_pair(
+    detector: &mut dyn crate::tags::TagDetector,
+    left: &image::GrayImage,
+    right: &image::GrayImage,
+) -> Result<(Vec<TagDetection>, Vec<TagDetection>), crate::tags::TagError> {
+    let in_left = detector.detect(left)?;
+    let rows = in_left
+        .iter()
+        .flat_map(|d| d.corners_px.iter().map(|c| c[1]));
+    let (lo, hi) = rows.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+        (lo.min(y), hi.max(y))
+    });
+    if in_left.is_empty() || !lo.is_finite() {
+        return Ok((in_left, Vec::new()));
+    }
+    // Start on a multiple of 8 rows so decimation and the detectors' 4x4 threshold tiles see the
+    // same pixels as in the full image.
+    let top = ((lo.floor().max(0.0) as u32).saturating_sub(EPIPOLAR_BAND_MARGIN_PX) / 8) * 8;
+    let bottom = ((hi.ceil().max(0.0) as u32) + EPIPOLAR_BAND_MARGIN_PX).min(right.height());
+    if bottom <= top {
+        return Ok((in_left, Vec::new()));
+    }
+    let band = image::imageops::crop_imm(right, 0, top, right.width(), bottom - top).to_image();
+    let mut in_right = detector.detect(&band)?;
+    for d in &mut in_right {
+        for c in &mut d.corners_px {
+            c[1] += top as f64;
+        }
+        d.centre_px[1] += top as f64;
+    }
+    Ok((in_left, in_right))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -393,40 +433,4 @@ mod tests {
         );
         assert!(tags.is_empty() && rej[0].reason.contains("size"), "{rej:?}");
     }
-}
-
-/// Rows of margin around the left tags' rows searched in the right image (ours: 24 px, room for
-/// the vertical disparity of a mis-rectified rig and the lens distortion differences).
-pub const EPIPOLAR_BAND_MARGIN_PX: u32 = 24;
-
-/// Detects tags in a stereo pair: the whole left image, then only the band of rows of the right
-/// image where the left tags' epipolar lines run (the rig is horizontal, so corresponding points
-/// share rows up to distortion and calibration error).
-pub fn detect_pair(
-    detector: &mut dyn crate::tags::TagDetector,
-    left: &image::GrayImage,
-    right: &image::GrayImage,
-) -> Result<(Vec<TagDetection>, Vec<TagDetection>), crate::tags::TagError> {
-    let in_left = detector.detect(left)?;
-    let rows = in_left.iter().flat_map(|d| d.corners_px.iter().map(|c| c[1]));
-    let (lo, hi) = rows.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| (lo.min(y), hi.max(y)));
-    if in_left.is_empty() || !lo.is_finite() {
-        return Ok((in_left, Vec::new()));
-    }
-    // Start on a multiple of 8 rows so decimation and the detectors' 4x4 threshold tiles see the
-    // same pixels as in the full image.
-    let top = ((lo.floor().max(0.0) as u32).saturating_sub(EPIPOLAR_BAND_MARGIN_PX) / 8) * 8;
-    let bottom = ((hi.ceil().max(0.0) as u32) + EPIPOLAR_BAND_MARGIN_PX).min(right.height());
-    if bottom <= top {
-        return Ok((in_left, Vec::new()));
-    }
-    let band = image::imageops::crop_imm(right, 0, top, right.width(), bottom - top).to_image();
-    let mut in_right = detector.detect(&band)?;
-    for d in &mut in_right {
-        for c in &mut d.corners_px {
-            c[1] += top as f64;
-        }
-        d.centre_px[1] += top as f64;
-    }
-    Ok((in_left, in_right))
 }

@@ -135,14 +135,8 @@ impl Detect {
             ..StereoConfig::default()
         };
         let (in_left, in_right) = detect_pair(detector, left, right)?;
-        let (tags, rejected) = triangulate_tags(
-            &rig,
-            &rect,
-            &in_left,
-            &in_right,
-            self.tag_size_m,
-            &config,
-        );
+        let (tags, rejected) =
+            triangulate_tags(&rig, &rect, &in_left, &in_right, self.tag_size_m, &config);
         println!(
             "{}",
             serde_json::to_string_pretty(

@@ -114,7 +114,7 @@ fn take_pictures(
     output: &mut SimOutput,
     quiet: bool,
 ) -> anyhow::Result<()> {
-    use stereotag::render::{plan_captures, render_pair, CapturePolicy, RenderConfig};
+    use stereotag::render::{plan_captures, CapturePolicy, RenderConfig, Renderer};
     let rig = io::load_rig(rig_path)?;
     let truth = output.run.ground_truth.clone().unwrap_or_default();
     let config = RenderConfig::default();
@@ -122,10 +122,10 @@ fn take_pictures(
     std::fs::create_dir_all(dir.path("stereo/left"))?;
     std::fs::create_dir_all(dir.path("stereo/right"))?;
     let bar = progress(plan.len() as u64, "render", quiet);
+    let renderer = Renderer::new(&rig);
     for (k, p) in plan.iter().enumerate() {
-        let pair = render_pair(
+        let pair = renderer.render(
             world,
-            &rig,
             p.pose,
             &RenderConfig {
                 seed: k as u64 + 1,
