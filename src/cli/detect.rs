@@ -26,7 +26,7 @@ pub struct Detect {
     #[arg(long)]
     tag_size_m: Option<f64>,
     /// Corner noise assumed for the covariance, pixels.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.3)]
     sigma_px: f64,
     /// Detector backend.
     #[arg(long, value_enum, default_value = "apriltag-c")]
