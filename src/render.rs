@@ -345,6 +345,17 @@ struct RayTable {
     rays: Vec<Option<[Vector3<f64>; 4]>>,
 }
 
+/// A deterministic offset in [-0.25, 0.25)² for sample `k` of pixel `i`.
+fn jitter(i: u64, k: u64) -> (f64, f64) {
+    let mut h = i.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k + 1).wrapping_mul(0xD1B5_4A32_D192_ED03);
+    h ^= h >> 31;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 29;
+    let a = (h & 0xFFFF_FFFF) as f64 / 4_294_967_296.0;
+    let b = (h >> 32) as f64 / 4_294_967_296.0;
+    (0.5 * a - 0.25, 0.5 * b - 0.25)
+}
+
 /// The 2x2 sample grid inside a pixel.
 const SAMPLE_OFFSETS: [(f64, f64); 4] =
     [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
@@ -358,7 +369,10 @@ impl RayTable {
                 let (col, row) = ((i % w) as f64, (i / w) as f64);
                 let mut out = [Vector3::zeros(); 4];
                 for (k, (du, dv)) in SAMPLE_OFFSETS.iter().enumerate() {
-                    let n = camera.unproject(&Point2::new(col + du, row + dv))?;
+                    // Jittered strata: a fixed pseudo-random point inside each quarter of the
+                    // pixel, so edge positions are not quantised to half pixels along a line.
+                    let (ju, jv) = jitter(i as u64, k as u64);
+                    let n = camera.unproject(&Point2::new(col + du + ju, row + dv + jv))?;
                     out[k] = Vector3::new(n.x, n.y, 1.0).normalize();
                 }
                 Some(out)

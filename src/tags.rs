@@ -93,6 +93,11 @@ pub struct DetectorConfig {
     pub sharpening: f64,
     /// Largest number of bit errors corrected (C backend; default 2).
     pub max_hamming: usize,
+    /// Apply our shared sub-pixel corner refinement ([`refine_corners`]) after either backend.
+    /// Off by default: on 200 rendered pairs it moved the corner error from 0.18 / 0.55 px
+    /// (median / 95th percentile, C backend alone) to 0.20 / 0.63 px, while the 3D error went
+    /// from 0.19% to 0.16% of range; it does not yet earn its place.
+    pub subpixel: bool,
 }
 
 impl Default for DetectorConfig {
@@ -103,6 +108,7 @@ impl Default for DetectorConfig {
             refine_edges: true,
             sharpening: 0.25,
             max_hamming: 2,
+            subpixel: false,
         }
     }
 }
@@ -142,6 +148,39 @@ pub trait TagDetector {
     fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, TagError>;
     /// The backend's name.
     fn name(&self) -> &'static str;
+}
+
+/// Cells across the black square of a family (its `width_at_border`); `None` where the
+/// refinement does not apply (reversed-border families).
+fn border_cells(family: &str) -> Option<f64> {
+    match family {
+        "tag36h11" => Some(8.0),
+        "tag25h9" => Some(7.0),
+        "tag16h5" => Some(6.0),
+        _ => None,
+    }
+}
+
+/// Applies [`refine_corners`] to every detection it can improve; the centre becomes the
+/// intersection of the refined diagonals.
+fn refine_all(image: &GrayImage, detections: &mut [TagDetection]) {
+    for d in detections.iter_mut() {
+        let Some(cells) = border_cells(d.family) else {
+            continue;
+        };
+        let Some(c) = refine_corners(image, &d.corners_px, cells) else {
+            continue;
+        };
+        let (p, q) = (c[0], c[2]);
+        let (r, t) = (c[1], c[3]);
+        let (d1, d2) = ([q[0] - p[0], q[1] - p[1]], [t[0] - r[0], t[1] - r[1]]);
+        let den = d1[0] * d2[1] - d1[1] * d2[0];
+        if den.abs() > 1e-9 {
+            let s = ((r[0] - p[0]) * d2[1] - (r[1] - p[1]) * d2[0]) / den;
+            d.centre_px = [p[0] + d1[0] * s, p[1] + d1[1] * s];
+        }
+        d.corners_px = c;
+    }
 }
 
 fn sort_detections(mut d: Vec<TagDetection>) -> Vec<TagDetection> {
@@ -231,7 +270,11 @@ impl TagDetector for KorniaDetector {
                     centre_px: to_centre_convention([d.center.x as f64, d.center.y as f64]),
                 })
             })
-            .collect();
+            .collect::<Vec<_>>();
+        let mut out = out;
+        if self.config.subpixel {
+            refine_all(image, &mut out);
+        }
         Ok(sort_detections(out))
     }
 
@@ -244,6 +287,7 @@ impl TagDetector for KorniaDetector {
 pub struct CDetector {
     detector: apriltag::Detector,
     families: Vec<TagFamily>,
+    subpixel: bool,
 }
 
 impl CDetector {
@@ -266,6 +310,7 @@ impl CDetector {
         Ok(Self {
             detector,
             families: config.families,
+            subpixel: config.subpixel,
         })
     }
 }
@@ -290,11 +335,132 @@ impl TagDetector for CDetector {
                 corners_px: d.corners().map(to_centre_convention),
                 centre_px: to_centre_convention(d.center()),
             })
-            .collect();
+            .collect::<Vec<_>>();
+        let mut out = out;
+        if self.subpixel {
+            refine_all(image, &mut out);
+        }
         Ok(sort_detections(out))
     }
 
     fn name(&self) -> &'static str {
         "apriltag-c"
     }
+}
+
+/// Bilinear sample of a grey image at a sub-pixel position (pixel centres at integers).
+fn sample(image: &GrayImage, x: f64, y: f64) -> Option<f64> {
+    let (w, h) = (image.width() as i64, image.height() as i64);
+    let (x0, y0) = (x.floor() as i64, y.floor() as i64);
+    if x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h {
+        return None;
+    }
+    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let p = |xx: i64, yy: i64| image.get_pixel(xx as u32, yy as u32).0[0] as f64;
+    let top = p(x0, y0) * (1.0 - fx) + p(x0 + 1, y0) * fx;
+    let bottom = p(x0, y0 + 1) * (1.0 - fx) + p(x0 + 1, y0 + 1) * fx;
+    Some(top * (1.0 - fy) + bottom * fy)
+}
+
+/// Points sampled along each edge by [`refine_corners`].
+const EDGE_SAMPLES: usize = 12;
+/// Step of the intensity profiles across an edge, pixels.
+const PROFILE_STEP_PX: f64 = 0.1;
+
+/// Shared sub-pixel refinement of a detected tag's corners: along each edge of the black square,
+/// intensity profiles across the edge locate the point where the grey level is halfway between
+/// the black border and the white quiet zone; a line is fitted to those points (total least
+/// squares) and adjacent lines are intersected. Works on either backend's output; returns `None`
+/// when the tag is too small or an edge has too few clean profiles (the caller keeps the
+/// original corners).
+pub fn refine_corners(
+    image: &GrayImage,
+    corners: &[[f64; 2]; 4],
+    border_cells: f64,
+) -> Option<[[f64; 2]; 4]> {
+    use nalgebra::{Matrix2, Vector2};
+    let pts: Vec<Vector2<f64>> = corners.iter().map(|c| Vector2::new(c[0], c[1])).collect();
+    let centre = pts.iter().sum::<Vector2<f64>>() / 4.0;
+    let mut lines = Vec::with_capacity(4);
+    for i in 0..4 {
+        let (a, b) = (pts[i], pts[(i + 1) % 4]);
+        let len = (b - a).norm();
+        let cell = len / border_cells;
+        if cell < 1.5 {
+            return None;
+        }
+        let dir = (b - a) / len;
+        let mut normal = Vector2::new(-dir.y, dir.x);
+        if normal.dot(&(a - centre)) < 0.0 {
+            normal = -normal; // outward
+        }
+        // Profiles reach 0.8 cell either side: inside stays on the black border, outside on the quiet zone.
+        let reach = 0.8 * cell;
+        let steps = (2.0 * reach / PROFILE_STEP_PX) as usize;
+        let mut edge_pts = Vec::new();
+        for k in 0..EDGE_SAMPLES {
+            let t = 0.2 + 0.6 * k as f64 / (EDGE_SAMPLES - 1) as f64;
+            let p = a + (b - a) * t;
+            let profile: Option<Vec<f64>> = (0..=steps)
+                .map(|s| {
+                    let q = p + normal * (-reach + s as f64 * PROFILE_STEP_PX);
+                    sample(image, q.x, q.y)
+                })
+                .collect();
+            let Some(profile) = profile else { continue };
+            let n = profile.len();
+            let dark = profile[..n / 4].iter().sum::<f64>() / (n / 4) as f64;
+            let light = profile[n - n / 4..].iter().sum::<f64>() / (n / 4) as f64;
+            if light - dark < 20.0 {
+                continue;
+            }
+            let mid = 0.5 * (dark + light);
+            // Last crossing of the mid level going outwards.
+            let Some(j) = (1..n)
+                .rev()
+                .find(|&j| profile[j - 1] < mid && profile[j] >= mid)
+            else {
+                continue;
+            };
+            let f = (mid - profile[j - 1]) / (profile[j] - profile[j - 1]);
+            let s = -reach + (j as f64 - 1.0 + f) * PROFILE_STEP_PX;
+            edge_pts.push(p + normal * s);
+        }
+        if edge_pts.len() < EDGE_SAMPLES / 2 {
+            return None;
+        }
+        // Total least squares line: point and direction.
+        let m = edge_pts.iter().sum::<Vector2<f64>>() / edge_pts.len() as f64;
+        let mut cov = Matrix2::zeros();
+        for q in &edge_pts {
+            let d = q - m;
+            cov += d * d.transpose();
+        }
+        let eig = cov.symmetric_eigen();
+        let k = if eig.eigenvalues[0] > eig.eigenvalues[1] {
+            0
+        } else {
+            1
+        };
+        let line_dir = Vector2::new(eig.eigenvectors[(0, k)], eig.eigenvectors[(1, k)]);
+        lines.push((m, line_dir));
+    }
+    let mut out = [[0.0; 2]; 4];
+    for i in 0..4 {
+        // Corner i joins edge i-1 (ending at it) and edge i (starting at it).
+        let (p1, d1) = lines[(i + 3) % 4];
+        let (p2, d2) = lines[i];
+        let den = d1.x * d2.y - d1.y * d2.x;
+        if den.abs() < 1e-6 {
+            return None;
+        }
+        let w = p2 - p1;
+        let s = (w.x * d2.y - w.y * d2.x) / den;
+        let c = p1 + d1 * s;
+        if (c - pts[i]).norm() > 2.0 {
+            return None; // refinement wandered: keep the detector's corners
+        }
+        out[i] = [c.x, c.y];
+    }
+    Some(out)
 }

@@ -77,6 +77,8 @@ fn regression_settings() -> DetectorConfig {
     DetectorConfig {
         decimate: 1,
         refine_edges: false,
+        // The C library's own output, without our refinement.
+        subpixel: false,
         ..DetectorConfig::default()
     }
 }

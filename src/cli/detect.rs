@@ -40,6 +40,9 @@ pub struct Detect {
     /// Turn edge refinement off.
     #[arg(long)]
     no_refine_edges: bool,
+    /// Apply our sub-pixel corner refinement after the backend (experimental).
+    #[arg(long)]
+    subpixel: bool,
     /// Sharpening of the decoded bits.
     #[arg(long, default_value_t = 0.25)]
     sharpening: f64,
@@ -66,6 +69,7 @@ impl Detect {
             decimate: self.decimate,
             refine_edges: !self.no_refine_edges,
             sharpening: self.sharpening,
+            subpixel: self.subpixel,
             ..DetectorConfig::default()
         };
         let mut detector: Box<dyn TagDetector> = match self.backend {
