@@ -64,6 +64,59 @@ pub struct StereoTag {
     pub epipolar_error_px: f64,
     /// Mean triangulated edge length, metres.
     pub size_m: f64,
+    /// Rotation `left_from_tag` (row-major), fitted to the four corners: tag x to the right,
+    /// y down, z into the wall (the AprilTag library's tag frame).
+    pub rotation_left_from_tag: [[f64; 3]; 3],
+    /// Outward normal of the tag (towards the camera side), in the left camera frame.
+    pub normal_in_left: [f64; 3],
+    /// RMS distance of the triangulated corners from the fitted square, metres.
+    pub fit_rms_m: f64,
+}
+
+/// A square fitted to four triangulated corners.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SquareFit {
+    /// `left_from_tag` rotation.
+    pub rotation: Matrix3<f64>,
+    /// Outward normal (−z of the tag frame).
+    pub normal: Vector3<f64>,
+    /// RMS corner residual, metres.
+    pub rms_m: f64,
+}
+
+/// Fits a square of edge `size_m` (corners in the C library's order: tag frame (-1, 1), (1, 1),
+/// (1, -1), (-1, -1) scaled by half the size, y down) to four points by the Kabsch method.
+/// With both cameras' rays the fit has no planar ambiguity, unlike single-image PnP.
+pub fn fit_square(corners: &[Vector3<f64>; 4], size_m: f64) -> SquareFit {
+    let h = 0.5 * size_m;
+    let model = [(-h, h), (h, h), (h, -h), (-h, -h)].map(|(x, y)| Vector3::new(x, y, 0.0));
+    let c = corners.iter().sum::<Vector3<f64>>() / 4.0;
+    let mut cov = Matrix3::zeros();
+    for (m, p) in model.iter().zip(corners) {
+        cov += (p - c) * m.transpose();
+    }
+    let svd = cov.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return SquareFit {
+            rotation: Matrix3::identity(),
+            normal: Vector3::new(0.0, 0.0, -1.0),
+            rms_m: f64::INFINITY,
+        };
+    };
+    let d = (u * v_t).determinant().signum();
+    let rotation = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
+    let rms_m = (model
+        .iter()
+        .zip(corners)
+        .map(|(m, p)| (rotation * m + c - p).norm_squared())
+        .sum::<f64>()
+        / 4.0)
+        .sqrt();
+    SquareFit {
+        rotation,
+        normal: -rotation.column(2).into_owned(),
+        rms_m,
+    }
 }
 
 /// Why a left detection found no partner.
@@ -219,6 +272,7 @@ pub fn triangulate_tags(
             }
         }
         let centre = corners.iter().sum::<Vector3<f64>>() / 4.0;
+        let pose = fit_square(&corners, known_size_m.unwrap_or(size_m));
         tags.push(StereoTag {
             id: l.id,
             family: l.family,
@@ -231,6 +285,11 @@ pub fn triangulate_tags(
             covariance_m2: std::array::from_fn(|i| std::array::from_fn(|j| cov[(i, j)])),
             epipolar_error_px: epi,
             size_m,
+            rotation_left_from_tag: std::array::from_fn(|i| {
+                std::array::from_fn(|j| pose.rotation[(i, j)])
+            }),
+            normal_in_left: [pose.normal.x, pose.normal.y, pose.normal.z],
+            fit_rms_m: pose.rms_m,
         });
     }
     (tags, rejected)

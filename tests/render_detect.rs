@@ -89,6 +89,20 @@ fn both_backends_find_rendered_tags_where_the_truth_says() {
                 "{}: 3D error {err:.4} m at {range:.2} m",
                 det.name()
             );
+            // The fitted square faces where the tag faces.
+            let yaw = w.world.tags[0].yaw_rad;
+            let normal_world = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
+            let normal_left = pair.world_from_left.rotation.inverse() * normal_world;
+            let angle = Vector3::from(tags[0].normal_in_left)
+                .angle(&normal_left)
+                .to_degrees();
+            assert!(
+                angle < 5.0,
+                "{}: normal off by {angle:.1} deg at pose {i}",
+                det.name()
+            );
+            // A wrong corner order would leave residuals of the tag size (0.16 m).
+            assert!(tags[0].fit_rms_m < 0.02, "{}", tags[0].fit_rms_m);
         }
     }
     assert!(seen >= 6, "tag 0 in view in {seen} poses");
