@@ -305,3 +305,38 @@ fn stereo_detect_checks_the_rig_against_the_images() {
     assert_eq!(code, 2);
     assert!(err.contains("exactly two images"), "{err}");
 }
+
+#[test]
+fn render_pose_must_be_three_finite_numbers_and_sequences_render() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::sample("office/world.yaml");
+    let rig = common::root().join("calibration/rigs/default.yaml");
+    let out = tmp.path().join("pair");
+    let base = [
+        "render",
+        "--world",
+        world.to_str().unwrap(),
+        "--rig",
+        rig.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    for bad in ["1,2", "1,2,x", "1,2,inf"] {
+        let (code, err) = stereotag(&[&base[..], &["--pose", bad]].concat());
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(err.contains("--pose"), "{err}");
+        assert!(!out.exists());
+    }
+    let poses = tmp.path().join("poses.csv");
+    std::fs::write(
+        &poses,
+        "t_s,x_m,y_m,theta_rad\n0,1.0,6.3,2.35\n1,1.2,6.0,2.2\n",
+    )
+    .unwrap();
+    let (code, err) = stereotag(&[&base[..], &["-q", "--poses", poses.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{err}");
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["frames"].as_array().unwrap().len(), 2);
+    assert!(out.join("left/000001.png").exists() && out.join("right/000001.png").exists());
+}

@@ -18,7 +18,7 @@ pub use rig::{
     load_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig, Camchain,
     KalibrCamera,
 };
-pub use run::{load_run, read_uci_sonar_ring, save_run};
+pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
 pub use world::{load_world, LoadedWorld, WorldFile};
 
 use std::path::{Path, PathBuf};

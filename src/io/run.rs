@@ -75,7 +75,8 @@ fn check_time(path: &Path, line: u64, t: f64, last: &mut f64) -> Result<(), IoEr
     Ok(())
 }
 
-fn read_poses(path: &Path) -> Result<Vec<StampedPose>, IoError> {
+/// Reads a pose CSV (`t_s,x_m,y_m,theta_rad`, time-ordered), as odometry.csv and ground_truth.csv.
+pub fn read_poses(path: &Path) -> Result<Vec<StampedPose>, IoError> {
     let text = read_text(path)?;
     let mut last = f64::NEG_INFINITY;
     csv_rows(path, &text, POSE_HEADER)?
