@@ -14,6 +14,7 @@
 
 use crate::camera::{Camera, StereoRig};
 use crate::geometry::Pose2;
+use crate::tags::TagFamily;
 use crate::world::{Tag, World};
 use image::GrayImage;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
@@ -124,64 +125,19 @@ struct TagPaint {
 const QUIET_ZONE_CELLS: i64 = 2;
 
 fn tag_paint(tag: &Tag) -> Result<TagPaint, RenderError> {
-    use kornia_apriltag::family::TagFamily as KFamily;
-    let family = match tag.family.as_str() {
-        "tag36h11" => KFamily::tag36_h11(),
-        "tag25h9" => KFamily::tag25_h9(),
-        "tag16h5" => KFamily::tag16_h5(),
-        "tagStandard41h12" => KFamily::tagstandard41_h12(),
-        _ => {
-            return Err(RenderError::UnknownFamily {
-                id: tag.id,
-                family: tag.family.clone(),
-            })
-        }
-    }
-    .map_err(|_| RenderError::UnknownFamily {
+    let family = TagFamily::from_name(&tag.family).ok_or_else(|| RenderError::UnknownFamily {
         id: tag.id,
         family: tag.family.clone(),
     })?;
-    let code = *family
-        .code_data
-        .get(tag.id as usize)
-        .ok_or(RenderError::IdOutOfRange {
+    let image = family
+        .code_image(tag.id)
+        .ok_or_else(|| RenderError::IdOutOfRange {
             id: tag.id,
             family: tag.family.clone(),
-            count: family.code_data.len(),
+            count: family.code_count(),
         })?;
-    // The family's own image (as the C library's `apriltag_to_image`): total_width cells, the
-    // black square of width_at_border cells in the middle, data bits white where set.
-    let tw = family.total_width as i64;
-    let border = (tw - family.width_at_border as i64) / 2;
-    let mut img = vec![true; (tw * tw) as usize];
-    for y in 0..tw {
-        for x in 0..tw {
-            let inside = |v: i64| v >= border && v < tw - border;
-            if inside(x) && inside(y) {
-                img[(y * tw + x) as usize] = false;
-            }
-        }
-    }
-    if family.reversed_border {
-        // Reversed-border families (tagStandard41h12): the outer ring is black, a white ring inside.
-        for y in 0..tw {
-            for x in 0..tw {
-                let ring = x == 0 || y == 0 || x == tw - 1 || y == tw - 1;
-                img[(y * tw + x) as usize] = !ring;
-            }
-        }
-    }
-    for i in 0..family.nbits {
-        if code & (1usize << (family.nbits - i - 1)) != 0 {
-            let (x, y) = (
-                family.bit_x[i] as i64 + border,
-                family.bit_y[i] as i64 + border,
-            );
-            if (0..tw).contains(&x) && (0..tw).contains(&y) {
-                img[(y * tw + x) as usize] = true;
-            }
-        }
-    }
+    let tw = image.total_cells as i64;
+    let img = &image.white;
     // Add the quiet zone.
     let total = tw + 2 * QUIET_ZONE_CELLS;
     let mut white = vec![true; (total * total) as usize];
@@ -197,7 +153,7 @@ fn tag_paint(tag: &Tag) -> Result<TagPaint, RenderError> {
         centre: Vector3::from(tag.position_m),
         normal,
         right: Vector3::new(-s, c, 0.0),
-        cell_m: tag.size_m / family.width_at_border as f64,
+        cell_m: tag.size_m / image.black_square_cells as f64,
         total_cells: total,
         white,
     })

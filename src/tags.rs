@@ -79,6 +79,78 @@ impl TagFamily {
     }
 }
 
+/// A tag's printed pattern as the AprilTag library draws it (`apriltag_to_image`): a square of
+/// cells, row-major from the top-left, `true` where white.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TagImage {
+    /// Cells across the whole pattern, the library's 1-cell white border included.
+    pub total_cells: usize,
+    /// Cells across the black square whose corners are the tag's corners.
+    pub black_square_cells: usize,
+    /// Row-major, `total_cells²` entries.
+    pub white: Vec<bool>,
+}
+
+impl TagFamily {
+    /// The family's code tables (built once per process: kornia builds a decoding table with them).
+    fn tables(&self) -> Option<&'static kornia_apriltag::family::TagFamily> {
+        use kornia_apriltag::family::TagFamily as K;
+        use std::sync::OnceLock;
+        static T36: OnceLock<Option<K>> = OnceLock::new();
+        static T25: OnceLock<Option<K>> = OnceLock::new();
+        static T16: OnceLock<Option<K>> = OnceLock::new();
+        static T41: OnceLock<Option<K>> = OnceLock::new();
+        let (cell, make): (&OnceLock<Option<K>>, fn() -> Option<K>) = match self {
+            TagFamily::Tag36h11 => (&T36, || K::tag36_h11().ok()),
+            TagFamily::Tag25h9 => (&T25, || K::tag25_h9().ok()),
+            TagFamily::Tag16h5 => (&T16, || K::tag16_h5().ok()),
+            TagFamily::TagStandard41h12 => (&T41, || K::tagstandard41_h12().ok()),
+        };
+        cell.get_or_init(make).as_ref()
+    }
+
+    /// Number of ids in the family.
+    pub fn code_count(&self) -> usize {
+        self.tables().map_or(0, |f| f.code_data.len())
+    }
+
+    /// The printed pattern of tag `id`, from the family's true code bits; `None` past the last id.
+    pub fn code_image(&self, id: u32) -> Option<TagImage> {
+        let family = self.tables()?;
+        let code = *family.code_data.get(id as usize)?;
+        let tw = family.total_width as i64;
+        let border = (tw - family.width_at_border as i64) / 2;
+        let inside = |v: i64| v >= border && v < tw - border;
+        let mut white: Vec<bool> = (0..tw * tw)
+            .map(|i| {
+                let (x, y) = (i % tw, i / tw);
+                if family.reversed_border {
+                    // Reversed-border families: the outer ring is black, white inside it.
+                    !(x == 0 || y == 0 || x == tw - 1 || y == tw - 1)
+                } else {
+                    !(inside(x) && inside(y))
+                }
+            })
+            .collect();
+        for i in 0..family.nbits {
+            if code & (1usize << (family.nbits - i - 1)) != 0 {
+                let (x, y) = (
+                    family.bit_x[i] as i64 + border,
+                    family.bit_y[i] as i64 + border,
+                );
+                if (0..tw).contains(&x) && (0..tw).contains(&y) {
+                    white[(y * tw + x) as usize] = true;
+                }
+            }
+        }
+        Some(TagImage {
+            total_cells: tw as usize,
+            black_square_cells: family.width_at_border,
+            white,
+        })
+    }
+}
+
 /// Detector settings shared by both backends.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetectorConfig {
