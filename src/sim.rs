@@ -431,7 +431,8 @@ pub fn simulate(
     let mut since_travel = 0.0;
     let mut since_turn = 0.0;
     let mut mode = Mode::Straight { target: None };
-    let mut boundary_done = false;
+    // Set when the first boundary loop ends: exploration goes on by targets.
+    let mut pick_target = false;
     let mut targets: Vec<Point2<f64>> = Vec::new();
     let mut failed: Vec<Point2<f64>> = Vec::new();
     let mut target_started = 0.0;
@@ -471,14 +472,16 @@ pub fn simulate(
 
     while t < e.duration_s {
         // Choose the next target when there is none to pursue.
-        let needs_target = match &mode {
-            Mode::Straight { target: Some(tg) } => {
-                (odom.position() - tg).norm() < 0.3 || t - target_started > e.target_timeout_s
-            }
-            Mode::Follow(f) => f.target.is_some() && t - target_started > e.target_timeout_s,
-            _ => false,
-        };
+        let needs_target = pick_target
+            || match &mode {
+                Mode::Straight { target: Some(tg) } => {
+                    (odom.position() - tg).norm() < 0.3 || t - target_started > e.target_timeout_s
+                }
+                Mode::Follow(f) => f.target.is_some() && t - target_started > e.target_timeout_s,
+                _ => false,
+            };
         if needs_target {
+            pick_target = false;
             if let Mode::Straight { target: Some(tg) }
             | Mode::Follow(FollowState {
                 target: Some(tg), ..
@@ -519,19 +522,12 @@ pub fn simulate(
 
         let (v, w, next_mode) = control(world, truth, odom, &mode, e);
         if let Some(m) = next_mode {
-            if let (Mode::Follow(f), Mode::Straight { target: None }) = (&mode, &m) {
-                // The first boundary loop closed (or was abandoned): start targeted exploration.
-                let _ = f;
-                boundary_done = true;
-            }
+            // The first boundary loop closed (or was abandoned): choose a target next step.
+            pick_target = matches!(
+                (&mode, &m),
+                (Mode::Follow(_), Mode::Straight { target: None })
+            );
             mode = m;
-        }
-        if boundary_done && matches!(mode, Mode::Straight { target: None }) {
-            // Force a target choice on the next step.
-            mode = Mode::Straight {
-                target: Some(odom.position()),
-            };
-            target_started = f64::NEG_INFINITY;
         }
 
         // True wheel travel, then what the encoders say.
@@ -848,26 +844,9 @@ fn choose_target(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Segment;
-    use crate::world::Wall;
 
     fn corridor() -> World {
-        let p = |x, y| Point2::new(x, y);
-        let pts = [
-            p(0.0, 0.0),
-            p(6.0, 0.0),
-            p(6.0, 3.0),
-            p(0.0, 3.0),
-            p(0.0, 0.0),
-        ];
-        let walls = pts
-            .windows(2)
-            .map(|w| Wall {
-                segment: Segment::new(w[0], w[1]),
-                height_m: 2.5,
-            })
-            .collect();
-        World::new(walls, vec![], vec![], vec![], Pose2::new(2.0, 1.5, 0.0))
+        crate::world::rectangle_world(6.0, 3.0, Pose2::new(2.0, 1.5, 0.0))
     }
 
     #[test]

@@ -100,7 +100,8 @@ impl TagFamily {
         static T25: OnceLock<Option<K>> = OnceLock::new();
         static T16: OnceLock<Option<K>> = OnceLock::new();
         static T41: OnceLock<Option<K>> = OnceLock::new();
-        let (cell, make): (&OnceLock<Option<K>>, fn() -> Option<K>) = match self {
+        type Cached = OnceLock<Option<K>>;
+        let (cell, make): (&Cached, fn() -> Option<K>) = match self {
             TagFamily::Tag36h11 => (&T36, || K::tag36_h11().ok()),
             TagFamily::Tag25h9 => (&T25, || K::tag25_h9().ok()),
             TagFamily::Tag16h5 => (&T16, || K::tag16_h5().ok()),
@@ -326,7 +327,7 @@ impl TagDetector for KorniaDetector {
             .map_err(|e| TagError::Kornia(e.to_string()));
         dec.clear();
         let families = &self.config.families;
-        let out = found?
+        let mut out = found?
             .into_iter()
             .filter_map(|d| {
                 let family = families.iter().find(|f| f.kornia() == d.tag_family_kind)?;
@@ -343,7 +344,6 @@ impl TagDetector for KorniaDetector {
                 })
             })
             .collect::<Vec<_>>();
-        let mut out = out;
         if self.config.subpixel {
             refine_all(image, &mut out);
         }
@@ -396,7 +396,7 @@ impl TagDetector for CDetector {
         // One family per detector is the common case; with several, the C library does not say
         // which family a detection came from in this binding, so report the first.
         let family = self.families[0].name();
-        let out = self
+        let mut out = self
             .detector
             .detect(&img)
             .into_iter()
@@ -408,7 +408,6 @@ impl TagDetector for CDetector {
                 centre_px: to_centre_convention(d.center()),
             })
             .collect::<Vec<_>>();
-        let mut out = out;
         if self.subpixel {
             refine_all(image, &mut out);
         }

@@ -515,27 +515,33 @@ fn douglas_peucker(pts: &[Point2<f64>], tol: f64) -> Vec<Point2<f64>> {
     }
 }
 
+/// A closed rectangular room from (0, 0) to (`width_m`, `height_m`), for tests.
+#[cfg(test)]
+pub(crate) fn rectangle_world(width_m: f64, height_m: f64, start: Pose2) -> World {
+    let p = |x, y| Point2::new(x, y);
+    let pts = [
+        p(0.0, 0.0),
+        p(width_m, 0.0),
+        p(width_m, height_m),
+        p(0.0, height_m),
+        p(0.0, 0.0),
+    ];
+    let walls = pts
+        .windows(2)
+        .map(|w| Wall {
+            segment: Segment::new(w[0], w[1]),
+            height_m: DEFAULT_WALL_HEIGHT_M,
+        })
+        .collect();
+    World::new(walls, vec![], vec![], vec![], start)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn square_room() -> World {
-        let p = |x, y| Point2::new(x, y);
-        let pts = [
-            p(0.0, 0.0),
-            p(4.0, 0.0),
-            p(4.0, 3.0),
-            p(0.0, 3.0),
-            p(0.0, 0.0),
-        ];
-        let walls = pts
-            .windows(2)
-            .map(|w| Wall {
-                segment: Segment::new(w[0], w[1]),
-                height_m: 2.5,
-            })
-            .collect();
-        World::new(walls, vec![], vec![], vec![], Pose2::new(1.0, 1.0, 0.0))
+        rectangle_world(4.0, 3.0, Pose2::new(1.0, 1.0, 0.0))
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The repository root (tests run with the package root as working directory).
 pub fn root() -> PathBuf {
@@ -16,8 +16,4 @@ pub fn shared(rel: &str) -> Option<PathBuf> {
 
 pub fn sample(rel: &str) -> PathBuf {
     root().join("samples").join(rel)
-}
-
-pub fn exists(p: &Path) -> bool {
-    p.exists()
 }
