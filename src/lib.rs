@@ -9,11 +9,13 @@
 //! Data flows one way: [`world`] → [`sim`] → [`run`] dataset → [`grid`] → [`hough`] → [`score`].
 
 pub mod camera;
+pub mod fuse;
 pub mod geometry;
 pub mod grid;
 pub mod hough;
 pub mod io;
 pub mod pipeline;
+pub mod plan;
 pub mod render;
 pub mod run;
 pub mod score;
@@ -21,4 +23,6 @@ pub mod sim;
 pub mod sonar;
 pub mod stereo;
 pub mod tags;
+#[cfg(feature = "rerun")]
+pub mod viz;
 pub mod world;

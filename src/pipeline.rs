@@ -1,14 +1,22 @@
-//! The sonar half end to end: a run's readings → counting and log-odds grids → Hough features →
-//! scores against the world when it is known. Takes and returns values; [`crate::io`] does files.
+//! The stages end to end. The sonar half: a run's readings → counting and log-odds grids → Hough
+//! features → scores against the world when it is known. The survey: stereo pairs → tag sightings
+//! → fusion with odometry and corners → corrected trajectory and map → scores. Takes and returns values; [`crate::io`] does files.
 
+use crate::camera::{Rectification, StereoRig};
+use crate::fuse::{
+    associate, ate_m, run_offline, run_online, FuseConfig, Landmark, OfflineResult, OnlineResult,
+    TagSighting,
+};
 use crate::grid::{
     CountingGrid, GridError, LogOddsGrid, MappingConfig, OccupancyGrid, OccupancyMap,
 };
 use crate::hough::{
     classify_features, features_offline, features_online, reject_mid_wall, Accumulator, Feature,
 };
-use crate::run::{PoseSource, RunDataset};
+use crate::run::{PoseSource, RunDataset, StampedPose};
 use crate::score::{score_features, score_map, FeatureScore, MapScore};
+use crate::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
+use crate::tags::{TagDetector, TagError};
 use crate::world::World;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -63,6 +71,16 @@ pub fn map_run(
     config: &MappingConfig,
 ) -> Result<SonarMap, PipelineError> {
     let trajectory = run.trajectory(poses).ok_or(PipelineError::NoGroundTruth)?;
+    map_trajectory(run, trajectory, config)
+}
+
+/// Builds the grids and features of a run with the readings placed along `trajectory` (odometry,
+/// ground truth or a corrected estimate).
+pub fn map_trajectory(
+    run: &RunDataset,
+    trajectory: &[StampedPose],
+    config: &MappingConfig,
+) -> Result<SonarMap, PipelineError> {
     let layout = &run.meta.robot.sonar;
     let mut timings_s = BTreeMap::new();
     let start = Instant::now();
@@ -106,6 +124,205 @@ pub fn map_run(
         readings: readings.len(),
         timings_s,
     })
+}
+
+/// Detects and triangulates the tags of one stereo pair and moves them into the robot frame.
+/// `known_size_m` gives a tag's planned edge length (for the size check) when it is known.
+#[allow(clippy::too_many_arguments)]
+pub fn sightings_from_pair(
+    detector: &mut dyn TagDetector,
+    rig: &StereoRig,
+    rect: &Rectification,
+    left: &image::GrayImage,
+    right: &image::GrayImage,
+    (t_s, frame): (f64, usize),
+    known_size_m: &dyn Fn(&str, u32) -> Option<f64>,
+    config: &StereoConfig,
+) -> Result<(Vec<TagSighting>, Vec<Rejection>), TagError> {
+    let (in_left, in_right) = detect_pair(detector, left, right)?;
+    let (tags, mut rejected) = triangulate_tags(rig, rect, &in_left, &in_right, None, config);
+    let mut sightings = Vec::new();
+    for tag in tags {
+        if let Some(known) = known_size_m(tag.family, tag.id) {
+            if ((tag.size_m - known) / known).abs() > config.max_size_error {
+                rejected.push(Rejection {
+                    id: tag.id,
+                    reason: format!(
+                        "triangulated size {:.3} m, expected {known:.3} m",
+                        tag.size_m
+                    ),
+                });
+                continue;
+            }
+        }
+        sightings.push(TagSighting::from_stereo(
+            t_s,
+            frame,
+            &tag,
+            &rig.robot_from_left,
+        ));
+    }
+    Ok((sightings, rejected))
+}
+
+/// Everything a survey produces.
+#[derive(Debug, Clone)]
+pub struct Survey {
+    /// The grid and features with odometry poses (what the robot had while it ran).
+    pub raw: SonarMap,
+    /// The online filter.
+    pub online: OnlineResult,
+    /// The offline pose graph.
+    pub offline: OfflineResult,
+    /// The grid and features rebuilt from the offline trajectory.
+    pub corrected: SonarMap,
+    /// The surveyed landmarks (offline positions, matched with the corrected map's corners).
+    pub landmarks: Vec<Landmark>,
+    /// Seconds per stage.
+    pub timings_s: BTreeMap<String, f64>,
+}
+
+/// Runs the survey over a run and its tag sightings: raw map, online filter, offline pass, and
+/// the map rebuilt from the corrected poses.
+pub fn survey(
+    run: &RunDataset,
+    sightings: &[TagSighting],
+    mapping: &MappingConfig,
+    fuse: &FuseConfig,
+) -> Result<Survey, PipelineError> {
+    let mut timings_s = BTreeMap::new();
+    let t = Instant::now();
+    let raw = map_trajectory(run, &run.odometry, mapping)?;
+    timings_s.insert("map_raw".into(), t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let online = run_online(&run.odometry, sightings, &raw.features_online, fuse);
+    timings_s.insert("fuse_online".into(), t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let offline = run_offline(&run.odometry, sightings, &online, fuse);
+    timings_s.insert("fuse_offline".into(), t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let corrected = map_trajectory(run, &offline.trajectory, mapping)?;
+    timings_s.insert("map_corrected".into(), t.elapsed().as_secs_f64());
+    let landmarks = offline
+        .landmarks
+        .iter()
+        .map(|l| {
+            let mut l = l.clone();
+            let xy = nalgebra::Vector2::new(l.position_m[0], l.position_m[1]);
+            let c = &l.covariance_m2;
+            let cov = nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]);
+            l.matched_corner = associate(&xy, &cov, &corrected.features_offline, fuse);
+            l
+        })
+        .collect();
+    Ok(Survey {
+        raw,
+        online,
+        offline,
+        corrected,
+        landmarks,
+        timings_s,
+    })
+}
+
+/// Scores a survey against the world and the run's ground truth: the sonar scores of the raw map,
+/// the corrected map and the map built with ground-truth poses; ATE of each trajectory; the
+/// landmark position errors.
+pub fn score_survey(
+    survey: &Survey,
+    run: &RunDataset,
+    world: &World,
+    mapping: &MappingConfig,
+) -> Result<BTreeMap<String, f64>, PipelineError> {
+    let mut m = score_sonar_map(&survey.raw, run, world).metrics();
+    let corrected = score_map(&survey.corrected.counting, world);
+    m.insert(
+        "map_corrected.occupied_precision".into(),
+        corrected.occupied_precision,
+    );
+    m.insert(
+        "map_corrected.occupied_recall".into(),
+        corrected.occupied_recall,
+    );
+    if let Some(truth) = &run.ground_truth {
+        let gt_map = map_trajectory(run, truth, mapping)?;
+        let gt = score_map(&gt_map.counting, world);
+        m.insert(
+            "map_ground_truth.occupied_precision".into(),
+            gt.occupied_precision,
+        );
+        m.insert(
+            "map_ground_truth.occupied_recall".into(),
+            gt.occupied_recall,
+        );
+        for (key, estimate) in [
+            ("ate_m.odometry", &run.odometry),
+            ("ate_m.online", &survey.online.trajectory),
+            ("ate_m.offline", &survey.offline.trajectory),
+        ] {
+            if let Some(ate) = ate_m(estimate, truth) {
+                m.insert(key.into(), ate);
+            }
+        }
+    }
+    let mut errors: Vec<f64> = survey
+        .landmarks
+        .iter()
+        .filter_map(|l| {
+            let tag = world
+                .tags
+                .iter()
+                .find(|t| t.id == l.id && t.family == l.family)?;
+            let d = nalgebra::Vector3::from(l.position_m) - nalgebra::Vector3::from(tag.position_m);
+            Some(d.norm())
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    if !errors.is_empty() {
+        m.insert("landmarks.median_error_m".into(), errors[errors.len() / 2]);
+        if errors.len() % 2 == 0 {
+            let n = errors.len();
+            m.insert(
+                "landmarks.median_error_m".into(),
+                0.5 * (errors[n / 2 - 1] + errors[n / 2]),
+            );
+        }
+        m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
+    }
+    m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
+    m.insert("landmarks.planned".into(), world.tags.len() as f64);
+    Ok(m)
+}
+
+/// Survey figures that need no ground truth.
+pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64> {
+    let mut m = BTreeMap::new();
+    m.insert("sightings.total".into(), sightings as f64);
+    m.insert(
+        "sightings.fused".into(),
+        survey.online.accepted.len() as f64,
+    );
+    m.insert(
+        "sightings.gated_out".into(),
+        survey.online.rejected.len() as f64,
+    );
+    m.insert("conflicts".into(), survey.online.conflicts.len() as f64);
+    m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
+    m.insert(
+        "landmarks.matched_corners".into(),
+        survey
+            .landmarks
+            .iter()
+            .filter(|l| l.matched_corner.is_some())
+            .count() as f64,
+    );
+    m.insert("offline.keyframes".into(), survey.offline.keyframes as f64);
+    m.insert("offline.factors".into(), survey.offline.factors as f64);
+    m.insert(
+        "offline.converged".into(),
+        f64::from(u8::from(survey.offline.converged)),
+    );
+    m
 }
 
 /// Scores a sonar map against the world. Sonar positions come from the ground truth when the run

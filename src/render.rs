@@ -558,20 +558,20 @@ pub fn visible_tags(
 /// `max_range_m`, at most once per `min_travel_m` of travel or `min_turn_rad` of turn.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CapturePolicy {
-    /// Farthest tag worth a picture (ours: 3 m).
+    /// Farthest tag worth a picture (ours: 6 m; a 16 cm tag is still 12 px wide there).
     pub max_range_m: f64,
-    /// Least travel between pictures (ours: 0.3 m).
+    /// Least travel between pictures (ours: 0.15 m).
     pub min_travel_m: f64,
-    /// Least turn between pictures (ours: 15 degrees).
+    /// Least turn between pictures (ours: 10 degrees).
     pub min_turn_rad: f64,
 }
 
 impl Default for CapturePolicy {
     fn default() -> Self {
         Self {
-            max_range_m: 3.0,
-            min_travel_m: 0.3,
-            min_turn_rad: 15f64.to_radians(),
+            max_range_m: 6.0,
+            min_travel_m: 0.15,
+            min_turn_rad: 10f64.to_radians(),
         }
     }
 }

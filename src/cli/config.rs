@@ -3,7 +3,7 @@ use super::UsageError;
 /// Arguments of `stereotag config`.
 #[derive(Debug, clap::Args)]
 pub struct Config {
-    /// Print the defaults of this kind of settings: mapping or simulation.
+    /// Print the defaults of this kind of settings: mapping, simulation, fuse or plan.
     #[arg(long = "default", value_name = "KIND")]
     kind: String,
 }
@@ -13,9 +13,11 @@ impl Config {
         let text = match self.kind.as_str() {
             "mapping" => serde_yaml_ng::to_string(&stereotag::grid::MappingConfig::default())?,
             "simulation" => serde_yaml_ng::to_string(&stereotag::sim::SimConfig::default())?,
+            "fuse" => serde_yaml_ng::to_string(&stereotag::fuse::FuseConfig::default())?,
+            "plan" => serde_yaml_ng::to_string(&stereotag::plan::PlanConfig::default())?,
             other => {
                 return Err(UsageError(format!(
-                    "unknown settings kind `{other}`: expected mapping or simulation"
+                    "unknown settings kind `{other}`: expected mapping, simulation, fuse or plan"
                 ))
                 .into())
             }

@@ -1,7 +1,8 @@
-use super::map::{map_and_score, print_summary, write_map_outputs};
+use super::detect::Backend;
 use super::simulate::simulate_world;
+use super::survey::{survey_into, DetectOptions, SurveyJob};
 use std::path::{Path, PathBuf};
-use stereotag::run::PoseSource;
+use stereotag::io::OutputDir;
 
 /// Arguments of `stereotag demo`.
 #[derive(Debug, clap::Args)]
@@ -12,36 +13,75 @@ pub struct Demo {
     /// World to run (default: the bundled office).
     #[arg(long, default_value = "samples/office/world.yaml")]
     world: PathBuf,
+    /// Random seed of the simulation (default: the world file's).
+    #[arg(long)]
+    seed: Option<u64>,
     /// Replace the output directory if it exists (the demo replaces its own default `out`).
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    rerun: super::RerunArgs,
 }
 
 impl Demo {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let force = self.force || self.out == Path::new("out");
-        if self.out.exists() && !force {
-            return Err(stereotag::io::IoError::OutputExists {
-                path: self.out.clone(),
-            }
-            .into());
-        }
-        std::fs::create_dir_all(&self.out)?;
-        let run_dir = self.out.join("run");
+        let dir = OutputDir::create(&self.out, force)?;
+        let run_dir = dir.path("run");
         let rig = Path::new("calibration/rigs/default.yaml");
-        let output = simulate_world(&self.world, &run_dir, Some(rig), true, quiet, |_| Ok(()))?;
-        let run = stereotag::io::load_run(&run_dir)?;
-        let mapping = run.meta.mapping.clone().unwrap_or_default();
-        for (poses, name) in [
-            (PoseSource::Odometry, "map"),
-            (PoseSource::GroundTruth, "map_ground_truth"),
-        ] {
-            let (map, metrics) = map_and_score(&run, poses, &mapping, Some(&self.world))?;
-            write_map_outputs(&self.out.join(name), true, &map, &metrics)?;
-            tracing::info!("{name} (poses from {poses:?}):");
-            print_summary(&map, &metrics);
-        }
-        tracing::info!("{}; outputs in {}", output.end_reason, self.out.display());
+        let sim = simulate_world(&self.world, &run_dir, Some(rig), false, quiet, |c| {
+            if let Some(s) = self.seed {
+                c.seed = s;
+            }
+            Ok(())
+        })?;
+        tracing::info!("{}; surveying", sim.end_reason);
+        let output = survey_into(
+            &SurveyJob {
+                run_dir: &run_dir,
+                out: &self.out,
+                world: Some(&self.world),
+                config: None,
+                detect: DetectOptions {
+                    backend: Backend::ApriltagC,
+                    families: &[],
+                    decimate: 1,
+                    tag_size_m: None,
+                    quiet,
+                },
+                force,
+                rerun: &self.rerun,
+            },
+            &dir,
+        )?;
+        dir.commit()?;
+        let get = |k: &str| output.metrics.get(k).copied().unwrap_or(f64::NAN);
+        println!(
+            "stereotag demo: {} -> {}",
+            self.world.display(),
+            self.out.display()
+        );
+        println!(
+            "  trajectory error (ATE): odometry {:.3} m -> online {:.3} m -> offline {:.3} m",
+            get("ate_m.odometry"),
+            get("ate_m.online"),
+            get("ate_m.offline")
+        );
+        println!(
+            "  map occupied precision/recall: raw {:.3}/{:.3} -> corrected {:.3}/{:.3} (ground-truth poses {:.3}/{:.3})",
+            get("map.occupied_precision"),
+            get("map.occupied_recall"),
+            get("map_corrected.occupied_precision"),
+            get("map_corrected.occupied_recall"),
+            get("map_ground_truth.occupied_precision"),
+            get("map_ground_truth.occupied_recall"),
+        );
+        println!(
+            "  {} landmarks, median position error {:.1} mm; see {}/landmarks.json, map_corrected.png, survey.rrd",
+            output.survey.landmarks.len(),
+            get("landmarks.median_error_m") * 1e3,
+            self.out.display()
+        );
         Ok(())
     }
 }

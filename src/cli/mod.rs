@@ -4,10 +4,13 @@
 mod config;
 mod demo;
 mod detect;
+mod localize;
 mod map;
+mod plan;
 mod render;
 mod rig;
 mod simulate;
+mod survey;
 
 use clap::{CommandFactory, Parser, Subcommand};
 use std::path::{Path, PathBuf};
@@ -55,6 +58,21 @@ enum Command {
     ///
     /// Example: stereotag rig calibration/rigs/default.yaml --out rig_export
     Rig(rig::Rig),
+    /// Survey a run: detect and triangulate the tags, fuse them with odometry and the sonar
+    /// corners online and offline, rebuild the map; writes landmarks, maps, trajectories, report
+    /// and a Rerun recording.
+    ///
+    /// Example: stereotag survey --run runs/office --out surveys/office
+    Survey(survey::SurveyArgs),
+    /// Track a new run against a saved survey's landmarks and report how the error grows
+    /// between sightings.
+    ///
+    /// Example: stereotag localize --survey out --run runs/office2 --out loc
+    Localize(localize::Localize),
+    /// Propose where tags should go from a sonar-only map's corners, with the predicted error.
+    ///
+    /// Example: stereotag plan --map maps/museum --out plan
+    Plan(plan::PlanArgs),
     /// Print a settings file with its defaults.
     ///
     /// Example: stereotag config --default mapping > mapping.yaml
@@ -78,6 +96,7 @@ fn is_input_error(err: &anyhow::Error) -> bool {
             || e.is::<UsageError>()
             || e.is::<stereotag::tags::TagError>()
             || e.is::<stereotag::render::RenderError>()
+            || is_viz_input_error(e)
     })
 }
 
@@ -107,6 +126,9 @@ pub fn main() -> i32 {
         Command::Demo(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
         Command::Map(c) => c.run(),
+        Command::Survey(c) => c.run(cli.quiet),
+        Command::Localize(c) => c.run(cli.quiet),
+        Command::Plan(c) => c.run(),
         Command::Detect(c) => c.run(),
         Command::Rig(c) => c.run(),
         Command::Render(c) => c.run(),
@@ -140,11 +162,10 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
         return indicatif::ProgressBar::hidden();
     }
     let bar = indicatif::ProgressBar::new(len);
-    let style = indicatif::ProgressStyle::with_template(
-        "{msg:>10} [{bar:40}] {pos}/{len} s simulated ({eta} left)",
-    )
-    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-    .progress_chars("=> ");
+    let style =
+        indicatif::ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} ({eta} left)")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> ");
     bar.set_style(style);
     bar.set_message(what.to_string());
     bar
@@ -165,4 +186,93 @@ pub(crate) fn relative_path(to: &Path, from_dir: &Path) -> PathBuf {
         out.push(c);
     }
     out
+}
+
+/// Where a command's Rerun recording goes.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RerunArgs {
+    /// Write the recording to this .rrd file (default: the output directory's survey.rrd).
+    #[arg(long, value_name = "FILE.rrd")]
+    save: Option<PathBuf>,
+    /// Stream the recording to a new Rerun viewer (the `rerun` executable on PATH).
+    #[arg(long)]
+    spawn: bool,
+    /// Stream the recording to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy.
+    #[arg(long, value_name = "URL")]
+    connect: Option<String>,
+    /// Record nothing.
+    #[arg(long, conflicts_with_all = ["save", "spawn", "connect"])]
+    no_rerun: bool,
+}
+
+#[cfg(feature = "rerun")]
+fn is_viz_input_error(e: &(dyn std::error::Error + 'static)) -> bool {
+    matches!(
+        e.downcast_ref::<stereotag::viz::VizError>(),
+        Some(stereotag::viz::VizError::Url { .. })
+    )
+}
+
+#[cfg(not(feature = "rerun"))]
+fn is_viz_input_error(_: &(dyn std::error::Error + 'static)) -> bool {
+    false
+}
+
+/// The open recording of a command (nothing when built without the `rerun` feature).
+#[cfg(feature = "rerun")]
+pub(crate) type Recorder = stereotag::viz::Recorder;
+#[cfg(not(feature = "rerun"))]
+pub(crate) type Recorder = ();
+
+/// Opens the recording the flags ask for; `default_file` is used unless `--save`, `--spawn` or
+/// `--connect` say otherwise. The file is written into the staging directory with the other outputs.
+#[cfg(feature = "rerun")]
+pub(crate) fn recorder(
+    args: &RerunArgs,
+    application: &'static str,
+    default_file: &Path,
+) -> anyhow::Result<Option<Recorder>> {
+    use stereotag::viz::Sink;
+    if args.no_rerun {
+        return Ok(None);
+    }
+    let mut sinks = Vec::new();
+    match &args.save {
+        Some(p) if !stereotag::viz::is_rrd(p) => {
+            return Err(
+                UsageError(format!("--save {}: expected a .rrd file name", p.display())).into(),
+            )
+        }
+        Some(p) => sinks.push(Sink::Save(p.clone())),
+        None if !args.spawn && args.connect.is_none() => {
+            sinks.push(Sink::Save(default_file.to_path_buf()))
+        }
+        None => {}
+    }
+    if args.spawn {
+        sinks.push(Sink::Spawn);
+    }
+    if let Some(url) = &args.connect {
+        sinks.push(Sink::Connect(url.clone()));
+    }
+    Ok(Some(stereotag::viz::Recorder::new(
+        application,
+        &sinks,
+        stereotag::viz::survey_blueprint(),
+    )?))
+}
+
+#[cfg(not(feature = "rerun"))]
+pub(crate) fn recorder(
+    args: &RerunArgs,
+    _application: &str,
+    _default_file: &Path,
+) -> anyhow::Result<Option<Recorder>> {
+    if args.save.is_some() || args.spawn || args.connect.is_some() {
+        return Err(UsageError(
+            "this stereotag was built without the `rerun` feature; rebuild with default features to record".into(),
+        )
+        .into());
+    }
+    Ok(None)
 }

@@ -76,7 +76,7 @@ pub(crate) fn simulate_world(
     let dir = OutputDir::create(out, force)?;
     let bar = progress(
         config.exploration.duration_s.ceil() as u64,
-        "simulate",
+        "simulate s",
         quiet,
     );
     let mut output = sim::simulate(&loaded.world, &config, |t| bar.set_position(t as u64))

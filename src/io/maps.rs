@@ -167,3 +167,126 @@ pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoErro
     }
     write_file(path, s.as_bytes())
 }
+
+/// Reads a ROS map as an occupancy map: occupancy `(255 − v) / 255` per pixel (or `v / 255` with
+/// `negate`), and the grey of unknown cells (205) as unknown.
+pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
+    let meta: RosMapYaml = parse_yaml(yaml_path, &read_text(yaml_path)?)?;
+    if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
+        return Err(IoError::content(
+            yaml_path,
+            "`resolution` must be a positive number of metres per pixel",
+        ));
+    }
+    if meta.origin.iter().any(|v| !v.is_finite()) || meta.origin[2] != 0.0 {
+        return Err(IoError::content(
+            yaml_path,
+            "`origin` must be finite with yaw 0 (rotated maps are not supported)",
+        ));
+    }
+    let image_path = yaml_path
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(&meta.image);
+    let img = image::open(&image_path)
+        .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
+        .to_luma8();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let mut occupancy = vec![None; w * h];
+    for (x, y, p) in img.enumerate_pixels() {
+        let v = p.0[0];
+        if v == ROS_UNKNOWN {
+            continue;
+        }
+        let occ = if meta.negate != 0 {
+            v as f64 / 255.0
+        } else {
+            (255.0 - v as f64) / 255.0
+        };
+        occupancy[(h - 1 - y as usize) * w + x as usize] = Some(occ);
+    }
+    Ok(OccupancyMap {
+        geometry: crate::grid::GridGeometry {
+            width: w,
+            height: h,
+            resolution_m: meta.resolution,
+            origin_m: [meta.origin[0], meta.origin[1]],
+        },
+        occupancy,
+        occupied_threshold: meta.occupied_thresh,
+        free_threshold: meta.free_thresh,
+    })
+}
+
+/// Reads `corners.csv` (`x_m,y_m,votes,kind`), naming the line of the first bad row.
+pub fn load_features_csv(path: &Path) -> Result<Vec<Feature>, IoError> {
+    let text = read_text(path)?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, header)) if header.trim() == "x_m,y_m,votes,kind" => {}
+        _ => {
+            return Err(IoError::line(
+                path,
+                1,
+                "expected the header `x_m,y_m,votes,kind`",
+            ))
+        }
+    }
+    let mut features = Vec::new();
+    for (i, line) in lines {
+        let line_no = i as u64 + 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let [x, y, votes, kind] = fields.as_slice() else {
+            return Err(IoError::line(
+                path,
+                line_no,
+                format!(
+                    "expected 4 fields (x_m,y_m,votes,kind), found {}",
+                    fields.len()
+                ),
+            ));
+        };
+        let number = |s: &str, what: &str| -> Result<f64, IoError> {
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    IoError::line(
+                        path,
+                        line_no,
+                        format!("{what}: `{s}` is not a finite number"),
+                    )
+                })
+        };
+        let kind = match *kind {
+            "corner" => crate::hough::FeatureKind::Corner,
+            "edge" => crate::hough::FeatureKind::Edge,
+            "unknown" => crate::hough::FeatureKind::Unknown,
+            other => {
+                return Err(IoError::line(
+                    path,
+                    line_no,
+                    format!("kind: `{other}`, expected corner, edge or unknown"),
+                ))
+            }
+        };
+        features.push(Feature {
+            x_m: number(x, "x_m")?,
+            y_m: number(y, "y_m")?,
+            votes: votes.parse().map_err(|_| {
+                IoError::line(
+                    path,
+                    line_no,
+                    format!("votes: `{votes}` is not a whole number"),
+                )
+            })?,
+            sightings: 1,
+            spread_deg: 0.0,
+            kind,
+        });
+    }
+    Ok(features)
+}

@@ -8,10 +8,12 @@ mod maps;
 mod output;
 mod rig;
 mod run;
+mod survey;
 mod world;
 
 pub use maps::{
-    load_ros_map, save_accumulator_png, save_features_csv, save_map_png, save_ros_map, RosMapYaml,
+    load_features_csv, load_ros_map, load_ros_occupancy, save_accumulator_png, save_features_csv,
+    save_map_png, save_ros_map, RosMapYaml,
 };
 pub use output::OutputDir;
 pub use rig::{
@@ -19,6 +21,10 @@ pub use rig::{
     KalibrCamera,
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
+pub use survey::{
+    load_landmarks, save_landmarks, save_trajectory_csv, save_wpilib_layout, CornerRecord,
+    LandmarkRecord, LandmarksFile, Trajectories,
+};
 pub use world::{load_world, LoadedWorld, WorldFile};
 
 use std::path::{Path, PathBuf};

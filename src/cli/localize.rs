@@ -1,0 +1,143 @@
+use super::detect::Backend;
+use super::survey::{detect_run, load_fuse_config, load_run_rig, world_of_run, DetectOptions};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use stereotag::fuse::{ate_m, error_growth, localize};
+use stereotag::io::{self, OutputDir};
+
+/// Arguments of `stereotag localize`.
+#[derive(Debug, clap::Args)]
+pub struct Localize {
+    /// A survey output directory (its landmarks.json is the map of tags).
+    #[arg(long)]
+    survey: PathBuf,
+    /// The new run to track.
+    #[arg(long)]
+    run: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// World file for the tag sizes (default: the one run.yaml names, if it exists).
+    #[arg(long)]
+    world: Option<PathBuf>,
+    /// Fusion settings (YAML, `stereotag config --default fuse`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Detector backend.
+    #[arg(long, value_enum, default_value = "apriltag-c")]
+    backend: Backend,
+    /// Decimation before quad detection.
+    #[arg(long, default_value_t = 1)]
+    decimate: u32,
+    /// Replace the output directory if it exists.
+    #[arg(long)]
+    force: bool,
+}
+
+impl Localize {
+    pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        let file = io::load_landmarks(&self.survey.join("landmarks.json"))?;
+        let landmarks: Vec<_> = file.landmarks.iter().map(|r| r.landmark()).collect();
+        let run = io::load_run(&self.run)?;
+        let config = load_fuse_config(self.config.as_deref())?;
+        let world_path = self.world.clone().or_else(|| world_of_run(&self.run));
+        let world = world_path
+            .as_deref()
+            .map(io::load_world)
+            .transpose()?
+            .map(|w| w.world);
+        let dir = OutputDir::create(&self.out, self.force)?;
+        let families: Vec<String> = {
+            let mut f: Vec<String> = landmarks.iter().map(|l| l.family.clone()).collect();
+            f.sort();
+            f.dedup();
+            f
+        };
+        let sightings = match load_run_rig(&self.run, &run)? {
+            Some(rig) => detect_run(
+                &DetectOptions {
+                    backend: self.backend,
+                    families: &families,
+                    decimate: self.decimate,
+                    tag_size_m: None,
+                    quiet,
+                },
+                &self.run,
+                &run,
+                &rig,
+                world.as_ref(),
+            )?,
+            None => Vec::new(),
+        };
+        let result = localize(&run.odometry, &sightings, &landmarks, &config);
+        let truth = run.ground_truth.as_deref();
+        let growth = error_growth(&result, truth);
+
+        let mut csv = String::from(
+            "t_s,odom_x_m,odom_y_m,odom_theta_rad,x_m,y_m,theta_rad,sigma_m,since_sighting_m,gt_x_m,gt_y_m,gt_theta_rad\n",
+        );
+        for (i, (o, p)) in run.odometry.iter().zip(&result.trajectory).enumerate() {
+            let gt = truth
+                .and_then(|t| stereotag::run::pose_at(t, o.t_s))
+                .map_or(",,".to_string(), |g| {
+                    format!("{:.5},{:.5},{:.6}", g.x, g.y, g.theta)
+                });
+            let _ = writeln!(
+                csv,
+                "{:.4},{:.5},{:.5},{:.6},{:.5},{:.5},{:.6},{:.5},{:.4},{gt}",
+                o.t_s,
+                o.pose.x,
+                o.pose.y,
+                o.pose.theta,
+                p.pose.x,
+                p.pose.y,
+                p.pose.theta,
+                result.sigma_m[i],
+                result.since_sighting_m[i],
+            );
+        }
+        std::fs::write(dir.path("localization.csv"), csv)?;
+        let mut metrics = serde_json::Map::new();
+        metrics.insert("sightings.fused".into(), result.accepted.len().into());
+        metrics.insert("sightings.gated_out".into(), result.rejected.len().into());
+        metrics.insert("sightings.unknown_tag".into(), result.unknown.len().into());
+        if let Some(t) = truth {
+            metrics.insert("ate_m.odometry".into(), ate_m(&run.odometry, t).into());
+            metrics.insert(
+                "ate_m.localized".into(),
+                ate_m(&result.trajectory, t).into(),
+            );
+        }
+        io::save_json(
+            &dir.path("report.json"),
+            &serde_json::json!({ "metrics": metrics, "error_growth": growth }),
+        )?;
+        dir.commit()?;
+        tracing::info!(
+            "{} sightings of {} surveyed tags fused ({} gated out, {} of unknown tags)",
+            result.accepted.len(),
+            landmarks.len(),
+            result.rejected.len(),
+            result.unknown.len()
+        );
+        tracing::info!("error against distance since the last sighting:");
+        for b in &growth {
+            tracing::info!(
+                "  {:>4.1}-{:<4.1} m: {:>6} samples, sigma {:.3} m{}",
+                b.from_m,
+                b.to_m,
+                b.samples,
+                b.mean_sigma_m,
+                b.rms_error_m
+                    .map_or(String::new(), |e| format!(", RMS error {e:.3} m"))
+            );
+        }
+        if let (Some(a), Some(b)) = (
+            metrics.get("ate_m.odometry"),
+            metrics.get("ate_m.localized"),
+        ) {
+            tracing::info!("ATE: odometry {a} m, localised {b} m");
+        }
+        Ok(())
+    }
+}

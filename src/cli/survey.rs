@@ -1,0 +1,465 @@
+use super::detect::Backend;
+use super::{progress, UsageError};
+use anyhow::Context;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use stereotag::camera::StereoRig;
+use stereotag::fuse::{FuseConfig, TagSighting};
+use stereotag::io::{self, LandmarkRecord, LandmarksFile, OutputDir, Trajectories};
+use stereotag::pipeline::{score_survey, sightings_from_pair, survey, survey_metrics, Survey};
+use stereotag::run::RunDataset;
+use stereotag::stereo::StereoConfig;
+use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
+use stereotag::world::World;
+
+/// Arguments of `stereotag survey`.
+#[derive(Debug, clap::Args)]
+pub struct SurveyArgs {
+    /// Run dataset directory.
+    #[arg(long)]
+    run: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// World file to score against and to give planned tag positions (default: the one run.yaml
+    /// names, if it exists).
+    #[arg(long)]
+    world: Option<PathBuf>,
+    /// Fusion settings (YAML, `stereotag config --default fuse`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Detector backend.
+    #[arg(long, value_enum, default_value = "apriltag-c")]
+    backend: Backend,
+    /// Tag families to look for (default: the world's, else tag36h11).
+    #[arg(long)]
+    family: Vec<String>,
+    /// Decimation before quad detection (1 = full resolution, the most accurate corners).
+    #[arg(long, default_value_t = 1)]
+    decimate: u32,
+    /// Edge length of the tags in metres when no world gives it (enables the size check).
+    #[arg(long)]
+    tag_size_m: Option<f64>,
+    /// Replace the output directory if it exists.
+    #[arg(long)]
+    force: bool,
+    #[command(flatten)]
+    pub rerun: super::RerunArgs,
+}
+
+/// What the survey command produced, for the demo's summary.
+pub(crate) struct SurveyOutput {
+    pub survey: Survey,
+    pub metrics: BTreeMap<String, f64>,
+}
+
+impl SurveyArgs {
+    pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        let world = self.world.clone().or_else(|| world_of_run(&self.run));
+        survey_run(&SurveyJob {
+            run_dir: &self.run,
+            out: &self.out,
+            world: world.as_deref(),
+            config: self.config.as_deref(),
+            detect: DetectOptions {
+                backend: self.backend,
+                families: &self.family,
+                decimate: self.decimate,
+                tag_size_m: self.tag_size_m,
+                quiet,
+            },
+            force: self.force,
+            rerun: &self.rerun,
+        })
+        .map(|_| ())
+    }
+}
+
+/// The world file a run names, if it exists.
+pub(crate) fn world_of_run(run_dir: &Path) -> Option<PathBuf> {
+    let text = std::fs::read_to_string(run_dir.join("run.yaml")).ok()?;
+    let meta: stereotag::run::RunMeta = serde_yaml_ng::from_str(&text).ok()?;
+    Some(run_dir.join(meta.world?)).filter(|p| p.exists())
+}
+
+/// How tags are detected in a run's stereo pairs.
+pub(crate) struct DetectOptions<'a> {
+    pub backend: Backend,
+    pub families: &'a [String],
+    pub decimate: u32,
+    pub tag_size_m: Option<f64>,
+    pub quiet: bool,
+}
+
+/// Everything `survey_run` needs.
+pub(crate) struct SurveyJob<'a> {
+    pub run_dir: &'a Path,
+    pub out: &'a Path,
+    pub world: Option<&'a Path>,
+    pub config: Option<&'a Path>,
+    pub detect: DetectOptions<'a>,
+    pub force: bool,
+    pub rerun: &'a super::RerunArgs,
+}
+
+/// Loads a run, detects and triangulates its tags, fuses, and writes the survey outputs.
+pub(crate) fn survey_run(job: &SurveyJob<'_>) -> anyhow::Result<SurveyOutput> {
+    // Refuse an existing output before the long work, not after.
+    let dir = OutputDir::create(job.out, job.force)?;
+    let output = survey_into(job, &dir)?;
+    dir.commit()?;
+    Ok(output)
+}
+
+/// [`survey_run`] writing into an output directory under construction (not committed here).
+pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Result<SurveyOutput> {
+    let started = std::time::Instant::now();
+    let run = io::load_run(job.run_dir)?;
+    let world = job.world.map(io::load_world).transpose()?.map(|w| w.world);
+    let fuse = load_fuse_config(job.config)?;
+    let mapping = run.meta.mapping.clone().unwrap_or_default();
+    let recorder = super::recorder(job.rerun, "stereotag survey", &dir.path("survey.rrd"))?;
+
+    let rig = load_run_rig(job.run_dir, &run)?;
+    let detect_start = std::time::Instant::now();
+    let sightings = match &rig {
+        Some(rig) => detect_run(&job.detect, job.run_dir, &run, rig, world.as_ref())?,
+        None => Vec::new(),
+    };
+    let detect_s = detect_start.elapsed().as_secs_f64();
+
+    let result = survey(&run, &sightings, &mapping, &fuse)?;
+    let mut metrics = survey_metrics(&result, sightings.len());
+    if let Some(w) = &world {
+        metrics.extend(score_survey(&result, &run, w, &mapping)?);
+    }
+    let mut timings = result.timings_s.clone();
+    timings.insert("detect".into(), detect_s);
+
+    #[cfg(feature = "rerun")]
+    if let Some(rec) = &recorder {
+        let t = std::time::Instant::now();
+        let images = |e: &stereotag::run::StereoEntry| {
+            let left = io::load_gray(&job.run_dir.join(&e.left)).ok()?;
+            let right = io::load_gray(&job.run_dir.join(&e.right)).ok()?;
+            Some((left, right))
+        };
+        stereotag::viz::log_survey(
+            rec,
+            &stereotag::viz::SurveyScene {
+                run: &run,
+                world: world.as_ref(),
+                survey: &result,
+                sightings: &sightings,
+                metrics: &metrics,
+                mapping: &mapping,
+                rig: rig.as_ref(),
+                images: &images,
+            },
+        )
+        .context("recording the survey")?;
+        timings.insert("record".into(), t.elapsed().as_secs_f64());
+    }
+    timings.insert("total".into(), started.elapsed().as_secs_f64());
+    write_outputs(dir, &run, world.as_ref(), &result, &metrics, &timings)?;
+    #[cfg(feature = "rerun")]
+    if let Some(rec) = recorder {
+        rec.finish().context("finishing the recording")?;
+    }
+    #[cfg(not(feature = "rerun"))]
+    let _ = recorder;
+    print_summary(&result, &metrics, world.as_ref());
+    Ok(SurveyOutput {
+        survey: result,
+        metrics,
+    })
+}
+
+/// Fusion settings from a YAML file, or the defaults.
+pub(crate) fn load_fuse_config(path: Option<&Path>) -> anyhow::Result<FuseConfig> {
+    Ok(match path {
+        Some(p) => io::parse_yaml(
+            p,
+            &std::fs::read_to_string(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?,
+        )?,
+        None => FuseConfig::default(),
+    })
+}
+
+/// The run's stereo rig with run.yaml's mounting, or `None` when the run has no pictures.
+pub(crate) fn load_run_rig(run_dir: &Path, run: &RunDataset) -> anyhow::Result<Option<StereoRig>> {
+    if run.stereo.is_empty() {
+        tracing::warn!(
+            "the run has no stereo pairs (stereo.csv is empty): sonar and odometry only"
+        );
+        return Ok(None);
+    }
+    let rig_name = run.meta.robot.rig.as_ref().ok_or_else(|| {
+        UsageError(format!(
+            "{}: the run has stereo pairs but run.yaml names no rig (robot.rig)",
+            run_dir.join("run.yaml").display()
+        ))
+    })?;
+    let mut rig = io::load_rig(&run_dir.join(rig_name))?;
+    if let Some(v) = run.meta.robot.robot_from_left {
+        rig.robot_from_left = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::new(v[0], v[1], v[2]),
+            nalgebra::UnitQuaternion::from_euler_angles(v[3], v[4], v[5]),
+        );
+    }
+    Ok(Some(rig))
+}
+
+/// Detects and triangulates the tags of every stereo pair, in parallel.
+pub(crate) fn detect_run(
+    job: &DetectOptions<'_>,
+    run_dir: &Path,
+    run: &RunDataset,
+    rig: &StereoRig,
+    world: Option<&World>,
+) -> anyhow::Result<Vec<TagSighting>> {
+    if job.decimate == 0 {
+        return Err(UsageError("--decimate must be at least 1".into()).into());
+    }
+    let rect = rig.rectify();
+    let mut names: Vec<String> = job.families.to_vec();
+    if names.is_empty() {
+        names = world
+            .map(|w| w.tags.iter().map(|t| t.family.clone()).collect())
+            .unwrap_or_default();
+        names.sort();
+        names.dedup();
+    }
+    if names.is_empty() {
+        names.push("tag36h11".into());
+    }
+    let families = names
+        .iter()
+        .map(|f| {
+            TagFamily::from_name(f).ok_or_else(|| {
+                UsageError(format!(
+                    "family {f}: expected tag36h11, tag25h9, tag16h5 or tagStandard41h12"
+                ))
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let config = DetectorConfig {
+        families,
+        decimate: job.decimate,
+        ..DetectorConfig::default()
+    };
+    let make = || -> Result<Box<dyn TagDetector>, stereotag::tags::TagError> {
+        Ok(match job.backend {
+            Backend::Kornia => Box::new(KorniaDetector::new(config.clone())?),
+            Backend::ApriltagC => Box::new(CDetector::new(config.clone())?),
+        })
+    };
+    make()?; // a bad configuration fails here, once
+    let known = |family: &str, id: u32| -> Option<f64> {
+        world
+            .and_then(|w| w.tags.iter().find(|t| t.id == id && t.family == family))
+            .map(|t| t.size_m)
+            .or(job.tag_size_m)
+    };
+    let stereo_config = StereoConfig::default();
+    let bar = progress(run.stereo.len() as u64, "detect", job.quiet);
+    let per_pair: Vec<Result<Vec<TagSighting>, anyhow::Error>> = run
+        .stereo
+        .par_iter()
+        .enumerate()
+        .map_init(make, |detector, (frame, entry)| {
+            let detector = detector.as_mut().map_err(|e| anyhow::anyhow!("{e}"))?;
+            let left_path = run_dir.join(&entry.left);
+            let right_path = run_dir.join(&entry.right);
+            let left = io::load_gray(&left_path)?;
+            let right = io::load_gray(&right_path)?;
+            for (img, cam, path) in [
+                (&left, &rig.left, &left_path),
+                (&right, &rig.right, &right_path),
+            ] {
+                if img.dimensions() != (cam.width, cam.height) {
+                    return Err(UsageError(format!(
+                        "{}: image is {}x{} but the rig says {}x{}",
+                        path.display(),
+                        img.width(),
+                        img.height(),
+                        cam.width,
+                        cam.height
+                    ))
+                    .into());
+                }
+            }
+            let (sightings, rejected) = sightings_from_pair(
+                detector.as_mut(),
+                rig,
+                &rect,
+                &left,
+                &right,
+                (entry.t_s, frame),
+                &known,
+                &stereo_config,
+            )?;
+            for r in rejected {
+                tracing::debug!(
+                    "pair {frame} (t = {:.1} s): tag {} rejected: {}",
+                    entry.t_s,
+                    r.id,
+                    r.reason
+                );
+            }
+            bar.inc(1);
+            Ok(sightings)
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut sightings = Vec::new();
+    for r in per_pair {
+        sightings.extend(r?);
+    }
+    tracing::info!(
+        "{} tag sightings in {} stereo pairs",
+        sightings.len(),
+        run.stereo.len()
+    );
+    Ok(sightings)
+}
+
+/// Writes every survey output into the staging directory.
+fn write_outputs(
+    dir: &OutputDir,
+    run: &RunDataset,
+    world: Option<&World>,
+    s: &Survey,
+    metrics: &BTreeMap<String, f64>,
+    timings: &BTreeMap<String, f64>,
+) -> anyhow::Result<()> {
+    io::save_ros_map(&dir.path(""), "map", &s.raw.counting)?;
+    io::save_map_png(&dir.path("map.png"), &s.raw.counting)?;
+    io::save_accumulator_png(&dir.path("hough.png"), &s.raw.accumulator)?;
+    io::save_features_csv(&dir.path("corners.csv"), &s.raw.features_offline)?;
+    io::save_ros_map(&dir.path(""), "map_corrected", &s.corrected.counting)?;
+    io::save_map_png(&dir.path("map_corrected.png"), &s.corrected.counting)?;
+    io::save_accumulator_png(&dir.path("hough_corrected.png"), &s.corrected.accumulator)?;
+    io::save_features_csv(
+        &dir.path("corners_corrected.csv"),
+        &s.corrected.features_offline,
+    )?;
+    let planned = |l: &stereotag::fuse::Landmark| {
+        world
+            .and_then(|w| w.tags.iter().find(|t| t.id == l.id && t.family == l.family))
+            .map(|t| t.position_m)
+    };
+    let mut landmarks = s.landmarks.clone();
+    landmarks.sort_by(|a, b| (&a.family, a.id).cmp(&(&b.family, b.id)));
+    let records = landmarks
+        .iter()
+        .map(|l| LandmarkRecord::new(l, planned(l)))
+        .collect();
+    io::save_landmarks(
+        &dir.path("landmarks.json"),
+        &LandmarksFile { landmarks: records },
+    )?;
+    io::save_wpilib_layout(&dir.path("layout.json"), &landmarks, 0.5)?;
+    io::save_trajectory_csv(
+        &dir.path("trajectory.csv"),
+        &Trajectories {
+            odometry: &run.odometry,
+            online: &s.online.trajectory,
+            offline: &s.offline.trajectory,
+            ground_truth: run.ground_truth.as_deref(),
+        },
+    )?;
+    let displacement: Vec<_> = landmarks
+        .iter()
+        .filter_map(|l| {
+            let p = planned(l)?;
+            let d = [
+                l.position_m[0] - p[0],
+                l.position_m[1] - p[1],
+                l.position_m[2] - p[2],
+            ];
+            Some(serde_json::json!({
+                "id": l.id, "family": l.family, "planned_m": p, "surveyed_m": l.position_m,
+                "displacement_m": d, "distance_m": (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+            }))
+        })
+        .collect();
+    let finite: BTreeMap<_, _> = metrics
+        .iter()
+        .map(|(k, v)| (k.clone(), v.is_finite().then_some(*v)))
+        .collect();
+    let report = serde_json::json!({
+        "metrics": finite,
+        "timings_s": timings,
+        "conflicts": s.online.conflicts,
+        "planned_vs_surveyed": displacement,
+    });
+    io::save_json(&dir.path("report.json"), &report)?;
+    Ok(())
+}
+
+/// Prints the landmarks, the planned-versus-surveyed table and the before/after figures.
+pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: Option<&World>) {
+    let get = |k: &str| metrics.get(k).copied();
+    tracing::info!(
+        "{} landmarks ({} matched with a Hough corner); {} sightings fused, {} gated out; offline graph: {} keyframes, {} factors",
+        s.landmarks.len(),
+        s.landmarks.iter().filter(|l| l.matched_corner.is_some()).count(),
+        s.online.accepted.len(),
+        s.online.rejected.len(),
+        s.offline.keyframes,
+        s.offline.factors,
+    );
+    for c in &s.online.conflicts {
+        tracing::warn!(
+            "tag {} ({}): {} — landmark at ({:.2}, {:.2}) m but {} sightings from t = {:.1} s put it at ({:.2}, {:.2}) m; not fused",
+            c.id, c.family, c.kind, c.landmark_m[0], c.landmark_m[1], c.sightings, c.first_t_s, c.seen_at_m[0], c.seen_at_m[1]
+        );
+    }
+    if let Some(w) = world {
+        for l in &s.landmarks {
+            if let Some(t) = w.tags.iter().find(|t| t.id == l.id && t.family == l.family) {
+                let d =
+                    nalgebra::Vector3::from(l.position_m) - nalgebra::Vector3::from(t.position_m);
+                tracing::info!(
+                    "  tag {:>3}: planned ({:.3}, {:.3}, {:.3}) surveyed ({:.3}, {:.3}, {:.3}) m, displacement {:.1} mm",
+                    l.id, t.position_m[0], t.position_m[1], t.position_m[2],
+                    l.position_m[0], l.position_m[1], l.position_m[2], d.norm() * 1e3
+                );
+            }
+        }
+    }
+    if let (Some(o), Some(on), Some(off)) = (
+        get("ate_m.odometry"),
+        get("ate_m.online"),
+        get("ate_m.offline"),
+    ) {
+        tracing::info!(
+            "trajectory ATE: odometry {:.3} m, online {:.3} m, offline {:.3} m",
+            o,
+            on,
+            off
+        );
+    }
+    if let (Some(p0), Some(r0), Some(p1), Some(r1)) = (
+        get("map.occupied_precision"),
+        get("map.occupied_recall"),
+        get("map_corrected.occupied_precision"),
+        get("map_corrected.occupied_recall"),
+    ) {
+        tracing::info!(
+            "map occupied precision/recall: raw {p0:.3}/{r0:.3}, corrected {p1:.3}/{r1:.3}{}",
+            match (
+                get("map_ground_truth.occupied_precision"),
+                get("map_ground_truth.occupied_recall")
+            ) {
+                (Some(p), Some(r)) => format!(", with ground-truth poses {p:.3}/{r:.3}"),
+                _ => String::new(),
+            }
+        );
+    }
+    if let Some(m) = get("landmarks.median_error_m") {
+        tracing::info!("landmark position error: median {:.1} mm", m * 1e3);
+    }
+}

@@ -1,0 +1,1491 @@
+//! Fusion: odometry, triangulated tags and Hough corners → landmarks and corrected trajectories.
+//!
+//! The planar robot pose `(x, y, θ)` and each tag landmark `(x, y, ψ)` (ψ: the direction the tag
+//! faces) form the state. A sighting measures the tag in the robot frame,
+//! `z = (R(θ)ᵀ (l − p), ψ − θ)`, with the covariance of the stereo triangulation rotated into the
+//! robot frame and a yaw sigma from the corner noise over the tag size.
+//!
+//! **Online** ([`run_online`]): an EKF over the pose and the landmarks (EKF-SLAM; a home has tens of
+//! tags, so the dense state stays small). Odometry increments predict, with noise growing with the
+//! distance travelled and the angle turned; sightings update after a χ² gate on the innovation; a
+//! tag seen the first time is added to the state and matched to the nearest Hough corner by
+//! Mahalanobis distance on both covariances. Sightings that fail the gate are kept aside and checked
+//! for consistency (the same id in two places, a tag moved after its first sighting) rather than
+//! fused.
+//!
+//! **Offline** ([`run_offline`], the method's a-posteriori pass): a pose graph over keyframes (every
+//! half metre or half radian of odometry, and every sighting), with odometry between-factors, tag
+//! observation factors under a Huber kernel and optionally Hough-corner priors on landmarks, solved by
+//! Levenberg-Marquardt in the `tiny-solver` crate (sparse Cholesky, automatic derivatives) from the
+//! online estimate. Poses between keyframes follow the odometry with the keyframe corrections
+//! interpolated by distance travelled.
+
+use crate::geometry::{wrap_angle, Pose2};
+use crate::hough::Feature;
+use crate::run::{pose_at, StampedPose};
+use crate::stereo::StereoTag;
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix2, Matrix3, Point3, Vector2, Vector3};
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use tiny_solver::na as sna;
+
+/// Settings of the fusion stage. Defaults say where they come from.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FuseConfig {
+    /// Translation noise of odometry, m per √m travelled (ours: 1 cm/√m, five times the simulated
+    /// random wheel noise to cover the wheel-scale error).
+    pub odometry_sigma_m_per_sqrt_m: f64,
+    /// Heading noise of odometry per √rad turned (ours: 0.03, covers the simulated 1% wheel-base
+    /// error over a full turn, 0.063 rad, at about one sigma).
+    pub heading_sigma_per_sqrt_rad: f64,
+    /// Heading noise per √m travelled (ours: 0.005 rad/√m, the wheel-scale difference).
+    pub heading_sigma_per_sqrt_m: f64,
+    /// Floor added to each sighting's position sigma, m (ours: 1 cm for the camera mounting and
+    /// the time stamp of the picture).
+    pub sighting_sigma_floor_m: f64,
+    /// Floor of a sighting's yaw sigma, rad (ours: 0.02).
+    pub yaw_sigma_floor_rad: f64,
+    /// Position sigma of a Hough corner, m (ours: 0.12: the 100 mm Hough cell and the offset of
+    /// the tag centre from the corner it marks).
+    pub corner_sigma_m: f64,
+    /// χ² gate of a sighting's innovation, 3 dof (16.27: 99.9%).
+    pub gate_chi2: f64,
+    /// χ² gate of tag-to-corner association, 2 dof (9.21: 99%).
+    pub association_chi2: f64,
+    /// Gated-out sightings within this distance of each other form one conflicting place, m.
+    pub conflict_radius_m: f64,
+    /// Sightings needed at a second place before it is reported (ours: 2; one can be a blunder).
+    pub conflict_min_sightings: usize,
+    /// A second place closer than this to the landmark is drift, not a conflict (ours: 0.3 m,
+    /// beyond the pose error the filter reaches between sightings in a home).
+    pub conflict_min_distance_m: f64,
+    /// Keyframe spacing of the offline graph, m of travel (ours: 0.5 m, short enough that heading
+    /// error does not make the linearised odometry factors overconfident).
+    pub keyframe_spacing_m: f64,
+    /// Keyframe spacing of the offline graph, rad of turn.
+    pub keyframe_turn_rad: f64,
+    /// Huber kernel width on whitened tag residuals (ours: 2 sigma).
+    pub huber_sigma: f64,
+    /// Add Hough-corner priors on matched landmarks in the offline graph (off by default: the
+    /// corners are placed with odometry poses and carry their drift).
+    pub corner_factors: bool,
+    /// Levenberg-Marquardt iterations at most.
+    pub max_iterations: usize,
+    /// Estimate the odometry's systematic errors (turn scale from the wheel base, heading drift
+    /// from unequal wheels, distance scale) in the offline graph and correct the whole run with
+    /// them, also before the first sighting (ours: on).
+    pub calibrate_odometry: bool,
+}
+
+impl Default for FuseConfig {
+    fn default() -> Self {
+        Self {
+            odometry_sigma_m_per_sqrt_m: 0.01,
+            heading_sigma_per_sqrt_rad: 0.03,
+            heading_sigma_per_sqrt_m: 0.005,
+            sighting_sigma_floor_m: 0.01,
+            yaw_sigma_floor_rad: 0.02,
+            corner_sigma_m: 0.12,
+            gate_chi2: 16.27,
+            association_chi2: 9.21,
+            conflict_radius_m: 0.3,
+            conflict_min_sightings: 2,
+            conflict_min_distance_m: 0.3,
+            keyframe_spacing_m: 0.5,
+            keyframe_turn_rad: 0.5,
+            huber_sigma: 2.0,
+            corner_factors: false,
+            max_iterations: 50,
+            calibrate_odometry: true,
+        }
+    }
+}
+
+/// A tag's four corners in the left and the right image, pixels (AprilTag C order).
+pub type PairCorners = ([[f64; 2]; 4], [[f64; 2]; 4]);
+
+/// A tag seen in a stereo pair, in the robot frame.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TagSighting {
+    /// Time of the picture, seconds.
+    pub t_s: f64,
+    /// Index of the stereo pair in the run.
+    pub frame: usize,
+    /// Tag id.
+    pub id: u32,
+    /// Tag family.
+    pub family: String,
+    /// Triangulated edge length, metres.
+    pub size_m: f64,
+    /// Tag centre in the robot frame, metres.
+    pub position_in_robot_m: [f64; 3],
+    /// Covariance of the centre in the robot frame, m².
+    pub covariance_m2: [[f64; 3]; 3],
+    /// Direction the tag faces in the robot frame, radians.
+    pub yaw_in_robot_rad: f64,
+    /// One sigma of that direction, radians.
+    pub yaw_sigma_rad: f64,
+    /// The detected corners (left, right), pixels, when the sighting came from images.
+    pub corners_px: Option<PairCorners>,
+}
+
+impl TagSighting {
+    /// A stereo tag moved into the robot frame through `robot_from_left`.
+    pub fn from_stereo(
+        t_s: f64,
+        frame: usize,
+        tag: &StereoTag,
+        robot_from_left: &Isometry3<f64>,
+    ) -> Self {
+        let p = robot_from_left * Point3::from(tag.position_in_left_m);
+        let r = robot_from_left.rotation.to_rotation_matrix();
+        let cov_left = Matrix3::from_fn(|i, j| tag.covariance_m2[i][j]);
+        let cov = r.matrix() * cov_left * r.matrix().transpose();
+        let n = r * Vector3::from(tag.normal_in_left);
+        // A corner moves about twice the centre's sigma (the centre averages four corners); the
+        // yaw error is the depth difference of opposite corners over the tag size.
+        let largest = cov_left.symmetric_eigenvalues().max().max(0.0).sqrt();
+        let yaw_sigma = 2.0 * std::f64::consts::SQRT_2 * largest / tag.size_m.max(1e-3);
+        Self {
+            t_s,
+            frame,
+            id: tag.id,
+            family: tag.family.to_string(),
+            size_m: tag.size_m,
+            position_in_robot_m: [p.x, p.y, p.z],
+            covariance_m2: std::array::from_fn(|i| std::array::from_fn(|j| cov[(i, j)])),
+            yaw_in_robot_rad: n.y.atan2(n.x),
+            yaw_sigma_rad: yaw_sigma,
+            corners_px: Some((tag.corners_px, tag.right_corners_px)),
+        }
+    }
+
+    /// The planar measurement `(x, y, ψ)` and its covariance, with the configured floors.
+    fn measurement(&self, config: &FuseConfig) -> (Vector3<f64>, Matrix3<f64>) {
+        let z = Vector3::new(
+            self.position_in_robot_m[0],
+            self.position_in_robot_m[1],
+            self.yaw_in_robot_rad,
+        );
+        let floor = config.sighting_sigma_floor_m.powi(2);
+        let c = &self.covariance_m2;
+        let yaw_sigma = self.yaw_sigma_rad.max(config.yaw_sigma_floor_rad);
+        let r = Matrix3::new(
+            c[0][0] + floor,
+            c[0][1],
+            0.0,
+            c[1][0],
+            c[1][1] + floor,
+            0.0,
+            0.0,
+            0.0,
+            yaw_sigma * yaw_sigma,
+        );
+        (z, r)
+    }
+
+    fn key(&self) -> (String, u32) {
+        (self.family.clone(), self.id)
+    }
+}
+
+/// A Hough corner a landmark was matched with.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CornerMatch {
+    /// Corner position, metres.
+    pub x_m: f64,
+    /// Corner position, metres.
+    pub y_m: f64,
+    /// Votes of the Hough peak.
+    pub votes: u32,
+    /// Squared Mahalanobis distance of the match.
+    pub distance_chi2: f64,
+}
+
+/// A surveyed tag.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Landmark {
+    /// Tag id.
+    pub id: u32,
+    /// Tag family.
+    pub family: String,
+    /// Mean triangulated edge length, metres.
+    pub size_m: f64,
+    /// Tag centre in the world, metres (z is the mean of the sightings).
+    pub position_m: [f64; 3],
+    /// Direction the tag faces, radians from the world x axis.
+    pub yaw_rad: f64,
+    /// Covariance of the centre, m² (x, y from the filter; z from the spread of the sightings).
+    pub covariance_m2: [[f64; 3]; 3],
+    /// Sightings fused.
+    pub observations: usize,
+    /// The Hough corner matched, if any.
+    pub matched_corner: Option<CornerMatch>,
+}
+
+/// Sightings of one id that disagree with its landmark.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Conflict {
+    /// Tag id.
+    pub id: u32,
+    /// Tag family.
+    pub family: String,
+    /// `"moved"` (never seen at the first place again) or `"duplicate id"` (seen at both).
+    pub kind: String,
+    /// Where the landmark is, metres.
+    pub landmark_m: [f64; 2],
+    /// Where the conflicting sightings put it, metres.
+    pub seen_at_m: [f64; 2],
+    /// Number of conflicting sightings.
+    pub sightings: usize,
+    /// Time of the first conflicting sighting, seconds.
+    pub first_t_s: f64,
+}
+
+/// The result of the online filter.
+#[derive(Debug, Clone)]
+pub struct OnlineResult {
+    /// Filtered pose at each odometry time.
+    pub trajectory: Vec<StampedPose>,
+    /// Landmarks at the end of the run.
+    pub landmarks: Vec<Landmark>,
+    /// Sightings fused (indices into the input).
+    pub accepted: Vec<usize>,
+    /// Sightings gated out (indices into the input).
+    pub rejected: Vec<usize>,
+    /// Consistency problems found.
+    pub conflicts: Vec<Conflict>,
+    /// Filtered pose at each sighting (same order as the input), used to start the offline pass.
+    pub pose_at_sighting: Vec<Pose2>,
+    /// Normalised innovation squared of each accepted update (for consistency plots).
+    pub nis: Vec<(f64, f64)>,
+    /// Position sigma of the pose (√ of the largest eigenvalue) at each odometry time, metres.
+    pub sigma_m: Vec<f64>,
+}
+
+/// Odometry noise of one increment, in the frame of its start.
+fn odometry_covariance(
+    delta: &Pose2,
+    path_m: f64,
+    turn_rad: f64,
+    config: &FuseConfig,
+) -> Matrix3<f64> {
+    let _ = delta;
+    let vt = config.odometry_sigma_m_per_sqrt_m.powi(2) * path_m;
+    let vh = config.heading_sigma_per_sqrt_rad.powi(2) * turn_rad
+        + config.heading_sigma_per_sqrt_m.powi(2) * path_m;
+    Matrix3::from_diagonal(&Vector3::new(vt + 1e-12, vt + 1e-12, vh + 1e-12))
+}
+
+/// The EKF state: pose first, then three numbers per landmark.
+struct Ekf {
+    x: DVector<f64>,
+    p: DMatrix<f64>,
+    slots: Vec<(String, u32)>,
+}
+
+impl Ekf {
+    fn pose(&self) -> Pose2 {
+        Pose2::new(self.x[0], self.x[1], self.x[2])
+    }
+
+    fn slot(&self, key: &(String, u32)) -> Option<usize> {
+        self.slots.iter().position(|k| k == key)
+    }
+
+    fn predict(&mut self, delta: &Pose2, q: &Matrix3<f64>) {
+        let (s, c) = self.x[2].sin_cos();
+        let f = Matrix3::new(
+            1.0,
+            0.0,
+            -s * delta.x - c * delta.y,
+            0.0,
+            1.0,
+            c * delta.x - s * delta.y,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let g = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let moved = self.pose().compose(delta);
+        self.x[0] = moved.x;
+        self.x[1] = moved.y;
+        self.x[2] = wrap_angle(moved.theta);
+        let n = self.x.len();
+        let ppp = self.p.fixed_view::<3, 3>(0, 0).into_owned();
+        let new_pp = f * ppp * f.transpose() + g * q * g.transpose();
+        if n > 3 {
+            let ppl = self.p.view((0, 3), (3, n - 3)).into_owned();
+            let new_pl = f * ppl;
+            self.p.view_mut((0, 3), (3, n - 3)).copy_from(&new_pl);
+            self.p
+                .view_mut((3, 0), (n - 3, 3))
+                .copy_from(&new_pl.transpose());
+        }
+        self.p.fixed_view_mut::<3, 3>(0, 0).copy_from(&new_pp);
+    }
+
+    /// Predicted measurement of landmark `slot` and its Jacobian over the whole state.
+    fn observe(&self, slot: usize) -> (Vector3<f64>, DMatrix<f64>) {
+        let i = 3 + 3 * slot;
+        let (s, c) = self.x[2].sin_cos();
+        let d = Vector2::new(self.x[i] - self.x[0], self.x[i + 1] - self.x[1]);
+        let h = Vector3::new(
+            c * d.x + s * d.y,
+            -s * d.x + c * d.y,
+            wrap_angle(self.x[i + 2] - self.x[2]),
+        );
+        let mut jac = DMatrix::zeros(3, self.x.len());
+        jac[(0, 0)] = -c;
+        jac[(0, 1)] = -s;
+        jac[(1, 0)] = s;
+        jac[(1, 1)] = -c;
+        jac[(0, 2)] = -s * d.x + c * d.y;
+        jac[(1, 2)] = -c * d.x - s * d.y;
+        jac[(2, 2)] = -1.0;
+        jac[(0, i)] = c;
+        jac[(0, i + 1)] = s;
+        jac[(1, i)] = -s;
+        jac[(1, i + 1)] = c;
+        jac[(2, i + 2)] = 1.0;
+        (h, jac)
+    }
+
+    /// Innovation, its covariance and the Jacobian of a sighting of landmark `slot`.
+    fn innovation(
+        &self,
+        slot: usize,
+        z: &Vector3<f64>,
+        r: &Matrix3<f64>,
+    ) -> (Vector3<f64>, Matrix3<f64>, DMatrix<f64>) {
+        let (h, jac) = self.observe(slot);
+        let mut y = z - h;
+        y[2] = wrap_angle(y[2]);
+        let s = &jac * &self.p * jac.transpose() + DMatrix::from_column_slice(3, 3, r.as_slice());
+        (y, Matrix3::from_fn(|i, j| s[(i, j)]), jac)
+    }
+
+    fn update(&mut self, y: &Vector3<f64>, s: &Matrix3<f64>, jac: &DMatrix<f64>, r: &Matrix3<f64>) {
+        let Some(s_inv) = s.try_inverse() else { return };
+        let s_inv = DMatrix::from_column_slice(3, 3, s_inv.as_slice());
+        let k = &self.p * jac.transpose() * s_inv;
+        self.x += &k * DVector::from_column_slice(y.as_slice());
+        self.x[2] = wrap_angle(self.x[2]);
+        for l in 0..self.slots.len() {
+            let i = 3 + 3 * l + 2;
+            self.x[i] = wrap_angle(self.x[i]);
+        }
+        // Joseph form keeps the covariance symmetric and positive.
+        let n = self.x.len();
+        let ikh = DMatrix::identity(n, n) - &k * jac;
+        let rr = DMatrix::from_column_slice(3, 3, r.as_slice());
+        self.p = &ikh * &self.p * ikh.transpose() + &k * rr * k.transpose();
+    }
+
+    /// Adds a landmark at the sighting seen from the current pose; returns its slot.
+    fn add(&mut self, key: (String, u32), z: &Vector3<f64>, r: &Matrix3<f64>) -> usize {
+        let (s, c) = self.x[2].sin_cos();
+        let l = Vector3::new(
+            self.x[0] + c * z.x - s * z.y,
+            self.x[1] + s * z.x + c * z.y,
+            wrap_angle(self.x[2] + z.z),
+        );
+        let gp = Matrix3::new(
+            1.0,
+            0.0,
+            -s * z.x - c * z.y,
+            0.0,
+            1.0,
+            c * z.x - s * z.y,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let gz = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let n = self.x.len();
+        let mut x = DVector::zeros(n + 3);
+        x.rows_mut(0, n).copy_from(&self.x);
+        x.rows_mut(n, 3).copy_from(&l);
+        let mut p = DMatrix::zeros(n + 3, n + 3);
+        p.view_mut((0, 0), (n, n)).copy_from(&self.p);
+        let gp_d = DMatrix::from_column_slice(3, 3, gp.as_slice());
+        let cross = &gp_d * self.p.view((0, 0), (3, n)); // 3 x n
+        p.view_mut((n, 0), (3, n)).copy_from(&cross);
+        p.view_mut((0, n), (n, 3)).copy_from(&cross.transpose());
+        let ppp = self.p.fixed_view::<3, 3>(0, 0).into_owned();
+        let pll = gp * ppp * gp.transpose() + gz * r * gz.transpose();
+        p.fixed_view_mut::<3, 3>(n, n).copy_from(&pll);
+        self.x = x;
+        self.p = p;
+        self.slots.push(key);
+        self.slots.len() - 1
+    }
+
+    fn landmark_xy_cov(&self, slot: usize) -> (Vector2<f64>, Matrix2<f64>) {
+        let i = 3 + 3 * slot;
+        (
+            Vector2::new(self.x[i], self.x[i + 1]),
+            self.p.fixed_view::<2, 2>(i, i).into_owned(),
+        )
+    }
+}
+
+/// Matches a landmark at `xy` with covariance `cov` to the nearest Hough corner within the gate.
+pub fn associate(
+    xy: &Vector2<f64>,
+    cov: &Matrix2<f64>,
+    corners: &[Feature],
+    config: &FuseConfig,
+) -> Option<CornerMatch> {
+    let s = cov + Matrix2::identity() * config.corner_sigma_m.powi(2);
+    let s_inv = s.try_inverse()?;
+    corners
+        .iter()
+        .map(|f| {
+            let d = Vector2::new(f.x_m - xy.x, f.y_m - xy.y);
+            (f, (d.transpose() * s_inv * d)[0])
+        })
+        .filter(|(_, d2)| *d2 <= config.association_chi2)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(f, d2)| CornerMatch {
+            x_m: f.x_m,
+            y_m: f.y_m,
+            votes: f.votes,
+            distance_chi2: d2,
+        })
+}
+
+/// Per-landmark running sums of what the planar state does not hold.
+#[derive(Default, Clone)]
+struct Extras {
+    z_sum: f64,
+    z_sq: f64,
+    size_sum: f64,
+    n: usize,
+    corner: Option<CornerMatch>,
+}
+
+/// Runs the online filter over odometry and time-ordered sightings; `corners` are the Hough
+/// features a new landmark is matched with.
+pub fn run_online(
+    odometry: &[StampedPose],
+    sightings: &[TagSighting],
+    corners: &[Feature],
+    config: &FuseConfig,
+) -> OnlineResult {
+    let start = odometry
+        .first()
+        .map_or(Pose2::new(0.0, 0.0, 0.0), |p| p.pose);
+    let mut ekf = Ekf {
+        x: DVector::from_vec(vec![start.x, start.y, start.theta]),
+        p: DMatrix::identity(3, 3) * 1e-9,
+        slots: Vec::new(),
+    };
+    let mut extras: Vec<Extras> = Vec::new();
+    let mut order: Vec<usize> = (0..sightings.len()).collect();
+    order.sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
+    let mut result = OnlineResult {
+        trajectory: Vec::with_capacity(odometry.len()),
+        landmarks: Vec::new(),
+        accepted: Vec::new(),
+        rejected: Vec::new(),
+        conflicts: Vec::new(),
+        pose_at_sighting: vec![start; sightings.len()],
+        nis: Vec::new(),
+        sigma_m: Vec::with_capacity(odometry.len()),
+    };
+    let mut last_odom = start;
+    let mut pending = order.into_iter().peekable();
+    let mut path_since = 0.0;
+    let mut turn_since = 0.0;
+    let advance = |ekf: &mut Ekf, to: Pose2, last: &mut Pose2, path: &mut f64, turn: &mut f64| {
+        let delta = last.between(&to);
+        *path += delta.x.hypot(delta.y);
+        *turn += wrap_angle(delta.theta).abs();
+        let q = odometry_covariance(&delta, *path, *turn, config);
+        ekf.predict(&delta, &q);
+        *path = 0.0;
+        *turn = 0.0;
+        *last = to;
+    };
+    for sample in odometry {
+        while let Some(&k) = pending.peek() {
+            if sightings[k].t_s > sample.t_s {
+                break;
+            }
+            pending.next();
+            let odom = pose_at(odometry, sightings[k].t_s).unwrap_or(sample.pose);
+            advance(
+                &mut ekf,
+                odom,
+                &mut last_odom,
+                &mut path_since,
+                &mut turn_since,
+            );
+            result.pose_at_sighting[k] = ekf.pose();
+            fuse_sighting(
+                &mut ekf,
+                &mut extras,
+                &sightings[k],
+                k,
+                corners,
+                config,
+                &mut result,
+            );
+        }
+        advance(
+            &mut ekf,
+            sample.pose,
+            &mut last_odom,
+            &mut path_since,
+            &mut turn_since,
+        );
+        result.trajectory.push(StampedPose {
+            t_s: sample.t_s,
+            pose: ekf.pose(),
+        });
+        let pos = ekf.p.fixed_view::<2, 2>(0, 0).into_owned();
+        result
+            .sigma_m
+            .push(pos.symmetric_eigenvalues().max().max(0.0).sqrt());
+    }
+    // Sightings after the last odometry sample: fused at the last pose.
+    for k in pending {
+        result.pose_at_sighting[k] = ekf.pose();
+        fuse_sighting(
+            &mut ekf,
+            &mut extras,
+            &sightings[k],
+            k,
+            corners,
+            config,
+            &mut result,
+        );
+    }
+    result.landmarks = ekf
+        .slots
+        .iter()
+        .enumerate()
+        .map(|(slot, key)| {
+            let (xy, cov) = ekf.landmark_xy_cov(slot);
+            landmark_from(key, xy, ekf.x[3 + 3 * slot + 2], &cov, &extras[slot])
+        })
+        .collect();
+    result.conflicts = find_conflicts(sightings, &result, config);
+    result
+}
+
+fn landmark_from(
+    key: &(String, u32),
+    xy: Vector2<f64>,
+    yaw: f64,
+    cov: &Matrix2<f64>,
+    extra: &Extras,
+) -> Landmark {
+    let n = extra.n.max(1) as f64;
+    let z = extra.z_sum / n;
+    let var_z = (extra.z_sq / n - z * z).max(0.0) / n + 1e-6;
+    Landmark {
+        id: key.1,
+        family: key.0.clone(),
+        size_m: extra.size_sum / n,
+        position_m: [xy.x, xy.y, z],
+        yaw_rad: wrap_angle(yaw),
+        covariance_m2: [
+            [cov[(0, 0)], cov[(0, 1)], 0.0],
+            [cov[(1, 0)], cov[(1, 1)], 0.0],
+            [0.0, 0.0, var_z],
+        ],
+        observations: extra.n,
+        matched_corner: extra.corner,
+    }
+}
+
+fn fuse_sighting(
+    ekf: &mut Ekf,
+    extras: &mut Vec<Extras>,
+    sighting: &TagSighting,
+    index: usize,
+    corners: &[Feature],
+    config: &FuseConfig,
+    result: &mut OnlineResult,
+) {
+    let (z, r) = sighting.measurement(config);
+    let key = sighting.key();
+    let slot = match ekf.slot(&key) {
+        Some(slot) => {
+            let (y, s, jac) = ekf.innovation(slot, &z, &r);
+            let Some(s_inv) = s.try_inverse() else {
+                result.rejected.push(index);
+                return;
+            };
+            let d2 = (y.transpose() * s_inv * y)[0];
+            if d2 > config.gate_chi2 {
+                result.rejected.push(index);
+                return;
+            }
+            ekf.update(&y, &s, &jac, &r);
+            result.nis.push((sighting.t_s, d2));
+            slot
+        }
+        None => {
+            let slot = ekf.add(key, &z, &r);
+            let (xy, cov) = ekf.landmark_xy_cov(slot);
+            extras.push(Extras {
+                corner: associate(&xy, &cov, corners, config),
+                ..Extras::default()
+            });
+            slot
+        }
+    };
+    let e = &mut extras[slot];
+    let zr = sighting.position_in_robot_m[2];
+    e.z_sum += zr;
+    e.z_sq += zr * zr;
+    e.size_sum += sighting.size_m;
+    e.n += 1;
+    result.accepted.push(index);
+}
+
+/// Groups gated-out sightings by place and reports the places seen often enough.
+fn find_conflicts(
+    sightings: &[TagSighting],
+    online: &OnlineResult,
+    config: &FuseConfig,
+) -> Vec<Conflict> {
+    let mut places: Vec<(usize, Vec<usize>, Vector2<f64>)> = Vec::new(); // (landmark, members, sum)
+    for &k in &online.rejected {
+        let s = &sightings[k];
+        let Some(l) = online
+            .landmarks
+            .iter()
+            .position(|l| l.id == s.id && l.family == s.family)
+        else {
+            continue;
+        };
+        let world = online.pose_at_sighting[k].transform_point(nalgebra::Point2::new(
+            s.position_in_robot_m[0],
+            s.position_in_robot_m[1],
+        ));
+        let w = Vector2::new(world.x, world.y);
+        match places.iter_mut().find(|(pl, members, sum)| {
+            *pl == l && (sum / members.len() as f64 - w).norm() <= config.conflict_radius_m
+        }) {
+            Some((_, members, sum)) => {
+                members.push(k);
+                *sum += w;
+            }
+            None => places.push((l, vec![k], w)),
+        }
+    }
+    places
+        .into_iter()
+        .filter(|(l, members, sum)| {
+            let at = sum / members.len() as f64;
+            let lm = &online.landmarks[*l].position_m;
+            members.len() >= config.conflict_min_sightings
+                && (at - Vector2::new(lm[0], lm[1])).norm() >= config.conflict_min_distance_m
+        })
+        .map(|(l, members, sum)| {
+            let lm = &online.landmarks[l];
+            let first_t_s = members
+                .iter()
+                .map(|&k| sightings[k].t_s)
+                .fold(f64::INFINITY, f64::min);
+            let seen_again = online.accepted.iter().any(|&k| {
+                sightings[k].id == lm.id
+                    && sightings[k].family == lm.family
+                    && sightings[k].t_s > first_t_s
+            });
+            let at = sum / members.len() as f64;
+            Conflict {
+                id: lm.id,
+                family: lm.family.clone(),
+                kind: if seen_again { "duplicate id" } else { "moved" }.into(),
+                landmark_m: [lm.position_m[0], lm.position_m[1]],
+                seen_at_m: [at.x, at.y],
+                sightings: members.len(),
+                first_t_s,
+            }
+        })
+        .collect()
+}
+
+/// The result of the offline pass.
+#[derive(Debug, Clone)]
+pub struct OfflineResult {
+    /// Corrected pose at each odometry time.
+    pub trajectory: Vec<StampedPose>,
+    /// Landmarks from the graph (covariances from the online filter).
+    pub landmarks: Vec<Landmark>,
+    /// Keyframes of the graph.
+    pub keyframes: usize,
+    /// Factors of the graph.
+    pub factors: usize,
+    /// Whether the solver returned a solution (else the online estimate is kept).
+    pub converged: bool,
+    /// The odometry calibration found `[turn scale error, heading drift rad/m, distance scale
+    /// error]`, when estimated.
+    pub odometry_calibration: Option<[f64; 3]>,
+}
+
+/// Whitened SE(2) between-factor: `r = S · (p0⁻¹ ∘ p1 ⊖ measured)`.
+struct BetweenFactor {
+    measured: [f64; 3],
+    sqrt_info: [[f64; 3]; 3],
+    /// Signed turn and path length of the interval, for the odometry calibration (when the
+    /// factor has a third variable `[a, c, s]`: turn scale error, heading drift per metre, distance
+    /// scale error; `dθ_true = dθ (1 + a) + c L`, `ds_true = ds (1 + s)`).
+    turn_rad: f64,
+    path_m: f64,
+}
+
+/// Whitened tag factor: `r = S · (h(pose, landmark) − z)`.
+struct TagFactor {
+    measured: [f64; 3],
+    sqrt_info: [[f64; 3]; 3],
+}
+
+/// Whitened prior on a vector variable (first pose; corner priors on landmark x, y).
+struct PriorFactor {
+    measured: Vec<f64>,
+    sqrt_info: Vec<f64>,
+}
+
+fn angle<T: sna::RealField>(a: T) -> T {
+    a.clone().sin().atan2(a.cos())
+}
+
+fn whiten<T: sna::RealField>(s: &[[f64; 3]; 3], r: [T; 3]) -> sna::DVector<T> {
+    sna::DVector::from_fn(3, |i, _| {
+        (0..3).fold(T::zero(), |acc, j| {
+            acc + T::from_f64(s[i][j]).unwrap_or_else(T::zero) * r[j].clone()
+        })
+    })
+}
+
+fn constant<T: sna::RealField>(v: f64) -> T {
+    T::from_f64(v).unwrap_or_else(T::zero)
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for BetweenFactor {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let (a, b) = (&params[0], &params[1]);
+        // The measured increment, corrected by the odometry calibration when there is one.
+        let (mx, my, mt) = match params.get(2) {
+            Some(k) => {
+                let extra = k[0].clone() * constant::<T>(self.turn_rad)
+                    + k[1].clone() * constant::<T>(self.path_m);
+                let half = extra.clone() * constant::<T>(0.5);
+                let scale = T::one() + k[2].clone();
+                let (hs, hc) = (half.clone().sin(), half.cos());
+                let (x, y) = (
+                    constant::<T>(self.measured[0]),
+                    constant::<T>(self.measured[1]),
+                );
+                (
+                    (hc.clone() * x.clone() - hs.clone() * y.clone()) * scale.clone(),
+                    (hs * x + hc * y) * scale,
+                    constant::<T>(self.measured[2]) + extra,
+                )
+            }
+            None => (
+                constant::<T>(self.measured[0]),
+                constant::<T>(self.measured[1]),
+                constant::<T>(self.measured[2]),
+            ),
+        };
+        let (s, c) = (a[2].clone().sin(), a[2].clone().cos());
+        let dx = b[0].clone() - a[0].clone();
+        let dy = b[1].clone() - a[1].clone();
+        let rx = c.clone() * dx.clone() + s.clone() * dy.clone() - mx;
+        let ry = -s * dx + c * dy - my;
+        let rt = angle(b[2].clone() - a[2].clone() - mt);
+        whiten(&self.sqrt_info, [rx, ry, rt])
+    }
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for TagFactor {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let (p, l) = (&params[0], &params[1]);
+        let (s, c) = (p[2].clone().sin(), p[2].clone().cos());
+        let dx = l[0].clone() - p[0].clone();
+        let dy = l[1].clone() - p[1].clone();
+        let rx = c.clone() * dx.clone() + s.clone() * dy.clone() - constant::<T>(self.measured[0]);
+        let ry = -s * dx + c * dy - constant::<T>(self.measured[1]);
+        let rt = angle(l[2].clone() - p[2].clone() - constant::<T>(self.measured[2]));
+        whiten(&self.sqrt_info, [rx, ry, rt])
+    }
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for PriorFactor {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let v = &params[0];
+        sna::DVector::from_fn(self.measured.len(), |i, _| {
+            (v[i].clone() - constant::<T>(self.measured[i])) * constant::<T>(self.sqrt_info[i])
+        })
+    }
+}
+
+/// Upper-triangular `S` with `Sᵀ S = Σ⁻¹`.
+fn sqrt_information(cov: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    let info = cov.try_inverse().unwrap_or_else(Matrix3::identity);
+    let info = (info + info.transpose()) * 0.5;
+    match info.cholesky() {
+        // info = L Lᵀ, so S = Lᵀ.
+        Some(ch) => {
+            let s = ch.l().transpose();
+            std::array::from_fn(|i| std::array::from_fn(|j| s[(i, j)]))
+        }
+        None => {
+            let d = cov.diagonal().map(|v| 1.0 / v.max(1e-12).sqrt());
+            [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
+        }
+    }
+}
+
+/// Name of the odometry calibration variable of the offline graph.
+const CALIBRATION: &str = "odometry_calibration";
+/// Prior sigmas of the odometry calibration `[a, c, s]`: 5% turn scale, 0.02 rad/m heading drift,
+/// 2% distance scale (weak: wheel errors of a few percent at most).
+const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
+
+/// One keyframe: the time, the odometry pose and the starting estimate.
+struct Keyframe {
+    t_s: f64,
+    odom: Pose2,
+    init: Pose2,
+}
+
+/// The method's a-posteriori pass: a pose graph over the whole run, started from `online`.
+pub fn run_offline(
+    odometry: &[StampedPose],
+    sightings: &[TagSighting],
+    online: &OnlineResult,
+    config: &FuseConfig,
+) -> OfflineResult {
+    let Some(first) = odometry.first() else {
+        return OfflineResult {
+            trajectory: Vec::new(),
+            landmarks: online.landmarks.clone(),
+            keyframes: 0,
+            factors: 0,
+            converged: false,
+            odometry_calibration: None,
+        };
+    };
+    // Keyframes: the odometry thinned by travel and turn, plus one at every fused sighting.
+    let mut keyframes: Vec<Keyframe> = Vec::new();
+    let mut sighting_kf: HashMap<usize, usize> = HashMap::new();
+    let mut fused: Vec<usize> = online.accepted.clone();
+    fused.sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
+    let mut fused = fused.into_iter().peekable();
+    let mut last_kf = first.pose;
+    for (i, sample) in odometry.iter().enumerate() {
+        while let Some(&k) = fused.peek() {
+            if sightings[k].t_s > sample.t_s && i + 1 < odometry.len() {
+                break;
+            }
+            fused.next();
+            let t = sightings[k].t_s;
+            let odom = pose_at(odometry, t).unwrap_or(sample.pose);
+            if let Some(kf) = keyframes.last() {
+                if (kf.t_s - t).abs() < 1e-9 {
+                    sighting_kf.insert(k, keyframes.len() - 1);
+                    continue;
+                }
+            }
+            keyframes.push(Keyframe {
+                t_s: t,
+                odom,
+                init: online.pose_at_sighting[k],
+            });
+            sighting_kf.insert(k, keyframes.len() - 1);
+            last_kf = odom;
+        }
+        let d = last_kf.between(&sample.pose);
+        let is_end = i == 0 || i + 1 == odometry.len();
+        if is_end
+            || d.x.hypot(d.y) >= config.keyframe_spacing_m
+            || wrap_angle(d.theta).abs() >= config.keyframe_turn_rad
+        {
+            if keyframes.last().is_some_and(|kf| kf.t_s >= sample.t_s) {
+                continue;
+            }
+            keyframes.push(Keyframe {
+                t_s: sample.t_s,
+                odom: sample.pose,
+                init: online.trajectory.get(i).map_or(sample.pose, |p| p.pose),
+            });
+            last_kf = sample.pose;
+        }
+    }
+
+    let pose_name = |i: usize| format!("p{i}");
+    let landmark_name = |i: usize| format!("l{i}");
+    let mut problem = tiny_solver::Problem::new();
+    let mut init: HashMap<String, sna::DVector<f64>> = HashMap::new();
+    for (i, kf) in keyframes.iter().enumerate() {
+        init.insert(
+            pose_name(i),
+            sna::DVector::from_vec(vec![kf.init.x, kf.init.y, kf.init.theta]),
+        );
+    }
+    for (i, l) in online.landmarks.iter().enumerate() {
+        init.insert(
+            landmark_name(i),
+            sna::DVector::from_vec(vec![l.position_m[0], l.position_m[1], l.yaw_rad]),
+        );
+    }
+    let mut factors = 0;
+    if config.calibrate_odometry {
+        init.insert(CALIBRATION.into(), sna::DVector::from_vec(vec![0.0; 3]));
+        problem.add_residual_block(
+            3,
+            &[CALIBRATION],
+            Box::new(PriorFactor {
+                measured: vec![0.0; 3],
+                sqrt_info: vec![
+                    1.0 / CALIBRATION_PRIOR_SIGMA[0],
+                    1.0 / CALIBRATION_PRIOR_SIGMA[1],
+                    1.0 / CALIBRATION_PRIOR_SIGMA[2],
+                ],
+            }),
+            None,
+        );
+        factors += 1;
+    }
+    problem.add_residual_block(
+        3,
+        &[&pose_name(0)],
+        Box::new(PriorFactor {
+            measured: vec![first.pose.x, first.pose.y, first.pose.theta],
+            sqrt_info: vec![1e3; 3],
+        }),
+        None,
+    );
+    factors += 1;
+    // Odometry factors; path and turn summed over the samples between the keyframes.
+    let mut sample = 0;
+    for i in 1..keyframes.len() {
+        let (a, b) = (&keyframes[i - 1], &keyframes[i]);
+        let mut path = 0.0;
+        let mut turn = 0.0;
+        let mut signed_turn = 0.0;
+        let mut prev = a.odom;
+        while sample < odometry.len() && odometry[sample].t_s <= a.t_s {
+            sample += 1;
+        }
+        let mut j = sample;
+        while j < odometry.len() && odometry[j].t_s < b.t_s {
+            let d = prev.between(&odometry[j].pose);
+            path += d.x.hypot(d.y);
+            turn += wrap_angle(d.theta).abs();
+            signed_turn += wrap_angle(d.theta);
+            prev = odometry[j].pose;
+            j += 1;
+        }
+        let d = prev.between(&b.odom);
+        path += d.x.hypot(d.y);
+        turn += wrap_angle(d.theta).abs();
+        signed_turn += wrap_angle(d.theta);
+        let delta = a.odom.between(&b.odom);
+        let cov = odometry_covariance(&delta, path, turn, config);
+        let (p0, p1) = (pose_name(i - 1), pose_name(i));
+        let mut vars: Vec<&str> = vec![&p0, &p1];
+        if config.calibrate_odometry {
+            vars.push(CALIBRATION);
+        }
+        problem.add_residual_block(
+            3,
+            &vars,
+            Box::new(BetweenFactor {
+                measured: [delta.x, delta.y, wrap_angle(delta.theta)],
+                sqrt_info: sqrt_information(&cov),
+                turn_rad: signed_turn,
+                path_m: path,
+            }),
+            None,
+        );
+        factors += 1;
+    }
+    let slot_of: BTreeMap<(String, u32), usize> = online
+        .landmarks
+        .iter()
+        .enumerate()
+        .map(|(i, l)| ((l.family.clone(), l.id), i))
+        .collect();
+    for (&k, &kf) in &sighting_kf {
+        let s = &sightings[k];
+        let Some(&l) = slot_of.get(&s.key()) else {
+            continue;
+        };
+        let (z, r) = s.measurement(config);
+        problem.add_residual_block(
+            3,
+            &[&pose_name(kf), &landmark_name(l)],
+            Box::new(TagFactor {
+                measured: [z.x, z.y, z.z],
+                sqrt_info: sqrt_information(&r),
+            }),
+            Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
+                config.huber_sigma.max(1e-3),
+            ))),
+        );
+        factors += 1;
+    }
+    if config.corner_factors {
+        for (i, l) in online.landmarks.iter().enumerate() {
+            if let Some(c) = l.matched_corner {
+                problem.add_residual_block(
+                    2,
+                    &[&landmark_name(i)],
+                    Box::new(PriorFactor {
+                        measured: vec![c.x_m, c.y_m],
+                        sqrt_info: vec![1.0 / config.corner_sigma_m; 2],
+                    }),
+                    None,
+                );
+                factors += 1;
+            }
+        }
+    }
+    let options = tiny_solver::OptimizerOptions {
+        max_iteration: config.max_iterations,
+        ..Default::default()
+    };
+    use tiny_solver::Optimizer;
+    let solution = tiny_solver::LevenbergMarquardtOptimizer::default().optimize(
+        &problem,
+        &init,
+        Some(options),
+    );
+    let converged = solution.is_some();
+    let values = solution.unwrap_or(init);
+    let kf_pose = |i: usize| {
+        values.get(&pose_name(i)).map_or(keyframes[i].init, |v| {
+            Pose2::new(v[0], v[1], wrap_angle(v[2]))
+        })
+    };
+    // Every odometry sample: the keyframe corrections (world_from_odometry) interpolated by
+    // distance travelled between the keyframes around it.
+    let corrections: Vec<Pose2> = (0..keyframes.len())
+        .map(|i| kf_pose(i).compose(&keyframes[i].odom.inverse()))
+        .collect();
+    let mut trajectory = Vec::with_capacity(odometry.len());
+    let mut kf = 0;
+    for sample in odometry {
+        while kf + 1 < keyframes.len() && keyframes[kf + 1].t_s < sample.t_s {
+            kf += 1;
+        }
+        let correction = if kf + 1 < keyframes.len() && sample.t_s >= keyframes[kf].t_s {
+            let (a, b) = (&keyframes[kf], &keyframes[kf + 1]);
+            let span = a
+                .odom
+                .position()
+                .coords
+                .metric_distance(&b.odom.position().coords);
+            let done = a
+                .odom
+                .position()
+                .coords
+                .metric_distance(&sample.pose.position().coords);
+            let f = if span > 1e-9 {
+                (done / span).clamp(0.0, 1.0)
+            } else {
+                ((sample.t_s - a.t_s) / (b.t_s - a.t_s).max(1e-9)).clamp(0.0, 1.0)
+            };
+            corrections[kf].lerp(&corrections[kf + 1], f)
+        } else {
+            corrections[kf.min(corrections.len() - 1)]
+        };
+        let pose = correction.compose(&sample.pose);
+        trajectory.push(StampedPose {
+            t_s: sample.t_s,
+            pose: Pose2::new(pose.x, pose.y, wrap_angle(pose.theta)),
+        });
+    }
+    let landmarks = online
+        .landmarks
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let mut l = l.clone();
+            if let Some(v) = values.get(&landmark_name(i)) {
+                l.position_m[0] = v[0];
+                l.position_m[1] = v[1];
+                l.yaw_rad = wrap_angle(v[2]);
+            }
+            l
+        })
+        .collect();
+    OfflineResult {
+        trajectory,
+        landmarks,
+        keyframes: keyframes.len(),
+        factors,
+        converged,
+        odometry_calibration: values
+            .get(CALIBRATION)
+            .filter(|_| config.calibrate_odometry)
+            .map(|v| [v[0], v[1], v[2]]),
+    }
+}
+
+/// The result of localising a new run against a saved survey.
+#[derive(Debug, Clone)]
+pub struct LocalizeResult {
+    /// Filtered pose at each odometry time.
+    pub trajectory: Vec<StampedPose>,
+    /// Position sigma at each odometry time, metres.
+    pub sigma_m: Vec<f64>,
+    /// Distance travelled since the last fused sighting at each odometry time, metres.
+    pub since_sighting_m: Vec<f64>,
+    /// Sightings fused.
+    pub accepted: Vec<usize>,
+    /// Sightings gated out.
+    pub rejected: Vec<usize>,
+    /// Sightings of tags the survey does not hold.
+    pub unknown: Vec<usize>,
+}
+
+/// Tracks a run's pose against surveyed landmarks held fixed (their covariance is added to each
+/// sighting's): the method's long-term use. The run starts at its odometry's first pose in the
+/// survey's frame (the robot leaves from the same place).
+pub fn localize(
+    odometry: &[StampedPose],
+    sightings: &[TagSighting],
+    landmarks: &[Landmark],
+    config: &FuseConfig,
+) -> LocalizeResult {
+    let start = odometry
+        .first()
+        .map_or(Pose2::new(0.0, 0.0, 0.0), |p| p.pose);
+    let mut ekf = Ekf {
+        x: DVector::from_vec(vec![start.x, start.y, start.theta]),
+        p: DMatrix::identity(3, 3) * 1e-9,
+        slots: Vec::new(),
+    };
+    let mut order: Vec<usize> = (0..sightings.len()).collect();
+    order.sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
+    let mut pending = order.into_iter().peekable();
+    let mut out = LocalizeResult {
+        trajectory: Vec::with_capacity(odometry.len()),
+        sigma_m: Vec::with_capacity(odometry.len()),
+        since_sighting_m: Vec::with_capacity(odometry.len()),
+        accepted: Vec::new(),
+        rejected: Vec::new(),
+        unknown: Vec::new(),
+    };
+    let mut last = start;
+    let mut travelled = 0.0;
+    let advance = |ekf: &mut Ekf, to: Pose2, last: &mut Pose2, travelled: &mut f64| {
+        let delta = last.between(&to);
+        let path = delta.x.hypot(delta.y);
+        *travelled += path;
+        let q = odometry_covariance(&delta, path, wrap_angle(delta.theta).abs(), config);
+        ekf.predict(&delta, &q);
+        *last = to;
+    };
+    for sample in odometry {
+        while let Some(&k) = pending.peek() {
+            if sightings[k].t_s > sample.t_s {
+                break;
+            }
+            pending.next();
+            let s = &sightings[k];
+            let odom = pose_at(odometry, s.t_s).unwrap_or(sample.pose);
+            advance(&mut ekf, odom, &mut last, &mut travelled);
+            let Some(l) = landmarks
+                .iter()
+                .find(|l| l.id == s.id && l.family == s.family)
+            else {
+                out.unknown.push(k);
+                continue;
+            };
+            // The landmark as a fixed state slot: a pose-only filter with the landmark's
+            // uncertainty moved into the measurement noise.
+            let mut full = Ekf {
+                x: DVector::from_vec(vec![
+                    ekf.x[0],
+                    ekf.x[1],
+                    ekf.x[2],
+                    l.position_m[0],
+                    l.position_m[1],
+                    l.yaw_rad,
+                ]),
+                p: DMatrix::zeros(6, 6),
+                slots: vec![(l.family.clone(), l.id)],
+            };
+            full.p
+                .fixed_view_mut::<3, 3>(0, 0)
+                .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
+            let c = &l.covariance_m2;
+            full.p[(3, 3)] = c[0][0];
+            full.p[(3, 4)] = c[0][1];
+            full.p[(4, 3)] = c[1][0];
+            full.p[(4, 4)] = c[1][1];
+            full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
+            let (z, r) = s.measurement(config);
+            let (y, sm, jac) = full.innovation(0, &z, &r);
+            let d2 = sm
+                .try_inverse()
+                .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
+            if d2 > config.gate_chi2 {
+                out.rejected.push(k);
+                continue;
+            }
+            full.update(&y, &sm, &jac, &r);
+            ekf.x.copy_from(&full.x.rows(0, 3));
+            ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
+            out.accepted.push(k);
+            travelled = 0.0;
+        }
+        advance(&mut ekf, sample.pose, &mut last, &mut travelled);
+        out.trajectory.push(StampedPose {
+            t_s: sample.t_s,
+            pose: ekf.pose(),
+        });
+        let pos = ekf.p.fixed_view::<2, 2>(0, 0).into_owned();
+        out.sigma_m
+            .push(pos.symmetric_eigenvalues().max().max(0.0).sqrt());
+        out.since_sighting_m.push(travelled);
+    }
+    out
+}
+
+/// Error statistics of a localised run over one band of distance since the last sighting.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GrowthBin {
+    /// Band start, metres travelled since the last fused sighting.
+    pub from_m: f64,
+    /// Band end, metres.
+    pub to_m: f64,
+    /// Odometry samples in the band.
+    pub samples: usize,
+    /// Mean filter sigma, metres.
+    pub mean_sigma_m: f64,
+    /// RMS position error against ground truth, metres (`None` without ground truth).
+    pub rms_error_m: Option<f64>,
+}
+
+/// Bands of distance since the last sighting used by [`error_growth`], metres.
+pub const GROWTH_BANDS_M: [f64; 7] = [0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
+
+/// How the error grows with the distance travelled since the last sighting.
+pub fn error_growth(result: &LocalizeResult, truth: Option<&[StampedPose]>) -> Vec<GrowthBin> {
+    let mut bins: Vec<GrowthBin> = GROWTH_BANDS_M
+        .iter()
+        .enumerate()
+        .map(|(i, &from_m)| GrowthBin {
+            from_m,
+            to_m: GROWTH_BANDS_M.get(i + 1).copied().unwrap_or(f64::INFINITY),
+            samples: 0,
+            mean_sigma_m: 0.0,
+            rms_error_m: truth.map(|_| 0.0),
+        })
+        .collect();
+    for (i, p) in result.trajectory.iter().enumerate() {
+        let d = result.since_sighting_m.get(i).copied().unwrap_or(0.0);
+        let Some(bin) = bins.iter_mut().find(|b| d >= b.from_m && d < b.to_m) else {
+            continue;
+        };
+        bin.samples += 1;
+        bin.mean_sigma_m += result.sigma_m.get(i).copied().unwrap_or(0.0);
+        if let (Some(sum), Some(gt)) = (
+            bin.rms_error_m.as_mut(),
+            truth.and_then(|t| pose_at(t, p.t_s)),
+        ) {
+            *sum += (p.pose.x - gt.x).powi(2) + (p.pose.y - gt.y).powi(2);
+        }
+    }
+    for b in &mut bins {
+        let n = b.samples.max(1) as f64;
+        b.mean_sigma_m /= n;
+        b.rms_error_m = b.rms_error_m.map(|s| (s / n).sqrt());
+    }
+    bins.retain(|b| b.samples > 0);
+    bins
+}
+
+/// Root-mean-square position error of `estimate` against `truth` at the estimate's times (no
+/// alignment: both start from the known start pose in the world frame).
+pub fn ate_m(estimate: &[StampedPose], truth: &[StampedPose]) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for p in estimate {
+        let t = pose_at(truth, p.t_s)?;
+        sum += (p.pose.x - t.x).powi(2) + (p.pose.y - t.y).powi(2);
+        n += 1;
+    }
+    (n > 0).then(|| (sum / n as f64).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A square loop driven with a biased odometry, a tag at each corner seen from near it.
+    fn square_run(
+        bias: f64,
+    ) -> (
+        Vec<StampedPose>,
+        Vec<StampedPose>,
+        Vec<TagSighting>,
+        Vec<[f64; 3]>,
+    ) {
+        let tags = vec![
+            [5.0, 0.0, std::f64::consts::PI],
+            [5.0, 5.0, -std::f64::consts::FRAC_PI_2],
+            [0.0, 5.0, 0.0],
+            [0.0, 0.0, std::f64::consts::FRAC_PI_2],
+        ];
+        let mut truth = Vec::new();
+        let mut odom = Vec::new();
+        let mut t = 0.0;
+        let mut gt = Pose2::new(0.5, 0.5, 0.0);
+        let mut od = gt;
+        for lap in 0..2 {
+            for side in 0..4 {
+                let _ = (lap, side);
+                for _ in 0..40 {
+                    let step = Pose2::new(0.1, 0.0, 0.0);
+                    gt = gt.compose(&step);
+                    od = od.compose(&Pose2::new(0.1 * (1.0 + bias), 0.0, bias * 0.1));
+                    t += 1.0;
+                    truth.push(StampedPose { t_s: t, pose: gt });
+                    odom.push(StampedPose { t_s: t, pose: od });
+                }
+                for _ in 0..10 {
+                    let step = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2 / 10.0);
+                    gt = gt.compose(&step);
+                    od = od.compose(&Pose2::new(0.0, 0.0, step.theta * (1.0 + 3.0 * bias)));
+                    t += 1.0;
+                    truth.push(StampedPose { t_s: t, pose: gt });
+                    odom.push(StampedPose { t_s: t, pose: od });
+                }
+            }
+        }
+        let mut sightings = Vec::new();
+        for (i, p) in truth.iter().enumerate().step_by(5) {
+            for (id, tag) in tags.iter().enumerate() {
+                let local = p
+                    .pose
+                    .inverse()
+                    .transform_point(nalgebra::Point2::new(tag[0], tag[1]));
+                let range = local.coords.norm();
+                if range > 3.5 || local.x < 0.3 || local.y.abs() > local.x {
+                    continue;
+                }
+                sightings.push(TagSighting {
+                    t_s: p.t_s,
+                    frame: i,
+                    id: id as u32,
+                    family: "tag36h11".into(),
+                    size_m: 0.16,
+                    position_in_robot_m: [local.x, local.y, 0.5],
+                    covariance_m2: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
+                    yaw_in_robot_rad: wrap_angle(tag[2] - p.pose.theta),
+                    yaw_sigma_rad: 0.01,
+                    corners_px: None,
+                });
+            }
+        }
+        (odom, truth, sightings, tags)
+    }
+
+    #[test]
+    fn online_and_offline_beat_odometry_on_a_biased_loop() {
+        let (odom, truth, sightings, tags) = square_run(0.01);
+        let config = FuseConfig::default();
+        let online = run_online(&odom, &sightings, &[], &config);
+        let offline = run_offline(&odom, &sightings, &online, &config);
+        let ate_odom = ate_m(&odom, &truth).unwrap();
+        let ate_online = ate_m(&online.trajectory, &truth).unwrap();
+        let ate_offline = ate_m(&offline.trajectory, &truth).unwrap();
+        assert!(offline.converged);
+        assert!(ate_odom > 0.2, "odometry ATE {ate_odom}");
+        assert!(
+            ate_online < 0.5 * ate_odom,
+            "online {ate_online} odometry {ate_odom}"
+        );
+        assert!(
+            ate_offline < 0.2 * ate_odom,
+            "offline {ate_offline} odometry {ate_odom}"
+        );
+        assert_eq!(online.landmarks.len(), tags.len());
+        for l in &offline.landmarks {
+            let t = tags[l.id as usize];
+            let e = (l.position_m[0] - t[0]).hypot(l.position_m[1] - t[1]);
+            assert!(e < 0.05, "tag {} error {e}", l.id);
+        }
+        assert!(
+            online.conflicts.is_empty(),
+            "{:?} rejected {}",
+            online.conflicts,
+            online.rejected.len()
+        );
+    }
+
+    #[test]
+    fn localisation_against_a_survey_bounds_the_drift() {
+        let (odom, truth, sightings, _) = square_run(0.01);
+        let config = FuseConfig::default();
+        let online = run_online(&odom, &sightings, &[], &config);
+        let survey = run_offline(&odom, &sightings, &online, &config);
+        // A second run with the same drift, localised against the first run's landmarks.
+        let result = localize(&odom, &sightings, &survey.landmarks, &config);
+        let ate = ate_m(&result.trajectory, &truth).unwrap();
+        assert!(
+            ate < 0.2 * ate_m(&odom, &truth).unwrap(),
+            "localised ATE {ate}"
+        );
+        assert!(result.rejected.is_empty() && result.unknown.is_empty());
+        assert!(result.since_sighting_m.contains(&0.0));
+    }
+
+    #[test]
+    fn a_moved_tag_is_reported_not_fused() {
+        let (odom, _, mut sightings, _) = square_run(0.0);
+        // Tag 1 is moved by 1 m along x after the first lap.
+        let lap_end = odom[odom.len() / 2].t_s;
+        for s in sightings
+            .iter_mut()
+            .filter(|s| s.id == 1 && s.t_s > lap_end)
+        {
+            let truth = odom.iter().find(|p| p.t_s == s.t_s).unwrap().pose;
+            let moved = truth
+                .inverse()
+                .transform_point(nalgebra::Point2::new(4.0, 5.0));
+            s.position_in_robot_m = [moved.x, moved.y, 0.5];
+        }
+        let online = run_online(&odom, &sightings, &[], &FuseConfig::default());
+        assert_eq!(online.conflicts.len(), 1, "{:?}", online.conflicts);
+        let c = &online.conflicts[0];
+        assert_eq!((c.id, c.kind.as_str()), (1, "moved"));
+        assert!((c.seen_at_m[0] - 4.0).abs() < 0.1 && (c.seen_at_m[1] - 5.0).abs() < 0.1);
+        let l = online.landmarks.iter().find(|l| l.id == 1).unwrap();
+        assert!((l.position_m[0] - 5.0).abs() < 0.05, "{l:?}");
+    }
+
+    #[test]
+    fn a_tag_is_matched_with_the_corner_it_marks() {
+        let (odom, _, sightings, _) = square_run(0.0);
+        let corner = |x: f64, y: f64| Feature {
+            x_m: x,
+            y_m: y,
+            votes: 80,
+            sightings: 1,
+            spread_deg: 90.0,
+            kind: crate::hough::FeatureKind::Corner,
+        };
+        let corners = vec![corner(4.95, 0.1), corner(2.5, 2.5)];
+        let online = run_online(&odom, &sightings, &corners, &FuseConfig::default());
+        let tag0 = online.landmarks.iter().find(|l| l.id == 0).unwrap();
+        let m = tag0.matched_corner.expect("tag 0 matched");
+        assert_eq!((m.x_m, m.y_m), (4.95, 0.1));
+        let tag2 = online.landmarks.iter().find(|l| l.id == 2).unwrap();
+        assert!(tag2.matched_corner.is_none());
+    }
+}

@@ -1,0 +1,193 @@
+//! Survey outputs: `landmarks.json`, the WPILib `layout.json` and `trajectory.csv` (DESIGN.md).
+
+use super::{read_text, write_file, IoError};
+use crate::fuse::{CornerMatch, Landmark};
+use crate::run::{pose_at, StampedPose};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// A matched corner as `landmarks.json` writes it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CornerRecord {
+    /// Corner x, metres.
+    pub x_m: f64,
+    /// Corner y, metres.
+    pub y_m: f64,
+    /// Hough votes.
+    pub votes: u32,
+}
+
+/// One entry of `landmarks.json` (keys fixed by DESIGN.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LandmarkRecord {
+    /// Tag id.
+    pub id: u32,
+    /// Tag family.
+    pub family: String,
+    /// Edge length, metres.
+    pub size_m: f64,
+    /// Centre in the world, metres.
+    pub position_m: [f64; 3],
+    /// Direction the tag faces, radians from the world x axis.
+    pub yaw_rad: f64,
+    /// Covariance of the centre, m².
+    pub covariance_m2: [[f64; 3]; 3],
+    /// Sightings fused.
+    pub observations: usize,
+    /// Hough corner matched, if any.
+    pub matched_corner: Option<CornerRecord>,
+    /// Where the world file planned the tag, if known.
+    pub planned_position_m: Option<[f64; 3]>,
+}
+
+/// The whole `landmarks.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LandmarksFile {
+    /// The landmarks, sorted by family and id.
+    pub landmarks: Vec<LandmarkRecord>,
+}
+
+impl LandmarkRecord {
+    /// A record of a landmark with its planned position.
+    pub fn new(l: &Landmark, planned_position_m: Option<[f64; 3]>) -> Self {
+        Self {
+            id: l.id,
+            family: l.family.clone(),
+            size_m: l.size_m,
+            position_m: l.position_m,
+            yaw_rad: l.yaw_rad,
+            covariance_m2: l.covariance_m2,
+            observations: l.observations,
+            matched_corner: l.matched_corner.map(|c| CornerRecord {
+                x_m: c.x_m,
+                y_m: c.y_m,
+                votes: c.votes,
+            }),
+            planned_position_m,
+        }
+    }
+
+    /// The landmark back (for localisation against a saved survey).
+    pub fn landmark(&self) -> Landmark {
+        Landmark {
+            id: self.id,
+            family: self.family.clone(),
+            size_m: self.size_m,
+            position_m: self.position_m,
+            yaw_rad: self.yaw_rad,
+            covariance_m2: self.covariance_m2,
+            observations: self.observations,
+            matched_corner: self.matched_corner.map(|c| CornerMatch {
+                x_m: c.x_m,
+                y_m: c.y_m,
+                votes: c.votes,
+                distance_chi2: 0.0,
+            }),
+        }
+    }
+}
+
+/// Writes `landmarks.json`.
+pub fn save_landmarks(path: &Path, file: &LandmarksFile) -> Result<(), IoError> {
+    super::save_json(path, file)
+}
+
+/// Reads `landmarks.json`, checking the numbers are finite and the covariances symmetric.
+pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
+    let text = read_text(path)?;
+    let file: LandmarksFile = serde_json::from_str(&text)
+        .map_err(|e| IoError::line(path, e.line() as u64, format!("column {}: {e}", e.column())))?;
+    for (i, l) in file.landmarks.iter().enumerate() {
+        let numbers = l
+            .position_m
+            .iter()
+            .chain(l.covariance_m2.iter().flatten())
+            .chain(std::iter::once(&l.yaw_rad))
+            .chain(std::iter::once(&l.size_m));
+        if numbers.into_iter().any(|v| !v.is_finite()) {
+            return Err(IoError::content(
+                path,
+                format!("landmarks[{i}] (tag {}): numbers must be finite", l.id),
+            ));
+        }
+        let c = &l.covariance_m2;
+        if c[0][0] < 0.0 || c[1][1] < 0.0 || c[2][2] < 0.0 {
+            return Err(IoError::content(
+                path,
+                format!(
+                    "landmarks[{i}] (tag {}): covariance_m2 has a negative variance",
+                    l.id
+                ),
+            ));
+        }
+    }
+    Ok(file)
+}
+
+/// Writes a WPILib AprilTag field layout: each tag's pose with x out of the tag face, and the
+/// field size as the extent of the landmarks plus a margin.
+pub fn save_wpilib_layout(
+    path: &Path,
+    landmarks: &[Landmark],
+    margin_m: f64,
+) -> Result<(), IoError> {
+    let (mut max_x, mut max_y) = (0.0f64, 0.0f64);
+    let tags: Vec<_> = landmarks
+        .iter()
+        .map(|l| {
+            max_x = max_x.max(l.position_m[0]);
+            max_y = max_y.max(l.position_m[1]);
+            let (s, c) = (0.5 * l.yaw_rad).sin_cos();
+            serde_json::json!({
+                "ID": l.id,
+                "pose": {
+                    "translation": {"x": l.position_m[0], "y": l.position_m[1], "z": l.position_m[2]},
+                    "rotation": {"quaternion": {"W": c, "X": 0.0, "Y": 0.0, "Z": s}}
+                }
+            })
+        })
+        .collect();
+    let layout = serde_json::json!({
+        "tags": tags,
+        "field": {"length": max_x + margin_m, "width": max_y + margin_m}
+    });
+    super::save_json(path, &layout)
+}
+
+/// The trajectories of a survey, all at the odometry times.
+#[derive(Debug, Clone, Copy)]
+pub struct Trajectories<'a> {
+    /// Dead reckoning.
+    pub odometry: &'a [StampedPose],
+    /// Online filter.
+    pub online: &'a [StampedPose],
+    /// Offline pose graph.
+    pub offline: &'a [StampedPose],
+    /// Ground truth, when known (interpolated to the odometry times).
+    pub ground_truth: Option<&'a [StampedPose]>,
+}
+
+/// Writes `trajectory.csv` with the DESIGN.md header; gt columns empty when unknown.
+pub fn save_trajectory_csv(path: &Path, t: &Trajectories<'_>) -> Result<(), IoError> {
+    let mut s = String::from(
+        "t_s,odom_x_m,odom_y_m,odom_theta_rad,online_x_m,online_y_m,online_theta_rad,\
+         offline_x_m,offline_y_m,offline_theta_rad,gt_x_m,gt_y_m,gt_theta_rad\n",
+    );
+    let pose = |p: Option<crate::geometry::Pose2>| match p {
+        Some(p) => format!("{:.5},{:.5},{:.6}", p.x, p.y, p.theta),
+        None => ",,".to_string(),
+    };
+    for (i, o) in t.odometry.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "{:.4},{},{},{},{}",
+            o.t_s,
+            pose(Some(o.pose)),
+            pose(t.online.get(i).map(|p| p.pose)),
+            pose(t.offline.get(i).map(|p| p.pose)),
+            pose(t.ground_truth.and_then(|g| pose_at(g, o.t_s))),
+        );
+    }
+    write_file(path, s.as_bytes())
+}
