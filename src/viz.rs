@@ -127,21 +127,44 @@ pub fn survey_blueprint() -> bp::Blueprint {
     let scene = bp::Spatial3DView::new("Scene")
         .with_origin("/world")
         .with_contents(["+ /world/**", "+ /landmarks/**"]);
-    let map = bp::Spatial2DView::new("Map").with_origin("/map");
+    let maps = bp::Tabs::new([
+        bp::Spatial2DView::new("Online map")
+            .with_origin("/map/online")
+            .into(),
+        bp::Spatial2DView::new("Corrected map")
+            .with_origin("/map/corrected")
+            .into(),
+        bp::Spatial2DView::new("Hough accumulator")
+            .with_origin("/map/hough")
+            .into(),
+    ]);
     let left = bp::Spatial2DView::new("Left camera").with_origin("/world/robot/left/image");
     let right = bp::Spatial2DView::new("Right camera").with_origin("/world/robot/right/image");
-    let errors = bp::TimeSeriesView::new("Errors").with_origin("/metrics");
+    let errors = bp::Tabs::new([
+        bp::TimeSeriesView::new("Position error")
+            .with_origin("/metrics")
+            .with_contents(["+ /metrics/position_error_m/**", "+ /metrics/online_sigma_m"])
+            .into(),
+        bp::TimeSeriesView::new("Tag NIS")
+            .with_origin("/metrics/tag_nis")
+            .into(),
+    ]);
     let report = bp::TextDocumentView::new("Report").with_origin("/report");
     bp::Blueprint::new(
         bp::Vertical::new([
-            bp::Horizontal::new([scene.into(), map.into(), report.into()])
+            bp::Horizontal::new([scene.into(), maps.into(), report.into()])
                 .with_column_shares([0.45, 0.35, 0.2])
                 .into(),
             bp::Horizontal::new([left.into(), right.into(), errors.into()]).into(),
         ])
         .with_row_shares([0.6, 0.4]),
     )
-    .with_time_panel(bp::TimePanel::new().with_timeline("time"))
+    // Opened on the end of the run (the finished map and trajectories); scrub back to replay it.
+    .with_time_panel(
+        bp::TimePanel::new()
+            .with_timeline("time")
+            .with_play_state(bp::components::PlayState::Following),
+    )
 }
 
 /// What a survey recording shows.
@@ -215,6 +238,14 @@ fn map_image(map: &OccupancyMap) -> rerun::Image {
 }
 
 /// The map as a ROS OccupancyGrid (0 free .. 100 occupied, 255 unknown) for the GridMap archetype.
+fn feature_color(kind: crate::hough::FeatureKind) -> rerun::Color {
+    match kind {
+        crate::hough::FeatureKind::Corner => rerun::Color::from_rgb(255, 60, 200),
+        crate::hough::FeatureKind::Edge => rerun::Color::from_rgb(60, 160, 255),
+        crate::hough::FeatureKind::Unknown => rerun::Color::from_rgb(200, 200, 0),
+    }
+}
+
 fn grid_map(map: &OccupancyMap) -> rerun::GridMap {
     let g = &map.geometry;
     let data: Vec<u8> = map
@@ -454,22 +485,11 @@ fn log_sonar_and_grid(
         "map/hough",
         &rerun::Image::from_l8(pixels, [acc.n_phi as u32, acc.n_rho as u32]),
     )?;
-    for (name, map, features) in [
-        ("raw", &s.raw.counting, &s.raw.features_offline),
-        (
-            "corrected",
-            &s.corrected.counting,
-            &s.corrected.features_offline,
-        ),
+    for (name, features) in [
+        ("raw", &s.raw.features_offline),
+        ("corrected", &s.corrected.features_offline),
     ] {
-        let colors: Vec<rerun::Color> = features
-            .iter()
-            .map(|f| match f.kind {
-                crate::hough::FeatureKind::Corner => rerun::Color::from_rgb(255, 60, 200),
-                crate::hough::FeatureKind::Edge => rerun::Color::from_rgb(60, 160, 255),
-                crate::hough::FeatureKind::Unknown => rerun::Color::from_rgb(200, 200, 0),
-            })
-            .collect();
+        let colors: Vec<rerun::Color> = features.iter().map(|f| feature_color(f.kind)).collect();
         let labels: Vec<String> = features
             .iter()
             .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes))
@@ -477,28 +497,40 @@ fn log_sonar_and_grid(
         rec.log_static(
             format!("world/features_{name}"),
             &rerun::Points3D::new(features.iter().map(|f| [f.x_m as f32, f.y_m as f32, 0.0]))
-                .with_colors(colors.clone())
+                .with_colors(colors)
                 .with_labels(labels)
+                .with_show_labels(false)
                 .with_radii([0.05f32]),
         )?;
+    }
+    // The 2D maps: the online grid as it grows with the online trajectory, and the corrected grid
+    // with its features and the offline trajectory.
+    for (name, map, trajectory, color) in [
+        ("online", &s.corrected.counting, &s.online.trajectory, [240, 180, 40]),
+        ("corrected", &s.corrected.counting, &s.offline.trajectory, [60, 200, 90]),
+    ] {
+        let traj: Vec<[f32; 2]> = trajectory
+            .iter()
+            .map(|p| map_pixel(map, p.pose.x, p.pose.y))
+            .collect();
         rec.log_static(
-            format!("map/{name}/features"),
-            &rerun::Points2D::new(features.iter().map(|f| map_pixel(map, f.x_m, f.y_m)))
-                .with_colors(colors)
-                .with_radii([1.0f32]),
+            format!("map/{name}/trajectory"),
+            &rerun::LineStrips2D::new([traj])
+                .with_colors([rerun::Color::from_rgb(color[0], color[1], color[2])]),
         )?;
     }
-    rec.log_static("map/corrected/grid", &map_image(&s.corrected.counting))?;
-    let traj: Vec<[f32; 2]> = s
-        .offline
-        .trajectory
-        .iter()
-        .map(|p| map_pixel(&s.corrected.counting, p.pose.x, p.pose.y))
-        .collect();
+    let features = &s.corrected.features_offline;
     rec.log_static(
-        "map/corrected/trajectory",
-        &rerun::LineStrips2D::new([traj]).with_colors([rerun::Color::from_rgb(60, 200, 90)]),
+        "map/corrected/features",
+        &rerun::Points2D::new(
+            features
+                .iter()
+                .map(|f| map_pixel(&s.corrected.counting, f.x_m, f.y_m)),
+        )
+        .with_colors(features.iter().map(|f| feature_color(f.kind)).collect::<Vec<_>>())
+        .with_radii([1.0f32]),
     )?;
+    rec.log_static("map/corrected/grid", &map_image(&s.corrected.counting))?;
 
     // The online grid (readings placed with the online poses) as it grows, and the sonar cones.
     let half = 0.5 * layout.cone_rad;
