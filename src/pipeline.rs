@@ -3,8 +3,9 @@
 //! → fusion with odometry and corners → corrected trajectory and map → scores. Takes and returns values; [`crate::io`] does files.
 
 use crate::camera::{Rectification, StereoRig};
+use crate::geometry::Pose2;
 use crate::fuse::{
-    associate, ate_m, run_offline, run_online, FuseConfig, Landmark, OfflineResult, OnlineResult,
+    align_se2, associate, ate_m, run_offline, run_online, FuseConfig, Landmark, OfflineResult, OnlineResult,
     TagSighting,
 };
 use crate::grid::{
@@ -265,33 +266,65 @@ pub fn score_survey(
             }
         }
     }
-    let mut errors: Vec<f64> = survey
-        .landmarks
-        .iter()
-        .filter_map(|l| {
-            let tag = world
-                .tags
-                .iter()
-                .find(|t| t.id == l.id && t.family == l.family)?;
-            let d = nalgebra::Vector3::from(l.position_m) - nalgebra::Vector3::from(tag.position_m);
-            Some(d.norm())
-        })
-        .collect();
-    errors.sort_by(f64::total_cmp);
-    if !errors.is_empty() {
-        m.insert("landmarks.median_error_m".into(), errors[errors.len() / 2]);
-        if errors.len() % 2 == 0 {
-            let n = errors.len();
-            m.insert(
-                "landmarks.median_error_m".into(),
-                0.5 * (errors[n / 2 - 1] + errors[n / 2]),
-            );
-        }
+    let landmark_errors = |align: Pose2| -> Vec<f64> {
+        let mut errors: Vec<f64> = survey
+            .landmarks
+            .iter()
+            .filter_map(|l| {
+                let tag = world
+                    .tags
+                    .iter()
+                    .find(|t| t.id == l.id && t.family == l.family)?;
+                let p = align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
+                let d = nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
+                    - nalgebra::Vector3::from(tag.position_m);
+                Some(d.norm())
+            })
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        errors
+    };
+    let errors = landmark_errors(Pose2::new(0.0, 0.0, 0.0));
+    if let Some(median) = median_sorted(&errors) {
+        m.insert("landmarks.median_error_m".into(), median);
         m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
+    }
+    // Diagnostics: the same after the best rigid alignment of the offline trajectory with the
+    // truth, i.e. with the shift and turn of the whole survey (its anchoring) taken out.
+    if let Some(align) = run
+        .ground_truth
+        .as_deref()
+        .and_then(|t| align_se2(&survey.offline.trajectory, t))
+    {
+        if let Some(median) = median_sorted(&landmark_errors(align)) {
+            m.insert("landmarks.median_error_aligned_m".into(), median);
+        }
+        let aligned: Vec<StampedPose> = survey
+            .offline
+            .trajectory
+            .iter()
+            .map(|p| StampedPose {
+                t_s: p.t_s,
+                pose: align.compose(&p.pose),
+            })
+            .collect();
+        if let Some(ate) = run.ground_truth.as_deref().and_then(|t| ate_m(&aligned, t)) {
+            m.insert("ate_m.offline_aligned".into(), ate);
+        }
     }
     m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
     m.insert("landmarks.planned".into(), world.tags.len() as f64);
     Ok(m)
+}
+
+/// Median of a sorted list.
+fn median_sorted(v: &[f64]) -> Option<f64> {
+    let n = v.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(v[n / 2]),
+        _ => Some(0.5 * (v[n / 2 - 1] + v[n / 2])),
+    }
 }
 
 /// Survey figures that need no ground truth.
@@ -318,6 +351,11 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
     );
     m.insert("offline.keyframes".into(), survey.offline.keyframes as f64);
     m.insert("offline.factors".into(), survey.offline.factors as f64);
+    if let Some([a, c, s]) = survey.offline.odometry_calibration {
+        m.insert("offline.odometry_turn_scale_error".into(), a);
+        m.insert("offline.odometry_heading_drift_rad_per_m".into(), c);
+        m.insert("offline.odometry_distance_scale_error".into(), s);
+    }
     m.insert(
         "offline.converged".into(),
         f64::from(u8::from(survey.offline.converged)),
