@@ -3,11 +3,11 @@
 //! → fusion with odometry and corners → corrected trajectory and map → scores. Takes and returns values; [`crate::io`] does files.
 
 use crate::camera::{Rectification, StereoRig};
-use crate::geometry::Pose2;
 use crate::fuse::{
-    align_se2, associate, ate_m, run_offline, run_online, FuseConfig, Landmark, OfflineResult, OnlineResult,
-    TagSighting,
+    align_se2, associate, ate_m, run_offline, run_online, FuseConfig, Landmark, OfflineResult,
+    OnlineResult, TagSighting,
 };
+use crate::geometry::Pose2;
 use crate::grid::{
     CountingGrid, GridError, LogOddsGrid, MappingConfig, OccupancyGrid, OccupancyMap,
 };
@@ -275,7 +275,8 @@ pub fn score_survey(
                     .tags
                     .iter()
                     .find(|t| t.id == l.id && t.family == l.family)?;
-                let p = align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
+                let p =
+                    align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
                 let d = nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
                     - nalgebra::Vector3::from(tag.position_m);
                 Some(d.norm())

@@ -139,6 +139,14 @@ pub struct ExplorationConfig {
     pub min_growth: f64,
     /// A target not reached in this time is given up (ours: 150 s).
     pub target_timeout_s: f64,
+    /// When exploration ends, drive the first boundary loop's path once more (through targets
+    /// every [`REVISIT_SPACING_M`] along it, in odometry), so every tag seen on the loop is seen
+    /// again: the loop closure an offline survey needs (ours: on; off gives the paper's run).
+    pub revisit_loop: bool,
+    /// Turn once on the spot before exploring, so the tags in view of the known start pose are
+    /// seen before any drift: they anchor the survey to the start (ours: on; off gives the paper's
+    /// run).
+    pub look_around_at_start: bool,
 }
 
 impl Default for ExplorationConfig {
@@ -155,6 +163,8 @@ impl Default for ExplorationConfig {
             step_s: 0.05,
             min_growth: 0.02,
             target_timeout_s: 150.0,
+            revisit_loop: true,
+            look_around_at_start: true,
         }
     }
 }
@@ -361,6 +371,8 @@ pub struct SimOutput {
 
 #[derive(Debug, Clone)]
 enum Mode {
+    /// Turn on the spot at the start, this much odometry turn still to go.
+    LookAround { remaining_rad: f64 },
     /// Drive straight, or towards a target.
     Straight { target: Option<Point2<f64>> },
     /// Follow the boundary with the obstacle on the right.
@@ -394,6 +406,13 @@ const GROWTH_WINDOW_S: f64 = 120.0;
 const BUG_GIVE_UP_M: f64 = 10.0;
 /// The first boundary is abandoned after this much travel if it never closes (ours: 150 m).
 const BOUNDARY_GIVE_UP_M: f64 = 150.0;
+
+/// Spacing of the revisit targets along the first boundary loop, metres of travel.
+pub const REVISIT_SPACING_M: f64 = 1.0;
+/// A revisit target within this distance (odometry) counts as reached, metres.
+pub const REVISIT_REACHED_M: f64 = 0.6;
+/// A revisit target not reached in this time is skipped, seconds (ten times the travel time).
+pub const REVISIT_TIMEOUT_S: f64 = 10.0 * REVISIT_SPACING_M / 0.1;
 
 /// Simulates a run in `world`. `on_progress(t_s)` is called about once per simulated second.
 pub fn simulate(
@@ -430,7 +449,13 @@ pub fn simulate(
     let mut t = 0.0;
     let mut since_travel = 0.0;
     let mut since_turn = 0.0;
-    let mut mode = Mode::Straight { target: None };
+    let mut mode = if e.look_around_at_start {
+        Mode::LookAround {
+            remaining_rad: std::f64::consts::TAU,
+        }
+    } else {
+        Mode::Straight { target: None }
+    };
     // Set when the first boundary loop ends: exploration goes on by targets.
     let mut pick_target = false;
     let mut targets: Vec<Point2<f64>> = Vec::new();
@@ -439,6 +464,11 @@ pub fn simulate(
     let mut known_history: Vec<(f64, usize)> = Vec::new();
     let mut end_reason = String::from("time budget ended");
     let mut next_progress = 1.0;
+    // The first boundary loop as odometry positions, and the revisit queue once exploring ends.
+    let mut loop_path: Vec<Point2<f64>> = Vec::new();
+    let mut loop_done = false;
+    let mut revisit: Option<std::collections::VecDeque<Point2<f64>>> = None;
+    let mut explore_end = String::new();
 
     let mut sample =
         |t: f64, truth: Pose2, odom: Pose2, rng: &mut ChaCha8Rng, grid: &mut CountingGrid| {
@@ -472,51 +502,80 @@ pub fn simulate(
 
     while t < e.duration_s {
         // Choose the next target when there is none to pursue.
+        // Revisit targets are odometry positions near walls that drift may have put inside
+        // one: they count as reached sooner and are given up sooner.
+        let (reach_m, timeout_s) = if revisit.is_some() {
+            (REVISIT_REACHED_M, REVISIT_TIMEOUT_S)
+        } else {
+            (0.3, e.target_timeout_s)
+        };
         let needs_target = pick_target
             || match &mode {
                 Mode::Straight { target: Some(tg) } => {
-                    (odom.position() - tg).norm() < 0.3 || t - target_started > e.target_timeout_s
+                    (odom.position() - tg).norm() < reach_m || t - target_started > timeout_s
                 }
-                Mode::Follow(f) => f.target.is_some() && t - target_started > e.target_timeout_s,
+                Mode::Follow(FollowState {
+                    target: Some(tg), ..
+                }) => {
+                    (revisit.is_some() && (odom.position() - tg).norm() < reach_m)
+                        || t - target_started > timeout_s
+                }
                 _ => false,
             };
         if needs_target {
-            pick_target = false;
-            if let Mode::Straight { target: Some(tg) }
-            | Mode::Follow(FollowState {
-                target: Some(tg), ..
-            }) = &mode
-            {
-                if (odom.position() - tg).norm() >= 0.3 {
-                    failed.push(*tg);
+            if let Some(queue) = revisit.as_mut() {
+                // Revisiting the first loop: the next point of it, whether this one was reached.
+                match queue.pop_front() {
+                    Some(tg) => {
+                        target_started = t;
+                        mode = Mode::Straight { target: Some(tg) };
+                    }
+                    None => {
+                        end_reason = format!("{explore_end}; first boundary loop driven again");
+                        break;
+                    }
                 }
-            }
-            let map = grid.map();
-            let now = map.known_cells();
-            known_history.push((t, now));
-            // Compare with the area three targets and at least two minutes ago.
-            let old = known_history
-                .iter()
-                .rev()
-                .skip(3)
-                .find(|(t_old, _)| t - t_old >= GROWTH_WINDOW_S)
-                .map(|&(_, k)| k);
-            if let Some(old) = old {
-                if (now as f64) < old as f64 * (1.0 + e.min_growth) {
-                    end_reason = "explored area stopped growing".into();
+            } else if let Some(reason) = explore_step(
+                &mut pick_target,
+                &mode,
+                odom,
+                t,
+                &grid,
+                &mut failed,
+                &mut known_history,
+                &mut targets,
+                &mut target_started,
+                e,
+            )
+            .map_or_else(Some, |next| {
+                mode = next;
+                None
+            }) {
+                if !(e.revisit_loop && loop_path.len() > 1) {
+                    end_reason = reason;
                     break;
                 }
-            }
-            match choose_target(&map, odom.position(), &failed, e.robot_radius_m) {
-                Some(tg) => {
-                    targets.push(tg);
-                    target_started = t;
-                    mode = Mode::Straight { target: Some(tg) };
-                }
-                None => {
-                    end_reason = "no reachable unexplored region left".into();
-                    break;
-                }
+                // Start the loop again from its point nearest to where the robot is.
+                let here = odom.position();
+                let start = (0..loop_path.len())
+                    .min_by(|&a, &b| {
+                        (loop_path[a] - here)
+                            .norm()
+                            .total_cmp(&(loop_path[b] - here).norm())
+                    })
+                    .unwrap_or(0);
+                let mut queue: std::collections::VecDeque<Point2<f64>> = loop_path[start..]
+                    .iter()
+                    .chain(&loop_path[..=start])
+                    .copied()
+                    .collect();
+                explore_end = reason;
+                let first = queue.pop_front().unwrap_or(here);
+                target_started = t;
+                mode = Mode::Straight {
+                    target: Some(first),
+                };
+                revisit = Some(queue);
             }
         }
 
@@ -527,6 +586,7 @@ pub fn simulate(
                 (&mode, &m),
                 (Mode::Follow(_), Mode::Straight { target: None })
             );
+            loop_done |= pick_target;
             mode = m;
         }
 
@@ -555,9 +615,20 @@ pub fn simulate(
         since_travel += ds.abs();
         since_turn += dth.abs();
 
+        if let Mode::LookAround { remaining_rad } = &mut mode {
+            *remaining_rad -= dth.abs();
+        }
         if let Mode::Follow(f) = &mut mode {
             f.travel_m += ds.abs();
             f.history.push((f.travel_m, odom.theta));
+            let on_first_loop = f.target.is_none() && !loop_done;
+            if on_first_loop
+                && loop_path
+                    .last()
+                    .is_none_or(|last| (odom.position() - last).norm() >= REVISIT_SPACING_M)
+            {
+                loop_path.push(odom.position());
+            }
         }
         if since_travel >= e.sample_travel_m || since_turn >= e.sample_turn_deg.to_radians() {
             since_travel = 0.0;
@@ -597,6 +668,56 @@ pub fn simulate(
         end_reason,
         targets,
     })
+}
+
+/// One exploration decision when a target is needed: `Err(reason)` when exploring is over, else
+/// the mode that pursues the next target.
+#[allow(clippy::too_many_arguments)]
+fn explore_step(
+    pick_target: &mut bool,
+    mode: &Mode,
+    odom: Pose2,
+    t: f64,
+    grid: &CountingGrid,
+    failed: &mut Vec<Point2<f64>>,
+    known_history: &mut Vec<(f64, usize)>,
+    targets: &mut Vec<Point2<f64>>,
+    target_started: &mut f64,
+    e: &ExplorationConfig,
+) -> Result<Mode, String> {
+    *pick_target = false;
+    if let Mode::Straight { target: Some(tg) }
+    | Mode::Follow(FollowState {
+        target: Some(tg), ..
+    }) = mode
+    {
+        if (odom.position() - tg).norm() >= 0.3 {
+            failed.push(*tg);
+        }
+    }
+    let map = grid.map();
+    let now = map.known_cells();
+    known_history.push((t, now));
+    // Compare with the area three targets and at least two minutes ago.
+    let old = known_history
+        .iter()
+        .rev()
+        .skip(3)
+        .find(|(t_old, _)| t - t_old >= GROWTH_WINDOW_S)
+        .map(|&(_, k)| k);
+    if let Some(old) = old {
+        if (now as f64) < old as f64 * (1.0 + e.min_growth) {
+            return Err("explored area stopped growing".into());
+        }
+    }
+    match choose_target(&map, odom.position(), failed, e.robot_radius_m) {
+        Some(tg) => {
+            targets.push(tg);
+            *target_started = t;
+            Ok(Mode::Straight { target: Some(tg) })
+        }
+        None => Err("no reachable unexplored region left".into()),
+    }
 }
 
 /// Moves a pose by `ds` along an arc turning `dth` (midpoint rule).
@@ -640,6 +761,13 @@ fn control(
         }
     };
     match mode {
+        Mode::LookAround { remaining_rad } => {
+            if *remaining_rad <= 0.0 {
+                (0.0, 0.0, Some(Mode::Straight { target: None }))
+            } else {
+                (0.0, e.turn_rate_rad_s, None)
+            }
+        }
         Mode::Straight { target } => {
             let heading_err = match target {
                 Some(tg) => {

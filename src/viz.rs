@@ -143,7 +143,10 @@ pub fn survey_blueprint() -> bp::Blueprint {
     let errors = bp::Tabs::new([
         bp::TimeSeriesView::new("Position error")
             .with_origin("/metrics")
-            .with_contents(["+ /metrics/position_error_m/**", "+ /metrics/online_sigma_m"])
+            .with_contents([
+                "+ /metrics/position_error_m/**",
+                "+ /metrics/online_sigma_m",
+            ])
             .into(),
         bp::TimeSeriesView::new("Tag NIS")
             .with_origin("/metrics/tag_nis")
@@ -506,8 +509,18 @@ fn log_sonar_and_grid(
     // The 2D maps: the online grid as it grows with the online trajectory, and the corrected grid
     // with its features and the offline trajectory.
     for (name, map, trajectory, color) in [
-        ("online", &s.corrected.counting, &s.online.trajectory, [240, 180, 40]),
-        ("corrected", &s.corrected.counting, &s.offline.trajectory, [60, 200, 90]),
+        (
+            "online",
+            &s.corrected.counting,
+            &s.online.trajectory,
+            [240, 180, 40],
+        ),
+        (
+            "corrected",
+            &s.corrected.counting,
+            &s.offline.trajectory,
+            [60, 200, 90],
+        ),
     ] {
         let traj: Vec<[f32; 2]> = trajectory
             .iter()
@@ -527,7 +540,12 @@ fn log_sonar_and_grid(
                 .iter()
                 .map(|f| map_pixel(&s.corrected.counting, f.x_m, f.y_m)),
         )
-        .with_colors(features.iter().map(|f| feature_color(f.kind)).collect::<Vec<_>>())
+        .with_colors(
+            features
+                .iter()
+                .map(|f| feature_color(f.kind))
+                .collect::<Vec<_>>(),
+        )
         .with_radii([1.0f32]),
     )?;
     rec.log_static("map/corrected/grid", &map_image(&s.corrected.counting))?;
@@ -612,17 +630,28 @@ fn log_cameras(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<
     for s in scene.sightings {
         by_frame.entry(s.frame).or_default().push(s);
     }
-    for (k, entry) in scene.run.stereo.iter().enumerate() {
+    // Loading and compressing the pictures is most of the recording's cost: done in parallel.
+    use rayon::prelude::*;
+    let encoded: Vec<Option<(Vec<u8>, Vec<u8>)>> = scene
+        .run
+        .stereo
+        .par_iter()
+        .map(|entry| {
+            let (left, right) = (scene.images)(entry)?;
+            Some((jpeg(&left).ok()?, jpeg(&right).ok()?))
+        })
+        .collect();
+    for (k, (entry, pair)) in scene.run.stereo.iter().zip(encoded).enumerate() {
         rec.set_duration_secs("time", entry.t_s);
         rec.set_time_sequence("frame", k as i64);
-        if let Some((left, right)) = (scene.images)(entry) {
+        if let Some((left, right)) = pair {
             rec.log(
                 "world/robot/left/image",
-                &rerun::EncodedImage::from_file_contents(jpeg(&left)?),
+                &rerun::EncodedImage::from_file_contents(left),
             )?;
             rec.log(
                 "world/robot/right/image",
-                &rerun::EncodedImage::from_file_contents(jpeg(&right)?),
+                &rerun::EncodedImage::from_file_contents(right),
             )?;
         }
         let tags = by_frame.get(&k).map(Vec::as_slice).unwrap_or(&[]);
