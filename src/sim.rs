@@ -876,8 +876,12 @@ fn follow_command(
             let desired =
                 towards + std::f64::consts::FRAC_PI_2 - (2.0 * (dist - d)).clamp(-1.0, 1.0);
             let err = wrap_angle(desired - truth.theta);
-            if err.abs() > 0.8 {
+            if err.abs() > 0.8 && dist < d {
                 (0.0, e.turn_rate_rad_s * err.signum())
+            } else if err.abs() > 0.8 {
+                // Not too close: turn while creeping on, so two obstacles pulling opposite ways
+                // (a door's jambs) cannot hold the robot turning back and forth on the spot.
+                (0.5 * e.speed_mps, e.turn_rate_rad_s * err.signum())
             } else {
                 (
                     e.speed_mps,
