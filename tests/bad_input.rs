@@ -340,3 +340,122 @@ fn render_pose_must_be_three_finite_numbers_and_sequences_render() {
     assert_eq!(truth["frames"].as_array().unwrap().len(), 2);
     assert!(out.join("left/000001.png").exists() && out.join("right/000001.png").exists());
 }
+
+/// A good run with one stereo pair written from a rendered office pair.
+fn run_with_pair(dir: &Path) {
+    good_run(dir);
+    let pair = dir.join("pair");
+    let (code, err) = stereotag(&[
+        "render",
+        "--world",
+        &common::sample("office/world.yaml").to_string_lossy(),
+        "--pose",
+        "1.0,6.3,2.35",
+        "--out",
+        pair.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::create_dir_all(dir.join("stereo")).unwrap();
+    std::fs::rename(pair.join("left.png"), dir.join("stereo/l.png")).unwrap();
+    std::fs::rename(pair.join("right.png"), dir.join("stereo/r.png")).unwrap();
+    std::fs::remove_dir_all(&pair).unwrap();
+    std::fs::write(
+        dir.join("stereo.csv"),
+        "t_s,left,right\n0.5,stereo/l.png,stereo/r.png\n",
+    )
+    .unwrap();
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/default.yaml"),
+        dir.join("rig.yaml"),
+    )
+    .unwrap();
+    let yaml = std::fs::read_to_string(dir.join("run.yaml")).unwrap();
+    std::fs::write(
+        dir.join("run.yaml"),
+        yaml.replace("robot:\n", "robot:\n  rig: rig.yaml\n"),
+    )
+    .unwrap();
+}
+
+fn survey(run: &Path, out: &Path) -> (i32, String) {
+    stereotag(&[
+        "survey",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-rerun",
+    ])
+}
+
+#[test]
+fn survey_of_a_sonar_only_run_says_so_and_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    let out = tmp.path().join("survey");
+    let (code, err) = survey(&run, &out);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("no stereo pairs"), "{err}");
+    assert!(out.join("landmarks.json").exists());
+}
+
+#[test]
+fn survey_names_a_missing_image_and_a_rig_that_does_not_fit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    run_with_pair(&run);
+    // The pair surveys.
+    let (code, err) = survey(&run, &tmp.path().join("ok"));
+    assert_eq!(code, 0, "{err}");
+
+    std::fs::remove_file(run.join("stereo/r.png")).unwrap();
+    let out = tmp.path().join("missing");
+    let (code, err) = survey(&run, &out);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("r.png"), "{err}");
+    assert!(!out.exists());
+
+    run_with_pair(&run);
+    let rig = std::fs::read_to_string(run.join("rig.yaml")).unwrap();
+    std::fs::write(
+        run.join("rig.yaml"),
+        rig.replace("[640, 480]", "[752, 480]"),
+    )
+    .unwrap();
+    let out = tmp.path().join("rig");
+    let (code, err) = survey(&run, &out);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("l.png") && err.contains("640x480"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn localize_names_a_bad_landmarks_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    let survey_dir = tmp.path().join("survey");
+    std::fs::create_dir_all(&survey_dir).unwrap();
+    std::fs::write(
+        survey_dir.join("landmarks.json"),
+        "{\"landmarks\": [{\"id\": 1, \"family\": \"tag36h11\"}]}",
+    )
+    .unwrap();
+    let out = tmp.path().join("loc");
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        survey_dir.to_str().unwrap(),
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("landmarks.json") && err.contains("size_m"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
