@@ -1,6 +1,7 @@
 //! Command-line interface: argument parsing, error reporting, progress. The only module that uses
 //! clap, anyhow and indicatif.
 
+mod calibrate;
 mod config;
 mod demo;
 mod detect;
@@ -73,6 +74,11 @@ enum Command {
     ///
     /// Example: stereotag plan --map maps/museum --out plan
     Plan(plan::PlanArgs),
+    /// Calibrate a stereo rig from board corners: Zhang initialisation, bundle adjustment of both
+    /// cameras and right_from_left with outliers listed; writes Kalibr, OpenCV and ROS files.
+    ///
+    /// Example: stereotag calibrate --target calibration/targets/aprilgrid_6x6.yaml --corners-left cam0 --corners-right cam1 --resolution 752x480 --out calib
+    Calibrate(calibrate::Calibrate),
     /// Print a settings file with its defaults.
     ///
     /// Example: stereotag config --default mapping > mapping.yaml
@@ -96,6 +102,7 @@ fn is_input_error(err: &anyhow::Error) -> bool {
             || e.is::<UsageError>()
             || e.is::<stereotag::tags::TagError>()
             || e.is::<stereotag::render::RenderError>()
+            || e.is::<stereotag::calibrate::CalibError>()
             || is_viz_input_error(e)
     })
 }
@@ -128,6 +135,7 @@ pub fn main() -> i32 {
         Command::Map(c) => c.run(),
         Command::Survey(c) => c.run(cli.quiet),
         Command::Localize(c) => c.run(cli.quiet),
+        Command::Calibrate(c) => c.run(),
         Command::Plan(c) => c.run(),
         Command::Detect(c) => c.run(),
         Command::Rig(c) => c.run(),

@@ -17,24 +17,8 @@ pub struct Rig {
 impl Rig {
     pub fn run(&self) -> anyhow::Result<()> {
         let rig = io::load_rig(&self.rig)?;
-        let rect = rig.rectify();
         let dir = OutputDir::create(&self.out, self.force)?;
-        io::save_rig(&dir.path("camchain.yaml"), &rig)?;
-        io::save_opencv_stereo(&dir.path("opencv_stereo.yaml"), &rig, &rect)?;
-        io::save_camera_info(
-            &dir.path("left.yaml"),
-            "left",
-            &rig.left,
-            &rect.left_rotation,
-            &rect.left_projection(),
-        )?;
-        io::save_camera_info(
-            &dir.path("right.yaml"),
-            "right",
-            &rig.right,
-            &rect.right_rotation,
-            &rect.right_projection(),
-        )?;
+        let rect = write_rig_exports(&dir, &rig)?;
         dir.commit()?;
         tracing::info!(
             "baseline {:.4} m, rectified focal {:.2} px; wrote {}",
@@ -44,4 +28,29 @@ impl Rig {
         );
         Ok(())
     }
+}
+
+/// Writes a rig as Kalibr camchain, OpenCV FileStorage and ROS camera_info (Bouguet-rectified).
+pub(crate) fn write_rig_exports(
+    dir: &OutputDir,
+    rig: &stereotag::camera::StereoRig,
+) -> anyhow::Result<stereotag::camera::Rectification> {
+    let rect = rig.rectify();
+    io::save_rig(&dir.path("camchain.yaml"), rig)?;
+    io::save_opencv_stereo(&dir.path("opencv_stereo.yaml"), rig, &rect)?;
+    io::save_camera_info(
+        &dir.path("left.yaml"),
+        "left",
+        &rig.left,
+        &rect.left_rotation,
+        &rect.left_projection(),
+    )?;
+    io::save_camera_info(
+        &dir.path("right.yaml"),
+        "right",
+        &rig.right,
+        &rect.right_rotation,
+        &rect.right_projection(),
+    )?;
+    Ok(rect)
 }

@@ -4,6 +4,7 @@
 //! the file and line of the first problem. Writers go through [`OutputDir`], which builds the
 //! output under a temporary name and renames it into place, so a failure leaves nothing half-written.
 
+mod calib;
 mod maps;
 mod output;
 mod rig;
@@ -11,6 +12,7 @@ mod run;
 mod survey;
 mod world;
 
+pub use calib::{load_corner_csvs, load_target, Target};
 pub use maps::{
     load_features_csv, load_ros_map, load_ros_occupancy, save_accumulator_png, save_features_csv,
     save_map_png, save_ros_map, RosMapYaml,

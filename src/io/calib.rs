@@ -1,0 +1,149 @@
+//! Calibration inputs: Kalibr target YAML and corners already detected (the EuRoC / yac CSV).
+
+use super::{parse_yaml, read_text, IoError};
+use crate::calibrate::{Corner, ViewCorners};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A calibration target as Kalibr describes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "target_type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Target {
+    /// Kalibr AprilGrid: tag36h11 tags with 2-bit borders in a grid.
+    Aprilgrid {
+        /// Tags across.
+        #[serde(rename = "tagCols")]
+        tag_cols: u32,
+        /// Tags down.
+        #[serde(rename = "tagRows")]
+        tag_rows: u32,
+        /// Tag edge, metres.
+        #[serde(rename = "tagSize")]
+        tag_size: f64,
+        /// Gap between tags over the tag edge.
+        #[serde(rename = "tagSpacing")]
+        tag_spacing: f64,
+    },
+    /// Chessboard by inner corners.
+    Checkerboard {
+        /// Inner corners across.
+        #[serde(rename = "targetCols")]
+        target_cols: u32,
+        /// Inner corners down.
+        #[serde(rename = "targetRows")]
+        target_rows: u32,
+        /// Square height, metres.
+        #[serde(rename = "rowSpacingMeters")]
+        row_spacing_m: f64,
+        /// Square width, metres.
+        #[serde(rename = "colSpacingMeters")]
+        col_spacing_m: f64,
+    },
+}
+
+/// Reads and checks a Kalibr target YAML file.
+pub fn load_target(path: &Path) -> Result<Target, IoError> {
+    let target: Target = parse_yaml(path, &read_text(path)?)?;
+    let ok = match &target {
+        Target::Aprilgrid {
+            tag_cols,
+            tag_rows,
+            tag_size,
+            tag_spacing,
+        } => *tag_cols > 0 && *tag_rows > 0 && *tag_size > 0.0 && *tag_spacing >= 0.0,
+        Target::Checkerboard {
+            target_cols,
+            target_rows,
+            row_spacing_m,
+            col_spacing_m,
+        } => *target_cols > 1 && *target_rows > 1 && *row_spacing_m > 0.0 && *col_spacing_m > 0.0,
+    };
+    if !ok {
+        return Err(IoError::content(
+            path,
+            "counts must be positive and sizes positive numbers of metres",
+        ));
+    }
+    Ok(target)
+}
+
+/// Reads a directory of per-frame corner CSV files as EuRoC's calibration data and yac write them:
+/// `ts,tag_rows,tag_cols,tag_size,tag_spacing,kp_x,kp_y,p_x,p_y,p_z,tag_id,corner_idx` (a `#` header
+/// line). The view name is the file stem (the time stamp).
+pub fn load_corner_csvs(dir: &Path) -> Result<ViewCorners, IoError> {
+    let mut views = ViewCorners::new();
+    let entries = std::fs::read_dir(dir).map_err(|e| IoError::file(dir, e))?;
+    let mut paths: Vec<_> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    paths.sort();
+    if paths.is_empty() {
+        return Err(IoError::content(
+            dir,
+            "no .csv corner files in this directory",
+        ));
+    }
+    for path in paths {
+        let text = read_text(&path)?;
+        let mut corners = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            let line_no = i as u64 + 1;
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') || line.starts_with("ts") {
+                continue;
+            }
+            let f: Vec<&str> = line.split(',').map(str::trim).collect();
+            if f.len() != 12 {
+                return Err(IoError::line(
+                    &path,
+                    line_no,
+                    format!(
+                        "expected 12 fields (ts,tag_rows,tag_cols,tag_size,tag_spacing,kp_x,kp_y,p_x,p_y,p_z,tag_id,corner_idx), found {}",
+                        f.len()
+                    ),
+                ));
+            }
+            let num = |k: usize, what: &str| -> Result<f64, IoError> {
+                f[k].parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        IoError::line(
+                            &path,
+                            line_no,
+                            format!("{what}: `{}` is not a finite number", f[k]),
+                        )
+                    })
+            };
+            let int = |k: usize, what: &str| -> Result<u32, IoError> {
+                f[k].parse::<u32>().map_err(|_| {
+                    IoError::line(
+                        &path,
+                        line_no,
+                        format!("{what}: `{}` is not a whole number", f[k]),
+                    )
+                })
+            };
+            let (tag, idx) = (int(10, "tag_id")?, int(11, "corner_idx")?);
+            if idx > 3 {
+                return Err(IoError::line(
+                    &path,
+                    line_no,
+                    format!("corner_idx: {idx}, expected 0 to 3"),
+                ));
+            }
+            corners.push(Corner {
+                id: tag * 4 + idx,
+                board_m: [num(7, "p_x")?, num(8, "p_y")?, num(9, "p_z")?],
+                px: [num(5, "kp_x")?, num(6, "kp_y")?],
+            });
+        }
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        views.insert(name, corners);
+    }
+    Ok(views)
+}
