@@ -127,6 +127,21 @@ pub struct Calibration {
     pub coverage_counts: (Vec<u32>, Vec<u32>),
     /// Things the user should know, with what to do.
     pub warnings: Vec<String>,
+    /// The views used, with the corners kept and the solved board pose.
+    pub used: Vec<UsedView>,
+}
+
+/// A view as the adjustment used it.
+#[derive(Debug, Clone)]
+pub struct UsedView {
+    /// View name.
+    pub name: String,
+    /// Left corners kept.
+    pub left: Vec<Corner>,
+    /// Right corners kept.
+    pub right: Vec<Corner>,
+    /// `left_from_board`.
+    pub left_from_board: Isometry3<f64>,
 }
 
 const COVERAGE_COLS: usize = 8;
@@ -321,6 +336,16 @@ pub fn calibrate_stereo(
         coverage,
         coverage_counts: (cells_l, cells_r),
         warnings,
+        used: views
+            .iter()
+            .zip(&state.poses)
+            .map(|((name, l, r), pose)| UsedView {
+                name: name.to_string(),
+                left: l.clone(),
+                right: r.clone(),
+                left_from_board: *pose,
+            })
+            .collect(),
     })
 }
 

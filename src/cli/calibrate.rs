@@ -27,12 +27,15 @@ pub struct Calibrate {
     /// Keep this rig file's intrinsics and distortion; solve right_from_left only.
     #[arg(long, value_name = "RIG")]
     fix_intrinsics: Option<PathBuf>,
-    /// Output directory: camchain.yaml, opencv_stereo.yaml, left.yaml, right.yaml, report.json.
+    /// Output directory: camchain.yaml, opencv_stereo.yaml, left.yaml, right.yaml, report.json,
+    /// calibration.rrd.
     #[arg(long)]
     out: PathBuf,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    rerun: super::RerunArgs,
 }
 
 impl Calibrate {
@@ -98,6 +101,22 @@ impl Calibrate {
             "warnings": calib.warnings,
         });
         io::save_json(&dir.path("report.json"), &report)?;
+        let recorder = super::recorder(
+            &self.rerun,
+            "stereotag calibration",
+            &dir.path("calibration.rrd"),
+        )?;
+        #[cfg(feature = "rerun")]
+        if let Some(rec) = recorder {
+            let md = format!(
+                "# stereotag calibration\n\n```json\n{}\n```\n",
+                serde_json::to_string_pretty(&report["metrics"])?
+            );
+            stereotag::viz::log_calibration(&rec, &calib, &md)?;
+            rec.finish()?;
+        }
+        #[cfg(not(feature = "rerun"))]
+        let _ = recorder;
         dir.commit()?;
         tracing::info!(
             "{} views, {} outliers left out; RMS {:.3} px (left {:.3}, right {:.3}); baseline {:.2} mm ± {:.2}",

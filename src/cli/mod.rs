@@ -233,7 +233,7 @@ pub(crate) type Recorder = stereotag::viz::Recorder;
 pub(crate) type Recorder = ();
 
 /// Opens the recording the flags ask for; `default_file` is used unless `--save`, `--spawn` or
-/// `--connect` say otherwise. The file is written into the staging directory with the other outputs.
+/// `--connect` say otherwise. The layout follows the application name (calibration or survey). The file is written into the staging directory with the other outputs.
 #[cfg(feature = "rerun")]
 pub(crate) fn recorder(
     args: &RerunArgs,
@@ -263,10 +263,15 @@ pub(crate) fn recorder(
     if let Some(url) = &args.connect {
         sinks.push(Sink::Connect(url.clone()));
     }
+    let blueprint = if application.contains("calibrat") {
+        stereotag::viz::calibration_blueprint()
+    } else {
+        stereotag::viz::survey_blueprint()
+    };
     Ok(Some(stereotag::viz::Recorder::new(
         application,
         &sinks,
-        stereotag::viz::survey_blueprint(),
+        blueprint,
     )?))
 }
 

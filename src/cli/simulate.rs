@@ -26,6 +26,10 @@ pub struct Simulate {
     /// Perfect odometry (no wheel errors).
     #[arg(long)]
     no_odometry_noise: bool,
+    /// The paper's exploration only: no look-around at the start, no second drive of the first
+    /// boundary loop (both added for surveys).
+    #[arg(long)]
+    paper_exploration: bool,
     /// Stereo rig for the pictures taken when a tag is in view.
     #[arg(long, default_value = "calibration/rigs/default.yaml")]
     rig: PathBuf,
@@ -54,6 +58,10 @@ impl Simulate {
             }
             if self.no_odometry_noise {
                 c.odometry = OdometryNoise::none();
+            }
+            if self.paper_exploration {
+                c.exploration.look_around_at_start = false;
+                c.exploration.revisit_loop = false;
             }
             Ok(())
         })
