@@ -7,7 +7,7 @@
 use crate::fuse::TagSighting;
 use crate::grid::{CountingGrid, OccupancyGrid, OccupancyMap};
 use crate::pipeline::Survey;
-use crate::run::{pose_at, RunDataset, StampedPose, StereoEntry};
+use crate::run::{pose_at, RunDataset, StampedPose};
 use crate::world::World;
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
 use rerun::blueprint as bp;
@@ -186,8 +186,8 @@ pub struct SurveyScene<'a> {
     pub mapping: &'a crate::grid::MappingConfig,
     /// The stereo rig's cameras and mounting, when the run has pictures.
     pub rig: Option<&'a crate::camera::StereoRig>,
-    /// Loads stereo pair `k` (left, right), or `None` when it cannot be read.
-    pub images: &'a (dyn Fn(&StereoEntry) -> Option<(image::GrayImage, image::GrayImage)> + Sync),
+    /// Each stereo pair of the run as JPEG bytes (left, right) from [`jpeg_pair`], or `None`.
+    pub images: &'a [Option<(Vec<u8>, Vec<u8>)>],
 }
 
 fn f32s<const N: usize>(v: [f64; N]) -> [f32; N] {
@@ -268,6 +268,12 @@ fn grid_map(map: &OccupancyMap) -> rerun::GridMap {
     )
     .with_translation([g.origin_m[0] as f32, g.origin_m[1] as f32, -0.01])
     .with_colormap(rerun::components::Colormap::RvizMap)
+}
+
+/// A stereo pair compressed for the recording (compressing is most of a recording's cost, so the
+/// survey does it while the pair is loaded for detection, in parallel).
+pub fn jpeg_pair(left: &image::GrayImage, right: &image::GrayImage) -> Option<(Vec<u8>, Vec<u8>)> {
+    Some((jpeg(left).ok()?, jpeg(right).ok()?))
 }
 
 fn jpeg(img: &image::GrayImage) -> Result<Vec<u8>, VizError> {
@@ -630,18 +636,8 @@ fn log_cameras(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<
     for s in scene.sightings {
         by_frame.entry(s.frame).or_default().push(s);
     }
-    // Loading and compressing the pictures is most of the recording's cost: done in parallel.
-    use rayon::prelude::*;
-    let encoded: Vec<Option<(Vec<u8>, Vec<u8>)>> = scene
-        .run
-        .stereo
-        .par_iter()
-        .map(|entry| {
-            let (left, right) = (scene.images)(entry)?;
-            Some((jpeg(&left).ok()?, jpeg(&right).ok()?))
-        })
-        .collect();
-    for (k, (entry, pair)) in scene.run.stereo.iter().zip(encoded).enumerate() {
+    for (k, entry) in scene.run.stereo.iter().enumerate() {
+        let pair = scene.images.get(k).cloned().flatten();
         rec.set_duration_secs("time", entry.t_s);
         rec.set_time_sequence("frame", k as i64);
         if let Some((left, right)) = pair {

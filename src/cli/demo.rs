@@ -43,6 +43,7 @@ impl Demo {
                 world: Some(&self.world),
                 config: None,
                 detect: DetectOptions {
+                    encode: None,
                     backend: Backend::ApriltagC,
                     families: &[],
                     decimate: 1,

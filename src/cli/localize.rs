@@ -53,9 +53,10 @@ impl Localize {
             f.dedup();
             f
         };
-        let sightings = match load_run_rig(&self.run, &run)? {
+        let (sightings, _) = match load_run_rig(&self.run, &run)? {
             Some(rig) => detect_run(
                 &DetectOptions {
+                    encode: None,
                     backend: self.backend,
                     families: &families,
                     decimate: self.decimate,
@@ -67,7 +68,7 @@ impl Localize {
                 &rig,
                 world.as_ref(),
             )?,
-            None => Vec::new(),
+            None => (Vec::new(), Vec::new()),
         };
         let result = localize(&run.odometry, &sightings, &landmarks, &config);
         let truth = run.ground_truth.as_deref();

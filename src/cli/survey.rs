@@ -63,6 +63,7 @@ impl SurveyArgs {
             world: world.as_deref(),
             config: self.config.as_deref(),
             detect: DetectOptions {
+                encode: None,
                 backend: self.backend,
                 families: &self.family,
                 decimate: self.decimate,
@@ -84,13 +85,23 @@ pub(crate) fn world_of_run(run_dir: &Path) -> Option<PathBuf> {
 }
 
 /// How tags are detected in a run's stereo pairs.
+#[derive(Clone)]
 pub(crate) struct DetectOptions<'a> {
+    /// Compresses each pair for the recording while it is loaded (None: not recording).
+    pub encode: Option<&'a EncodePair>,
     pub backend: Backend,
     pub families: &'a [String],
     pub decimate: u32,
     pub tag_size_m: Option<f64>,
     pub quiet: bool,
 }
+
+/// Compresses a stereo pair for the recording.
+pub(crate) type EncodePair =
+    dyn Fn(&image::GrayImage, &image::GrayImage) -> Option<(Vec<u8>, Vec<u8>)> + Sync;
+
+/// A run's sightings and, when recording, its pairs compressed.
+pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<(Vec<u8>, Vec<u8>)>>);
 
 /// Everything `survey_run` needs.
 pub(crate) struct SurveyJob<'a> {
@@ -123,9 +134,19 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
 
     let rig = load_run_rig(job.run_dir, &run)?;
     let detect_start = std::time::Instant::now();
-    let sightings = match &rig {
-        Some(rig) => detect_run(&job.detect, job.run_dir, &run, rig, world.as_ref())?,
-        None => Vec::new(),
+    #[cfg(feature = "rerun")]
+    let encode: Option<&EncodePair> = recorder
+        .as_ref()
+        .map(|_| &stereotag::viz::jpeg_pair as &EncodePair);
+    #[cfg(not(feature = "rerun"))]
+    let encode: Option<&EncodePair> = None;
+    let options = DetectOptions {
+        encode,
+        ..job.detect.clone()
+    };
+    let (sightings, images) = match &rig {
+        Some(rig) => detect_run(&options, job.run_dir, &run, rig, world.as_ref())?,
+        None => (Vec::new(), Vec::new()),
     };
     let detect_s = detect_start.elapsed().as_secs_f64();
 
@@ -140,11 +161,6 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
     #[cfg(feature = "rerun")]
     if let Some(rec) = &recorder {
         let t = std::time::Instant::now();
-        let images = |e: &stereotag::run::StereoEntry| {
-            let left = io::load_gray(&job.run_dir.join(&e.left)).ok()?;
-            let right = io::load_gray(&job.run_dir.join(&e.right)).ok()?;
-            Some((left, right))
-        };
         stereotag::viz::log_survey(
             rec,
             &stereotag::viz::SurveyScene {
@@ -218,7 +234,7 @@ pub(crate) fn detect_run(
     run: &RunDataset,
     rig: &StereoRig,
     world: Option<&World>,
-) -> anyhow::Result<Vec<TagSighting>> {
+) -> anyhow::Result<Detected> {
     if job.decimate == 0 {
         return Err(UsageError("--decimate must be at least 1".into()).into());
     }
@@ -264,7 +280,7 @@ pub(crate) fn detect_run(
     };
     let stereo_config = StereoConfig::default();
     let bar = progress(run.stereo.len() as u64, "detect", job.quiet);
-    let per_pair: Vec<Result<Vec<TagSighting>, anyhow::Error>> = run
+    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<(Vec<u8>, Vec<u8>)>)>> = run
         .stereo
         .par_iter()
         .enumerate()
@@ -308,21 +324,25 @@ pub(crate) fn detect_run(
                     r.reason
                 );
             }
+            let encoded = job.encode.and_then(|f| f(&left, &right));
             bar.inc(1);
-            Ok(sightings)
+            Ok((sightings, encoded))
         })
         .collect();
     bar.finish_and_clear();
     let mut sightings = Vec::new();
+    let mut images = Vec::new();
     for r in per_pair {
-        sightings.extend(r?);
+        let (s, e) = r?;
+        sightings.extend(s);
+        images.push(e);
     }
     tracing::info!(
         "{} tag sightings in {} stereo pairs",
         sightings.len(),
         run.stereo.len()
     );
-    Ok(sightings)
+    Ok((sightings, images))
 }
 
 /// Writes every survey output into the staging directory.
