@@ -100,8 +100,11 @@ pub(crate) struct DetectOptions<'a> {
 pub(crate) type EncodePair =
     dyn Fn(&image::GrayImage, &image::GrayImage) -> Option<(Vec<u8>, Vec<u8>)> + Sync;
 
+/// A stereo pair compressed for the recording (left, right).
+pub(crate) type JpegPair = (Vec<u8>, Vec<u8>);
+
 /// A run's sightings and, when recording, its pairs compressed.
-pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<(Vec<u8>, Vec<u8>)>>);
+pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<JpegPair>>);
 
 /// Everything `survey_run` needs.
 pub(crate) struct SurveyJob<'a> {
@@ -280,7 +283,7 @@ pub(crate) fn detect_run(
     };
     let stereo_config = StereoConfig::default();
     let bar = progress(run.stereo.len() as u64, "detect", job.quiet);
-    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<(Vec<u8>, Vec<u8>)>)>> = run
+    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<JpegPair>)>> = run
         .stereo
         .par_iter()
         .enumerate()
