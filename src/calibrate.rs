@@ -121,6 +121,9 @@ pub struct Calibration {
     pub outliers: Vec<Outlier>,
     /// Parameter sigmas by name (`left.fx`, ..., `right_from_left.tx`), one sigma.
     pub sigmas: BTreeMap<String, f64>,
+    /// RMS row difference of the same corner in the two rectified images (Bouguet rectification
+    /// of the result), pixels.
+    pub epipolar_error_px: f64,
     /// Share of each image's 8 x 6 cells holding at least one corner (left, right).
     pub coverage: (f64, f64),
     /// Cell counts of corners per image (row-major 6 rows x 8 columns), left and right.
@@ -320,13 +323,21 @@ pub fn calibrate_stereo(
             }
         }
     }
+    let rig = StereoRig {
+        left: cam_l,
+        right: cam_r,
+        right_from_left: state.right_from_left,
+        robot_from_left: Isometry3::identity(),
+    };
+    let epipolar_error_px = epipolar_rms(&rig, &views);
+    if epipolar_error_px > 0.5 {
+        warnings.push(format!(
+            "corresponding corners are {epipolar_error_px:.2} px apart vertically after rectification: stereo matching will suffer; recalibrate with more views"
+        ));
+    }
     Ok(Calibration {
-        rig: StereoRig {
-            left: cam_l,
-            right: cam_r,
-            right_from_left: state.right_from_left,
-            robot_from_left: Isometry3::identity(),
-        },
+        rig,
+        epipolar_error_px,
         rms_px,
         rms_left_px,
         rms_right_px,
@@ -347,6 +358,34 @@ pub fn calibrate_stereo(
             })
             .collect(),
     })
+}
+
+/// RMS row difference of corners seen in both images, after rectification.
+fn epipolar_rms(rig: &StereoRig, views: &[(&str, Vec<Corner>, Vec<Corner>)]) -> f64 {
+    let rect = rig.rectify();
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (_, l, r) in views {
+        for a in l {
+            let Some(b) = r.iter().find(|b| b.id == a.id) else {
+                continue;
+            };
+            let pa = rect.rectify_pixel(
+                &rig.left,
+                &rect.left_rotation,
+                &nalgebra::Point2::from(a.px),
+            );
+            let pb = rect.rectify_pixel(
+                &rig.right,
+                &rect.right_rotation,
+                &nalgebra::Point2::from(b.px),
+            );
+            if let (Some(pa), Some(pb)) = (pa, pb) {
+                sum += (pa.y - pb.y).powi(2);
+                n += 1;
+            }
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
 }
 
 /// Reprojection error of one corner, pixels (infinite behind the camera).

@@ -290,6 +290,44 @@ impl Rectification {
         ]
     }
 
+    /// The rectified image of one camera (same size as the raw one): each rectified pixel's ray
+    /// turned back into the camera, projected through its distortion and sampled bilinearly;
+    /// black where it falls outside the raw image.
+    pub fn rectify_image(
+        &self,
+        camera: &Camera,
+        rotation: &nalgebra::Rotation3<f64>,
+        raw: &image::GrayImage,
+    ) -> image::GrayImage {
+        let (w, h) = raw.dimensions();
+        let back = rotation.inverse();
+        let sample = |x: f64, y: f64| -> Option<u8> {
+            if x < 0.0 || y < 0.0 || x > (w - 1) as f64 || y > (h - 1) as f64 {
+                return None;
+            }
+            let (x0, y0) = (x.floor() as u32, y.floor() as u32);
+            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+            let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+            let p = |a: u32, b: u32| raw.get_pixel(a, b)[0] as f64;
+            let top = p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx;
+            let bottom = p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx;
+            Some((top * (1.0 - fy) + bottom * fy).round() as u8)
+        };
+        image::GrayImage::from_fn(w, h, |u, v| {
+            let ray = back
+                * Vector3::new(
+                    (u as f64 - self.principal_px[0]) / self.focal_px,
+                    (v as f64 - self.principal_px[1]) / self.focal_px,
+                    1.0,
+                );
+            let value = camera
+                .project(&ray)
+                .and_then(|q| sample(q.x, q.y))
+                .unwrap_or(0);
+            image::Luma([value])
+        })
+    }
+
     /// Pixel in the rectified image of a raw pixel of one camera; `None` if it cannot be undistorted.
     pub fn rectify_pixel(
         &self,

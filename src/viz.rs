@@ -812,8 +812,15 @@ pub fn log_calibration(
     recorder: &Recorder,
     calib: &crate::calibrate::Calibration,
     report_markdown: &str,
+    rectified_pair: Option<&image::GrayImage>,
 ) -> Result<(), VizError> {
     let rec = recorder.stream();
+    if let Some(img) = rectified_pair {
+        rec.log_static(
+            "rectified",
+            &rerun::EncodedImage::from_file_contents(jpeg(img)?),
+        )?;
+    }
     let rig = &calib.rig;
     rec.log_static("rig", &rerun::ViewCoordinates::RDF())?;
     rec.log_static("rig/right", &transform(&rig.right_from_left.inverse()))?;

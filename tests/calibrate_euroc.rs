@@ -37,8 +37,15 @@ fn calibrate(extra: &[&str], out: &std::path::Path) -> Value {
 #[test]
 fn euroc_baseline_with_official_intrinsics() {
     let dir = tempfile::tempdir().unwrap();
+    let stereo = "../shared/data/euroc_aprilgrid/calib/stereo";
     let r = calibrate(
-        &["--fix-intrinsics", "calibration/rigs/euroc_official.yaml"],
+        &[
+            "--fix-intrinsics",
+            "calibration/rigs/euroc_official.yaml",
+            "--rectify-pair",
+            &format!("{stereo}/cam0_1403709395937837056.png"),
+            &format!("{stereo}/cam1_1403709395937837056.png"),
+        ],
         &dir.path().join("fixed"),
     );
     let m = &r["metrics"];
@@ -49,6 +56,8 @@ fn euroc_baseline_with_official_intrinsics() {
     );
     assert_eq!(m["views_used"].as_u64(), Some(30));
     assert!(m["rms_px"].as_f64().unwrap() < 0.5, "{m}");
+    // Corresponding corners share a row after rectification.
+    assert!(m["epipolar_error_px"].as_f64().unwrap() < 0.5, "{m}");
     assert!(!r["outliers"].as_array().unwrap().is_empty());
     for f in [
         "camchain.yaml",

@@ -34,6 +34,10 @@ pub struct Calibrate {
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
+    /// A raw stereo pair (LEFT RIGHT) to rectify with the result: writes rectified.png, the pair
+    /// side by side with epipolar lines every 32 rows.
+    #[arg(long, num_args = 2, value_names = ["LEFT", "RIGHT"])]
+    rectify_pair: Vec<PathBuf>,
     #[command(flatten)]
     rerun: super::RerunArgs,
 }
@@ -85,6 +89,7 @@ impl Calibrate {
                 "views_used": calib.views.len(),
                 "outliers": calib.outliers.len(),
                 "baseline_m": t.norm(),
+                "epipolar_error_px": calib.epipolar_error_px,
                 "coverage_left": calib.coverage.0,
                 "coverage_right": calib.coverage.1,
             },
@@ -101,6 +106,15 @@ impl Calibrate {
             "warnings": calib.warnings,
         });
         io::save_json(&dir.path("report.json"), &report)?;
+        let rectified = match self.rectify_pair.as_slice() {
+            [l, r] => {
+                let img = rectified_pair(&calib.rig, &io::load_gray(l)?, &io::load_gray(r)?);
+                img.save(dir.path("rectified.png"))
+                    .map_err(|e| anyhow::anyhow!("writing rectified.png: {e}"))?;
+                Some(img)
+            }
+            _ => None,
+        };
         let recorder = super::recorder(
             &self.rerun,
             "stereotag calibration",
@@ -112,11 +126,11 @@ impl Calibrate {
                 "# stereotag calibration\n\n```json\n{}\n```\n",
                 serde_json::to_string_pretty(&report["metrics"])?
             );
-            stereotag::viz::log_calibration(&rec, &calib, &md)?;
+            stereotag::viz::log_calibration(&rec, &calib, &md, rectified.as_ref())?;
             rec.finish()?;
         }
         #[cfg(not(feature = "rerun"))]
-        let _ = recorder;
+        let _ = (recorder, rectified);
         dir.commit()?;
         tracing::info!(
             "{} views, {} outliers left out; RMS {:.3} px (left {:.3}, right {:.3}); baseline {:.2} mm ± {:.2}",
@@ -159,4 +173,29 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), UsageError> {
         return Err(bad());
     }
     Ok((w, h))
+}
+
+/// Rows between the epipolar lines drawn on `rectified.png`.
+const EPIPOLAR_LINE_ROWS: u32 = 32;
+
+/// Both images rectified, side by side, with horizontal lines: corresponding points of a good
+/// calibration lie on the same line.
+fn rectified_pair(
+    rig: &stereotag::camera::StereoRig,
+    left: &image::GrayImage,
+    right: &image::GrayImage,
+) -> image::GrayImage {
+    let rect = rig.rectify();
+    let l = rect.rectify_image(&rig.left, &rect.left_rotation, left);
+    let r = rect.rectify_image(&rig.right, &rect.right_rotation, right);
+    let (w, h) = (l.width() + r.width(), l.height().max(r.height()));
+    let mut out = image::GrayImage::new(w, h);
+    image::imageops::replace(&mut out, &l, 0, 0);
+    image::imageops::replace(&mut out, &r, l.width() as i64, 0);
+    for y in (EPIPOLAR_LINE_ROWS / 2..h).step_by(EPIPOLAR_LINE_ROWS as usize) {
+        for x in 0..w {
+            out.put_pixel(x, y, image::Luma([255]));
+        }
+    }
+    out
 }
