@@ -388,6 +388,37 @@ fn epipolar_rms(rig: &StereoRig, views: &[(&str, Vec<Corner>, Vec<Corner>)]) -> 
     (sum / n.max(1) as f64).sqrt()
 }
 
+/// Board corners of detected AprilGrid tags (Kalibr's layout: tag `id` at column `id % cols`,
+/// row `id / cols`, pitch `size · (1 + spacing)`; corner `k` of a tag is the C library's corner `k`:
+/// (x, y), (x + s, y), (x + s, y + s), (x, y + s) on the board). Ids outside the grid are dropped.
+pub fn aprilgrid_corners(
+    detections: &[crate::tags::TagDetection],
+    cols: u32,
+    rows: u32,
+    size_m: f64,
+    spacing: f64,
+) -> Vec<Corner> {
+    let pitch = size_m * (1.0 + spacing);
+    let mut out = Vec::new();
+    for d in detections.iter().filter(|d| d.id < cols * rows) {
+        let (x, y) = ((d.id % cols) as f64 * pitch, (d.id / cols) as f64 * pitch);
+        let board = [
+            [x, y],
+            [x + size_m, y],
+            [x + size_m, y + size_m],
+            [x, y + size_m],
+        ];
+        for (k, b) in board.iter().enumerate() {
+            out.push(Corner {
+                id: d.id * 4 + k as u32,
+                board_m: [b[0], b[1], 0.0],
+                px: d.corners_px[k],
+            });
+        }
+    }
+    out
+}
+
 /// Reprojection error of one corner, pixels (infinite behind the camera).
 fn reprojection_error(cam: &Camera, camera_from_board: &Isometry3<f64>, c: &Corner) -> f64 {
     let p = camera_from_board * Point3::from(c.board_m);

@@ -419,6 +419,108 @@ impl TagDetector for CDetector {
     }
 }
 
+/// Kalibr's AprilGrid tags: tag36h11 codes inside a black border two bits wide. The AprilTag C
+/// library finds them with its own tag36h11 family widened to that border (the black square is
+/// 10 cells across, the data bits one cell further in); neither the library's families nor
+/// kornia-apriltag decode them as they are. Corners are in the C library's order and our pixel
+/// convention.
+pub struct AprilGridDetector {
+    detector: *mut apriltag_sys::apriltag_detector_t,
+    family: *mut apriltag_sys::apriltag_family_t,
+}
+
+// The raw pointers are owned by this value alone and used through `&mut self` only.
+unsafe impl Send for AprilGridDetector {}
+
+/// Cells across the black square of a Kalibr AprilGrid tag (6 data + 2 x 2 border).
+pub const APRILGRID_BORDER_CELLS: i32 = 10;
+
+impl AprilGridDetector {
+    /// A detector at the given decimation (1 = full resolution) with edge refinement on or off.
+    pub fn new(decimate: f32, refine_edges: bool) -> Result<Self, TagError> {
+        if !(decimate >= 1.0 && decimate.is_finite()) {
+            return Err(TagError::Invalid(format!(
+                "decimate {decimate}: must be >= 1"
+            )));
+        }
+        // SAFETY: the family comes from the library's constructor; we only widen its border and
+        // shift its bit positions (arrays of `nbits` entries it allocated), before handing it to
+        // a detector that this value owns and destroys first in `drop`.
+        unsafe {
+            let family = apriltag_sys::tag36h11_create();
+            if family.is_null() {
+                return Err(TagError::C("tag36h11_create failed".into()));
+            }
+            (*family).width_at_border = APRILGRID_BORDER_CELLS;
+            (*family).total_width = APRILGRID_BORDER_CELLS + 2;
+            for i in 0..(*family).nbits as usize {
+                *(*family).bit_x.add(i) += 1;
+                *(*family).bit_y.add(i) += 1;
+            }
+            let detector = apriltag_sys::apriltag_detector_create();
+            if detector.is_null() {
+                apriltag_sys::tag36h11_destroy(family);
+                return Err(TagError::C("apriltag_detector_create failed".into()));
+            }
+            apriltag_sys::apriltag_detector_add_family_bits(detector, family, 2);
+            (*detector).quad_decimate = decimate;
+            (*detector).refine_edges = i32::from(refine_edges);
+            (*detector).nthreads = 1;
+            Ok(Self { detector, family })
+        }
+    }
+}
+
+impl Drop for AprilGridDetector {
+    fn drop(&mut self) {
+        // SAFETY: both were created in `new` and are destroyed once, detector first.
+        unsafe {
+            apriltag_sys::apriltag_detector_destroy(self.detector);
+            apriltag_sys::tag36h11_destroy(self.family);
+        }
+    }
+}
+
+impl TagDetector for AprilGridDetector {
+    fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, TagError> {
+        let mut out = Vec::new();
+        // SAFETY: the image buffer is created with the image's size and filled row by row within
+        // its stride; the detections array is read within its size and destroyed once.
+        unsafe {
+            let im = apriltag_sys::image_u8_create(image.width(), image.height());
+            if im.is_null() {
+                return Err(TagError::C("image_u8_create failed".into()));
+            }
+            let stride = (*im).stride as usize;
+            for (y, row) in image.as_raw().chunks(image.width() as usize).enumerate() {
+                std::ptr::copy_nonoverlapping(row.as_ptr(), (*im).buf.add(y * stride), row.len());
+            }
+            let detections = apriltag_sys::apriltag_detector_detect(self.detector, im);
+            if !detections.is_null() {
+                let n = (*detections).size.max(0) as usize;
+                let data = (*detections).data as *mut *mut apriltag_sys::apriltag_detection_t;
+                for i in 0..n {
+                    let d = *data.add(i);
+                    out.push(TagDetection {
+                        id: (*d).id.max(0) as u32,
+                        family: "aprilgrid36h11",
+                        hamming: (*d).hamming.max(0) as u32,
+                        corners_px: (*d).p.map(to_centre_convention),
+                        centre_px: to_centre_convention((*d).c),
+                    });
+                }
+                apriltag_sys::apriltag_detections_destroy(detections);
+            }
+            apriltag_sys::image_u8_destroy(im);
+        }
+        Ok(sort_detections(out))
+    }
+
+    fn name(&self) -> &'static str {
+        "aprilgrid-c"
+    }
+}
+
 /// Bilinear sample of a grey image at a sub-pixel position (pixel centres at integers).
 fn sample(image: &GrayImage, x: f64, y: f64) -> Option<f64> {
     let (w, h) = (image.width() as i64, image.height() as i64);

@@ -9,10 +9,10 @@ pub struct Calibrate {
     /// Calibration target (Kalibr target YAML), e.g. calibration/targets/aprilgrid_6x6.yaml.
     #[arg(long)]
     target: PathBuf,
-    /// Left images (a glob). Corner detection in images is not built yet: use --corners-left.
+    /// Left images, a glob like 'cam0/*.png' (AprilGrid targets; pairs matched in sorted order).
     #[arg(long)]
     left: Option<String>,
-    /// Right images (a glob).
+    /// Right images, a glob.
     #[arg(long)]
     right: Option<String>,
     /// Directory of left corners already detected (EuRoC / yac CSV, one file per view).
@@ -46,19 +46,21 @@ impl Calibrate {
     pub fn run(&self) -> anyhow::Result<()> {
         let started = std::time::Instant::now();
         let target = io::load_target(&self.target)?;
-        let (Some(cl), Some(cr)) = (&self.corners_left, &self.corners_right) else {
-            let what = if self.left.is_some() || self.right.is_some() {
-                "corner detection in images (--left/--right) is not built yet"
-            } else {
-                "no input"
-            };
-            return Err(UsageError(format!(
-                "{what}: pass --corners-left DIR --corners-right DIR with corners already detected (EuRoC CSV)"
-            ))
-            .into());
+        let (left, right) = match (
+            &self.corners_left,
+            &self.corners_right,
+            &self.left,
+            &self.right,
+        ) {
+            (Some(cl), Some(cr), _, _) => (io::load_corner_csvs(cl)?, io::load_corner_csvs(cr)?),
+            (_, _, Some(gl), Some(gr)) => detect_views(&target, gl, gr)?,
+            _ => {
+                return Err(UsageError(
+                    "pass --left GLOB --right GLOB (images) or --corners-left DIR --corners-right DIR (EuRoC CSV)".into(),
+                )
+                .into())
+            }
         };
-        let left = io::load_corner_csvs(cl)?;
-        let right = io::load_corner_csvs(cr)?;
         let mut config = CalibConfig::default();
         let resolution = match (&self.fix_intrinsics, &self.resolution) {
             (Some(rig_path), _) => {
@@ -198,4 +200,106 @@ fn rectified_pair(
         }
     }
     out
+}
+
+/// Files matching a glob with `*` in its last component, sorted.
+fn glob(pattern: &str) -> Result<Vec<PathBuf>, UsageError> {
+    let path = std::path::Path::new(pattern);
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let parts: Vec<&str> = name.split('*').collect();
+    let matches = |s: &str| {
+        let (first, last) = (parts[0], parts[parts.len() - 1]);
+        if parts.len() == 1 {
+            return s == first;
+        }
+        if !s.starts_with(first) || !s.ends_with(last) || s.len() < first.len() + last.len() {
+            return false;
+        }
+        let mut rest = &s[first.len()..s.len() - last.len()];
+        for p in &parts[1..parts.len() - 1] {
+            match rest.find(p) {
+                Some(i) => rest = &rest[i + p.len()..],
+                None => return false,
+            }
+        }
+        true
+    };
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| UsageError(format!("{pattern}: {}: {e}", dir.display())))?;
+    let mut out: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| matches(&e.file_name().to_string_lossy()))
+        .map(|e| e.path())
+        .collect();
+    out.sort();
+    if out.is_empty() {
+        return Err(UsageError(format!("{pattern}: no file matches")));
+    }
+    Ok(out)
+}
+
+/// Detects the target's corners in every left and right image (AprilGrid targets).
+fn detect_views(
+    target: &Target,
+    left: &str,
+    right: &str,
+) -> anyhow::Result<(
+    stereotag::calibrate::ViewCorners,
+    stereotag::calibrate::ViewCorners,
+)> {
+    use stereotag::tags::TagDetector;
+    let Target::Aprilgrid {
+        tag_cols,
+        tag_rows,
+        tag_size,
+        tag_spacing,
+    } = target
+    else {
+        return Err(UsageError(
+            "chessboard corner detection in images is not built yet: use an AprilGrid target or --corners-left/--corners-right".into(),
+        )
+        .into());
+    };
+    let (lf, rf) = (glob(left)?, glob(right)?);
+    if lf.len() != rf.len() {
+        return Err(UsageError(format!(
+            "{} left images but {} right images: the pairs must match",
+            lf.len(),
+            rf.len()
+        ))
+        .into());
+    }
+    let mut detector = stereotag::tags::AprilGridDetector::new(1.0, true)?;
+    let (mut lv, mut rv) = (
+        stereotag::calibrate::ViewCorners::new(),
+        stereotag::calibrate::ViewCorners::new(),
+    );
+    for (l, r) in lf.iter().zip(&rf) {
+        let name = l
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        for (path, views) in [(l, &mut lv), (r, &mut rv)] {
+            let found = detector.detect(&io::load_gray(path)?)?;
+            tracing::info!("{}: {} AprilGrid tags", path.display(), found.len());
+            views.insert(
+                name.clone(),
+                stereotag::calibrate::aprilgrid_corners(
+                    &found,
+                    *tag_cols,
+                    *tag_rows,
+                    *tag_size,
+                    *tag_spacing,
+                ),
+            );
+        }
+    }
+    Ok((lv, rv))
 }
