@@ -1,6 +1,5 @@
 use super::detect::Backend;
 use super::{progress, UsageError};
-use anyhow::Context;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -177,17 +176,18 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
                 images: &images,
             },
         )
-        .context("recording the survey")?;
+        .map_err(|e| anyhow::anyhow!("recording the survey: {e}"))?;
         timings.insert("record".into(), t.elapsed().as_secs_f64());
     }
     timings.insert("total".into(), started.elapsed().as_secs_f64());
     write_outputs(dir, &run, world.as_ref(), &result, &metrics, &timings)?;
     #[cfg(feature = "rerun")]
     if let Some(rec) = recorder {
-        rec.finish().context("finishing the recording")?;
+        rec.finish()
+            .map_err(|e| anyhow::anyhow!("finishing the recording: {e}"))?;
     }
     #[cfg(not(feature = "rerun"))]
-    let _ = recorder;
+    let _ = (recorder, images);
     print_summary(&result, &metrics, world.as_ref());
     Ok(SurveyOutput {
         survey: result,
