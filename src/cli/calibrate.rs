@@ -276,7 +276,7 @@ fn detect_views(
         ))
         .into());
     }
-    let mut detector = stereotag::tags::AprilGridDetector::new(1.0, true)?;
+    let mut detector = stereotag::tags::AprilGridMultiScale::new()?;
     let (mut lv, mut rv) = (
         stereotag::calibrate::ViewCorners::new(),
         stereotag::calibrate::ViewCorners::new(),
