@@ -133,11 +133,9 @@ impl Localize {
                     .map_or(String::new(), |e| format!(", RMS error {e:.3} m"))
             );
         }
-        if let (Some(a), Some(b)) = (
-            metrics.get("ate_m.odometry"),
-            metrics.get("ate_m.localized"),
-        ) {
-            tracing::info!("ATE: odometry {a} m, localised {b} m");
+        let get = |k: &str| metrics.get(k).and_then(|v| v.as_f64());
+        if let (Some(a), Some(b)) = (get("ate_m.odometry"), get("ate_m.localized")) {
+            tracing::info!("ATE: odometry {a:.3} m, localised {b:.3} m");
         }
         Ok(())
     }
