@@ -273,13 +273,7 @@ pub struct OnlineResult {
 }
 
 /// Odometry noise of one increment, in the frame of its start.
-fn odometry_covariance(
-    delta: &Pose2,
-    path_m: f64,
-    turn_rad: f64,
-    config: &FuseConfig,
-) -> Matrix3<f64> {
-    let _ = delta;
+fn odometry_covariance(path_m: f64, turn_rad: f64, config: &FuseConfig) -> Matrix3<f64> {
     let vt = config.odometry_sigma_m_per_sqrt_m.powi(2) * path_m;
     let vh = config.heading_sigma_per_sqrt_rad.powi(2) * turn_rad
         + config.heading_sigma_per_sqrt_m.powi(2) * path_m;
@@ -294,6 +288,36 @@ struct Ekf {
 }
 
 impl Ekf {
+    /// A filter sure of its start pose (the run's first odometry pose, the survey's anchor).
+    fn at_start(odometry: &[StampedPose]) -> (Self, Pose2) {
+        let start = odometry
+            .first()
+            .map_or(Pose2::new(0.0, 0.0, 0.0), |p| p.pose);
+        let ekf = Self {
+            x: DVector::from_vec(vec![start.x, start.y, start.theta]),
+            p: DMatrix::identity(3, 3) * 1e-9,
+            slots: Vec::new(),
+        };
+        (ekf, start)
+    }
+
+    /// Predicts with the odometry increment from `last` to `to` and moves `last` on; returns the
+    /// distance travelled.
+    fn advance(&mut self, last: &mut Pose2, to: Pose2, config: &FuseConfig) -> f64 {
+        let delta = last.between(&to);
+        let path = delta.x.hypot(delta.y);
+        let q = odometry_covariance(path, wrap_angle(delta.theta).abs(), config);
+        self.predict(&delta, &q);
+        *last = to;
+        path
+    }
+
+    /// Position sigma of the pose (√ of the largest eigenvalue), metres.
+    fn position_sigma_m(&self) -> f64 {
+        let pos = self.p.fixed_view::<2, 2>(0, 0).into_owned();
+        pos.symmetric_eigenvalues().max().max(0.0).sqrt()
+    }
+
     fn pose(&self) -> Pose2 {
         Pose2::new(self.x[0], self.x[1], self.x[2])
     }
@@ -474,6 +498,13 @@ struct Extras {
     corner: Option<CornerMatch>,
 }
 
+/// Indices of the sightings in time order.
+fn time_order(sightings: &[TagSighting]) -> std::iter::Peekable<std::vec::IntoIter<usize>> {
+    let mut order: Vec<usize> = (0..sightings.len()).collect();
+    order.sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
+    order.into_iter().peekable()
+}
+
 /// Runs the online filter over odometry and time-ordered sightings; `corners` are the Hough
 /// features a new landmark is matched with.
 pub fn run_online(
@@ -482,17 +513,8 @@ pub fn run_online(
     corners: &[Feature],
     config: &FuseConfig,
 ) -> OnlineResult {
-    let start = odometry
-        .first()
-        .map_or(Pose2::new(0.0, 0.0, 0.0), |p| p.pose);
-    let mut ekf = Ekf {
-        x: DVector::from_vec(vec![start.x, start.y, start.theta]),
-        p: DMatrix::identity(3, 3) * 1e-9,
-        slots: Vec::new(),
-    };
+    let (mut ekf, start) = Ekf::at_start(odometry);
     let mut extras: Vec<Extras> = Vec::new();
-    let mut order: Vec<usize> = (0..sightings.len()).collect();
-    order.sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
     let mut result = OnlineResult {
         trajectory: Vec::with_capacity(odometry.len()),
         landmarks: Vec::new(),
@@ -504,19 +526,7 @@ pub fn run_online(
         sigma_m: Vec::with_capacity(odometry.len()),
     };
     let mut last_odom = start;
-    let mut pending = order.into_iter().peekable();
-    let mut path_since = 0.0;
-    let mut turn_since = 0.0;
-    let advance = |ekf: &mut Ekf, to: Pose2, last: &mut Pose2, path: &mut f64, turn: &mut f64| {
-        let delta = last.between(&to);
-        *path += delta.x.hypot(delta.y);
-        *turn += wrap_angle(delta.theta).abs();
-        let q = odometry_covariance(&delta, *path, *turn, config);
-        ekf.predict(&delta, &q);
-        *path = 0.0;
-        *turn = 0.0;
-        *last = to;
-    };
+    let mut pending = time_order(sightings);
     for sample in odometry {
         while let Some(&k) = pending.peek() {
             if sightings[k].t_s > sample.t_s {
@@ -524,13 +534,7 @@ pub fn run_online(
             }
             pending.next();
             let odom = pose_at(odometry, sightings[k].t_s).unwrap_or(sample.pose);
-            advance(
-                &mut ekf,
-                odom,
-                &mut last_odom,
-                &mut path_since,
-                &mut turn_since,
-            );
+            ekf.advance(&mut last_odom, odom, config);
             result.pose_at_sighting[k] = ekf.pose();
             fuse_sighting(
                 &mut ekf,
@@ -542,21 +546,12 @@ pub fn run_online(
                 &mut result,
             );
         }
-        advance(
-            &mut ekf,
-            sample.pose,
-            &mut last_odom,
-            &mut path_since,
-            &mut turn_since,
-        );
+        ekf.advance(&mut last_odom, sample.pose, config);
         result.trajectory.push(StampedPose {
             t_s: sample.t_s,
             pose: ekf.pose(),
         });
-        let pos = ekf.p.fixed_view::<2, 2>(0, 0).into_owned();
-        result
-            .sigma_m
-            .push(pos.symmetric_eigenvalues().max().max(0.0).sqrt());
+        result.sigma_m.push(ekf.position_sigma_m());
     }
     // Sightings after the last odometry sample: fused at the last pose.
     for k in pending {
@@ -999,7 +994,7 @@ pub fn run_offline(
         turn += wrap_angle(d.theta).abs();
         signed_turn += wrap_angle(d.theta);
         let delta = a.odom.between(&b.odom);
-        let cov = odometry_covariance(&delta, path, turn, config);
+        let cov = odometry_covariance(path, turn, config);
         let (p0, p1) = (pose_name(i - 1), pose_name(i));
         let mut vars: Vec<&str> = vec![&p0, &p1];
         if config.calibrate_odometry {
@@ -1167,17 +1162,8 @@ pub fn localize(
     landmarks: &[Landmark],
     config: &FuseConfig,
 ) -> LocalizeResult {
-    let start = odometry
-        .first()
-        .map_or(Pose2::new(0.0, 0.0, 0.0), |p| p.pose);
-    let mut ekf = Ekf {
-        x: DVector::from_vec(vec![start.x, start.y, start.theta]),
-        p: DMatrix::identity(3, 3) * 1e-9,
-        slots: Vec::new(),
-    };
-    let mut order: Vec<usize> = (0..sightings.len()).collect();
-    order.sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
-    let mut pending = order.into_iter().peekable();
+    let (mut ekf, start) = Ekf::at_start(odometry);
+    let mut pending = time_order(sightings);
     let mut out = LocalizeResult {
         trajectory: Vec::with_capacity(odometry.len()),
         sigma_m: Vec::with_capacity(odometry.len()),
@@ -1188,14 +1174,6 @@ pub fn localize(
     };
     let mut last = start;
     let mut travelled = 0.0;
-    let advance = |ekf: &mut Ekf, to: Pose2, last: &mut Pose2, travelled: &mut f64| {
-        let delta = last.between(&to);
-        let path = delta.x.hypot(delta.y);
-        *travelled += path;
-        let q = odometry_covariance(&delta, path, wrap_angle(delta.theta).abs(), config);
-        ekf.predict(&delta, &q);
-        *last = to;
-    };
     for sample in odometry {
         while let Some(&k) = pending.peek() {
             if sightings[k].t_s > sample.t_s {
@@ -1204,7 +1182,7 @@ pub fn localize(
             pending.next();
             let s = &sightings[k];
             let odom = pose_at(odometry, s.t_s).unwrap_or(sample.pose);
-            advance(&mut ekf, odom, &mut last, &mut travelled);
+            travelled += ekf.advance(&mut last, odom, config);
             let Some(l) = landmarks
                 .iter()
                 .find(|l| l.id == s.id && l.family == s.family)
@@ -1250,14 +1228,12 @@ pub fn localize(
             out.accepted.push(k);
             travelled = 0.0;
         }
-        advance(&mut ekf, sample.pose, &mut last, &mut travelled);
+        travelled += ekf.advance(&mut last, sample.pose, config);
         out.trajectory.push(StampedPose {
             t_s: sample.t_s,
             pose: ekf.pose(),
         });
-        let pos = ekf.p.fixed_view::<2, 2>(0, 0).into_owned();
-        out.sigma_m
-            .push(pos.symmetric_eigenvalues().max().max(0.0).sqrt());
+        out.sigma_m.push(ekf.position_sigma_m());
         out.since_sighting_m.push(travelled);
     }
     out
