@@ -67,9 +67,8 @@ pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), Io
     write_file(&path, to_yaml(&path, &yaml)?.as_bytes())
 }
 
-/// Reads a ROS map as a wall raster: every cell that is not free (occupied or unknown) is an
-/// obstacle, so the unknown space behind walls is solid.
-pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
+/// Reads and checks a ROS map's YAML and its grey image.
+fn read_ros_map(yaml_path: &Path) -> Result<(RosMapYaml, image::GrayImage), IoError> {
     let meta: RosMapYaml = parse_yaml(yaml_path, &read_text(yaml_path)?)?;
     if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
         return Err(IoError::content(
@@ -90,6 +89,13 @@ pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
     let img = image::open(&image_path)
         .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
         .to_luma8();
+    Ok((meta, img))
+}
+
+/// Reads a ROS map as a wall raster: every cell that is not free (occupied or unknown) is an
+/// obstacle, so the unknown space behind walls is solid.
+pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
+    let (meta, img) = read_ros_map(yaml_path)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let obstacle = img
         .pixels()
@@ -171,26 +177,7 @@ pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoErro
 /// Reads a ROS map as an occupancy map: occupancy `(255 − v) / 255` per pixel (or `v / 255` with
 /// `negate`), and the grey of unknown cells (205) as unknown.
 pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
-    let meta: RosMapYaml = parse_yaml(yaml_path, &read_text(yaml_path)?)?;
-    if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
-        return Err(IoError::content(
-            yaml_path,
-            "`resolution` must be a positive number of metres per pixel",
-        ));
-    }
-    if meta.origin.iter().any(|v| !v.is_finite()) || meta.origin[2] != 0.0 {
-        return Err(IoError::content(
-            yaml_path,
-            "`origin` must be finite with yaw 0 (rotated maps are not supported)",
-        ));
-    }
-    let image_path = yaml_path
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join(&meta.image);
-    let img = image::open(&image_path)
-        .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
-        .to_luma8();
+    let (meta, img) = read_ros_map(yaml_path)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let mut occupancy = vec![None; w * h];
     for (x, y, p) in img.enumerate_pixels() {
