@@ -119,7 +119,7 @@ impl Calibrate {
         };
         let recorder = super::recorder(
             &self.rerun,
-            "stereotag calibration",
+            super::Recording::Calibration,
             &dir.path("calibration.rrd"),
         )?;
         #[cfg(feature = "rerun")]
@@ -155,9 +155,6 @@ impl Calibrate {
         }
         for w in &calib.warnings {
             tracing::warn!("{w}");
-        }
-        if let Target::Checkerboard { .. } = target {
-            tracing::debug!("checkerboard target");
         }
         Ok(())
     }

@@ -1,5 +1,4 @@
-use super::detect::Backend;
-use super::survey::{detect_run, load_fuse_config, load_run_rig, world_of_run, DetectOptions};
+use super::survey::{detect_run, load_fuse_config, load_run_rig};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use stereotag::fuse::{ate_m, error_growth, localize};
@@ -23,12 +22,8 @@ pub struct Localize {
     /// Fusion settings (YAML, `stereotag config --default fuse`).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Detector backend.
-    #[arg(long, value_enum, default_value = "apriltag-c")]
-    backend: Backend,
-    /// Decimation before quad detection.
-    #[arg(long, default_value_t = 1)]
-    decimate: u32,
+    #[command(flatten)]
+    detect: super::survey::DetectArgs,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -40,7 +35,7 @@ impl Localize {
         let landmarks: Vec<_> = file.landmarks.iter().map(|r| r.landmark()).collect();
         let run = io::load_run(&self.run)?;
         let config = load_fuse_config(self.config.as_deref())?;
-        let world_path = self.world.clone().or_else(|| world_of_run(&self.run));
+        let world_path = super::world_of_run(self.world.as_deref(), &self.run, &run);
         let world = world_path
             .as_deref()
             .map(io::load_world)
@@ -55,14 +50,7 @@ impl Localize {
         };
         let (sightings, _) = match load_run_rig(&self.run, &run)? {
             Some(rig) => detect_run(
-                &DetectOptions {
-                    encode: None,
-                    backend: self.backend,
-                    families: &families,
-                    decimate: self.decimate,
-                    tag_size_m: None,
-                    quiet,
-                },
+                &self.detect.options(&families, quiet),
                 &self.run,
                 &run,
                 &rig,

@@ -53,15 +53,7 @@ impl Map {
             Poses::Odometry => PoseSource::Odometry,
             Poses::GroundTruth => PoseSource::GroundTruth,
         };
-        let world = match &self.world {
-            Some(w) => Some(w.clone()),
-            None => run
-                .meta
-                .world
-                .as_ref()
-                .map(|w| self.run.join(w))
-                .filter(|p| p.exists()),
-        };
+        let world = super::world_of_run(self.world.as_deref(), &self.run, &run);
         let (map, metrics) = map_and_score(&run, poses, &config, world.as_deref())?;
         write_map_outputs(&self.out, self.force, &map, &metrics)?;
         print_summary(&map, &metrics);

@@ -179,6 +179,21 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
     bar
 }
 
+/// The world file to score a run against: the one given, else the one run.yaml names if it exists.
+pub(crate) fn world_of_run(
+    given: Option<&Path>,
+    run_dir: &Path,
+    run: &stereotag::run::RunDataset,
+) -> Option<PathBuf> {
+    given.map(Path::to_path_buf).or_else(|| {
+        run.meta
+            .world
+            .as_ref()
+            .map(|w| run_dir.join(w))
+            .filter(|p| p.exists())
+    })
+}
+
 /// `to` relative to the directory `from` (both as given, made absolute first).
 pub(crate) fn relative_path(to: &Path, from_dir: &Path) -> PathBuf {
     let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
@@ -232,12 +247,22 @@ pub(crate) type Recorder = stereotag::viz::Recorder;
 #[cfg(not(feature = "rerun"))]
 pub(crate) type Recorder = ();
 
+/// What a recording holds, which picks its application name and default layout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Recording {
+    /// A survey (also the demo's).
+    Survey,
+    /// A stereo calibration.
+    Calibration,
+}
+
 /// Opens the recording the flags ask for; `default_file` is used unless `--save`, `--spawn` or
-/// `--connect` say otherwise. The layout follows the application name (calibration or survey). The file is written into the staging directory with the other outputs.
+/// `--connect` say otherwise. The file is written into the staging directory with the other
+/// outputs.
 #[cfg(feature = "rerun")]
 pub(crate) fn recorder(
     args: &RerunArgs,
-    application: &'static str,
+    kind: Recording,
     default_file: &Path,
 ) -> anyhow::Result<Option<Recorder>> {
     use stereotag::viz::Sink;
@@ -263,10 +288,12 @@ pub(crate) fn recorder(
     if let Some(url) = &args.connect {
         sinks.push(Sink::Connect(url.clone()));
     }
-    let blueprint = if application.contains("calibrat") {
-        stereotag::viz::calibration_blueprint()
-    } else {
-        stereotag::viz::survey_blueprint()
+    let (application, blueprint) = match kind {
+        Recording::Survey => ("stereotag survey", stereotag::viz::survey_blueprint()),
+        Recording::Calibration => (
+            "stereotag calibration",
+            stereotag::viz::calibration_blueprint(),
+        ),
     };
     Ok(Some(stereotag::viz::Recorder::new(
         application,
@@ -278,7 +305,7 @@ pub(crate) fn recorder(
 #[cfg(not(feature = "rerun"))]
 pub(crate) fn recorder(
     args: &RerunArgs,
-    _application: &str,
+    _kind: Recording,
     _default_file: &Path,
 ) -> anyhow::Result<Option<Recorder>> {
     if args.save.is_some() || args.spawn || args.connect.is_some() {

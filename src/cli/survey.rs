@@ -28,10 +28,22 @@ pub struct SurveyArgs {
     /// Fusion settings (YAML, `stereotag config --default fuse`).
     #[arg(long)]
     config: Option<PathBuf>,
+    #[command(flatten)]
+    detect: DetectArgs,
+    /// Replace the output directory if it exists.
+    #[arg(long)]
+    force: bool,
+    #[command(flatten)]
+    pub rerun: super::RerunArgs,
+}
+
+/// How a run's stereo pairs are searched for tags (survey and localize).
+#[derive(Debug, clap::Args)]
+pub struct DetectArgs {
     /// Detector backend.
     #[arg(long, value_enum, default_value = "apriltag-c")]
     backend: Backend,
-    /// Tag families to look for (default: the world's, else tag36h11).
+    /// Tag families to look for (default: the world's or the survey's, else tag36h11).
     #[arg(long)]
     family: Vec<String>,
     /// Decimation before quad detection (1 = full resolution, the most accurate corners).
@@ -40,11 +52,28 @@ pub struct SurveyArgs {
     /// Edge length of the tags in metres when no world gives it (enables the size check).
     #[arg(long)]
     tag_size_m: Option<f64>,
-    /// Replace the output directory if it exists.
-    #[arg(long)]
-    force: bool,
-    #[command(flatten)]
-    pub rerun: super::RerunArgs,
+}
+
+impl DetectArgs {
+    /// The options these flags give; `default_families` when no `--family` is given.
+    pub(crate) fn options<'a>(
+        &'a self,
+        default_families: &'a [String],
+        quiet: bool,
+    ) -> DetectOptions<'a> {
+        DetectOptions {
+            encode: None,
+            backend: self.backend,
+            families: if self.family.is_empty() {
+                default_families
+            } else {
+                &self.family
+            },
+            decimate: self.decimate,
+            tag_size_m: self.tag_size_m,
+            quiet,
+        }
+    }
 }
 
 /// What the survey command produced, for the demo's summary.
@@ -55,32 +84,17 @@ pub(crate) struct SurveyOutput {
 
 impl SurveyArgs {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
-        let world = self.world.clone().or_else(|| world_of_run(&self.run));
         survey_run(&SurveyJob {
             run_dir: &self.run,
             out: &self.out,
-            world: world.as_deref(),
+            world: self.world.as_deref(),
             config: self.config.as_deref(),
-            detect: DetectOptions {
-                encode: None,
-                backend: self.backend,
-                families: &self.family,
-                decimate: self.decimate,
-                tag_size_m: self.tag_size_m,
-                quiet,
-            },
+            detect: self.detect.options(&[], quiet),
             force: self.force,
             rerun: &self.rerun,
         })
         .map(|_| ())
     }
-}
-
-/// The world file a run names, if it exists.
-pub(crate) fn world_of_run(run_dir: &Path) -> Option<PathBuf> {
-    let text = std::fs::read_to_string(run_dir.join("run.yaml")).ok()?;
-    let meta: stereotag::run::RunMeta = serde_yaml_ng::from_str(&text).ok()?;
-    Some(run_dir.join(meta.world?)).filter(|p| p.exists())
 }
 
 /// How tags are detected in a run's stereo pairs.
@@ -109,6 +123,7 @@ pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<JpegPair>>);
 pub(crate) struct SurveyJob<'a> {
     pub run_dir: &'a Path,
     pub out: &'a Path,
+    /// World file (default: the one run.yaml names, if it exists).
     pub world: Option<&'a Path>,
     pub config: Option<&'a Path>,
     pub detect: DetectOptions<'a>,
@@ -129,10 +144,14 @@ pub(crate) fn survey_run(job: &SurveyJob<'_>) -> anyhow::Result<SurveyOutput> {
 pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Result<SurveyOutput> {
     let started = std::time::Instant::now();
     let run = io::load_run(job.run_dir)?;
-    let world = job.world.map(io::load_world).transpose()?.map(|w| w.world);
+    let world = super::world_of_run(job.world, job.run_dir, &run)
+        .as_deref()
+        .map(io::load_world)
+        .transpose()?
+        .map(|w| w.world);
     let fuse = load_fuse_config(job.config)?;
     let mapping = run.meta.mapping.clone().unwrap_or_default();
-    let recorder = super::recorder(job.rerun, "stereotag survey", &dir.path("survey.rrd"))?;
+    let recorder = super::recorder(job.rerun, super::Recording::Survey, &dir.path("survey.rrd"))?;
 
     let rig = load_run_rig(job.run_dir, &run)?;
     let detect_start = std::time::Instant::now();
