@@ -199,7 +199,7 @@ impl TagSighting {
 }
 
 /// A Hough corner a landmark was matched with.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct CornerMatch {
     /// Corner position, metres.
     pub x_m: f64,
@@ -207,12 +207,13 @@ pub struct CornerMatch {
     pub y_m: f64,
     /// Votes of the Hough peak.
     pub votes: u32,
-    /// Squared Mahalanobis distance of the match.
+    /// Squared Mahalanobis distance of the match (0 when read from a file that lacks it).
+    #[serde(default)]
     pub distance_chi2: f64,
 }
 
-/// A surveyed tag.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// A surveyed tag (as `landmarks.json` holds it, see `io::LandmarkRecord`).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct Landmark {
     /// Tag id.
     pub id: u32,

@@ -32,7 +32,7 @@ pub struct Localize {
 impl Localize {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let file = io::load_landmarks(&self.survey.join("landmarks.json"))?;
-        let landmarks: Vec<_> = file.landmarks.iter().map(|r| r.landmark()).collect();
+        let landmarks: Vec<_> = file.landmarks.into_iter().map(|r| r.landmark).collect();
         let run = io::load_run(&self.run)?;
         let config = load_fuse_config(self.config.as_deref())?;
         let world_path = super::world_of_run(self.world.as_deref(), &self.run, &run);

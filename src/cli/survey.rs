@@ -396,7 +396,10 @@ fn write_outputs(
     landmarks.sort_by(|a, b| (&a.family, a.id).cmp(&(&b.family, b.id)));
     let records = landmarks
         .iter()
-        .map(|l| LandmarkRecord::new(l, planned(l)))
+        .map(|l| LandmarkRecord {
+            landmark: l.clone(),
+            planned_position_m: planned(l),
+        })
         .collect();
     io::save_landmarks(
         &dir.path("landmarks.json"),

@@ -1,42 +1,19 @@
 //! Survey outputs: `landmarks.json`, the WPILib `layout.json` and `trajectory.csv` (DESIGN.md).
 
 use super::{read_text, write_file, IoError};
-use crate::fuse::{CornerMatch, Landmark};
+use crate::fuse::Landmark;
 use crate::run::{pose_at, StampedPose};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// A matched corner as `landmarks.json` writes it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CornerRecord {
-    /// Corner x, metres.
-    pub x_m: f64,
-    /// Corner y, metres.
-    pub y_m: f64,
-    /// Hough votes.
-    pub votes: u32,
-}
-
-/// One entry of `landmarks.json` (keys fixed by DESIGN.md).
+/// One entry of `landmarks.json` (keys fixed by DESIGN.md): the landmark's own keys, with its
+/// matched corner as `{x_m, y_m, votes, distance_chi2}`, and the planned position.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LandmarkRecord {
-    /// Tag id.
-    pub id: u32,
-    /// Tag family.
-    pub family: String,
-    /// Edge length, metres.
-    pub size_m: f64,
-    /// Centre in the world, metres.
-    pub position_m: [f64; 3],
-    /// Direction the tag faces, radians from the world x axis.
-    pub yaw_rad: f64,
-    /// Covariance of the centre, m².
-    pub covariance_m2: [[f64; 3]; 3],
-    /// Sightings fused.
-    pub observations: usize,
-    /// Hough corner matched, if any.
-    pub matched_corner: Option<CornerRecord>,
+    /// The surveyed tag.
+    #[serde(flatten)]
+    pub landmark: Landmark,
     /// Where the world file planned the tag, if known.
     pub planned_position_m: Option<[f64; 3]>,
 }
@@ -46,46 +23,6 @@ pub struct LandmarkRecord {
 pub struct LandmarksFile {
     /// The landmarks, sorted by family and id.
     pub landmarks: Vec<LandmarkRecord>,
-}
-
-impl LandmarkRecord {
-    /// A record of a landmark with its planned position.
-    pub fn new(l: &Landmark, planned_position_m: Option<[f64; 3]>) -> Self {
-        Self {
-            id: l.id,
-            family: l.family.clone(),
-            size_m: l.size_m,
-            position_m: l.position_m,
-            yaw_rad: l.yaw_rad,
-            covariance_m2: l.covariance_m2,
-            observations: l.observations,
-            matched_corner: l.matched_corner.map(|c| CornerRecord {
-                x_m: c.x_m,
-                y_m: c.y_m,
-                votes: c.votes,
-            }),
-            planned_position_m,
-        }
-    }
-
-    /// The landmark back (for localisation against a saved survey).
-    pub fn landmark(&self) -> Landmark {
-        Landmark {
-            id: self.id,
-            family: self.family.clone(),
-            size_m: self.size_m,
-            position_m: self.position_m,
-            yaw_rad: self.yaw_rad,
-            covariance_m2: self.covariance_m2,
-            observations: self.observations,
-            matched_corner: self.matched_corner.map(|c| CornerMatch {
-                x_m: c.x_m,
-                y_m: c.y_m,
-                votes: c.votes,
-                distance_chi2: 0.0,
-            }),
-        }
-    }
 }
 
 /// Writes `landmarks.json`.
@@ -98,7 +35,7 @@ pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
     let text = read_text(path)?;
     let file: LandmarksFile = serde_json::from_str(&text)
         .map_err(|e| IoError::line(path, e.line() as u64, format!("column {}: {e}", e.column())))?;
-    for (i, l) in file.landmarks.iter().enumerate() {
+    for (i, l) in file.landmarks.iter().map(|r| &r.landmark).enumerate() {
         let numbers = l
             .position_m
             .iter()
