@@ -149,8 +149,8 @@ pub struct UsedView {
 
 const COVERAGE_COLS: usize = 8;
 const COVERAGE_ROWS: usize = 6;
-/// Views the free calibration needs (Zhang needs three; ours: 5).
-const MIN_VIEWS_FREE: usize = 5;
+/// Views the free calibration needs (Zhang needs three; fewer than 10 gets a warning).
+const MIN_VIEWS_FREE: usize = 3;
 /// Views the extrinsics-only calibration needs.
 const MIN_VIEWS_FIXED: usize = 1;
 
@@ -417,6 +417,28 @@ pub fn aprilgrid_corners(
         }
     }
     out
+}
+
+/// Board corners of a chessboard found by [`crate::chessboard::detect_chessboard`] (index
+/// `r · cols + c`): corner `(c, r)` at `(c · col_spacing, r · row_spacing, 0)` on the board, as
+/// Kalibr's checkerboard target places them.
+pub fn chessboard_board_corners(
+    px: &[[f64; 2]],
+    cols: u32,
+    col_spacing_m: f64,
+    row_spacing_m: f64,
+) -> Vec<Corner> {
+    px.iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let (c, r) = (k as u32 % cols, k as u32 / cols);
+            Corner {
+                id: k as u32,
+                board_m: [c as f64 * col_spacing_m, r as f64 * row_spacing_m, 0.0],
+                px: *p,
+            }
+        })
+        .collect()
 }
 
 /// Reprojection error of one corner, pixels (infinite behind the camera).

@@ -10,6 +10,7 @@
 
 pub mod calibrate;
 pub mod camera;
+pub mod chessboard;
 pub mod fuse;
 pub mod geometry;
 pub mod grid;

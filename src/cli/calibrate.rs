@@ -9,7 +9,7 @@ pub struct Calibrate {
     /// Calibration target (Kalibr target YAML), e.g. calibration/targets/aprilgrid_6x6.yaml.
     #[arg(long)]
     target: PathBuf,
-    /// Left images, a glob like 'cam0/*.png' (AprilGrid targets; pairs matched in sorted order).
+    /// Left images, a glob like 'cam0/*.png' (pairs matched in sorted order).
     #[arg(long)]
     left: Option<String>,
     /// Right images, a glob.
@@ -21,7 +21,7 @@ pub struct Calibrate {
     /// Directory of right corners already detected.
     #[arg(long)]
     corners_right: Option<PathBuf>,
-    /// Image size WIDTHxHEIGHT (needed without --fix-intrinsics).
+    /// Image size WIDTHxHEIGHT (needed with corner files without --fix-intrinsics; images give it).
     #[arg(long)]
     resolution: Option<String>,
     /// Keep this rig file's intrinsics and distortion; solve right_from_left only.
@@ -43,17 +43,25 @@ pub struct Calibrate {
 }
 
 impl Calibrate {
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let started = std::time::Instant::now();
         let target = io::load_target(&self.target)?;
-        let (left, right) = match (
+        let (left, right, image_size, misses) = match (
             &self.corners_left,
             &self.corners_right,
             &self.left,
             &self.right,
         ) {
-            (Some(cl), Some(cr), _, _) => (io::load_corner_csvs(cl)?, io::load_corner_csvs(cr)?),
-            (_, _, Some(gl), Some(gr)) => detect_views(&target, gl, gr)?,
+            (Some(cl), Some(cr), _, _) => (
+                io::load_corner_csvs(cl)?,
+                io::load_corner_csvs(cr)?,
+                None,
+                Vec::new(),
+            ),
+            (_, _, Some(gl), Some(gr)) => {
+                let d = detect_views(&target, gl, gr, quiet)?;
+                (d.left, d.right, Some(d.resolution), d.misses)
+            }
             _ => {
                 return Err(UsageError(
                     "pass --left GLOB --right GLOB (images) or --corners-left DIR --corners-right DIR (EuRoC CSV)".into(),
@@ -62,22 +70,39 @@ impl Calibrate {
             }
         };
         let mut config = CalibConfig::default();
-        let resolution = match (&self.fix_intrinsics, &self.resolution) {
-            (Some(rig_path), _) => {
+        let resolution = match (&self.fix_intrinsics, &self.resolution, image_size) {
+            (Some(rig_path), _, _) => {
                 let rig = io::load_rig(rig_path)?;
                 let res = (rig.left.width, rig.left.height);
+                if image_size.is_some_and(|s| s != res) {
+                    let (w, h) = image_size.unwrap_or_default();
+                    return Err(UsageError(format!(
+                        "{}: the rig is {}x{} but the images are {w}x{h}",
+                        rig_path.display(),
+                        res.0,
+                        res.1
+                    ))
+                    .into());
+                }
                 config.fixed_intrinsics = Some((rig.left, rig.right));
                 res
             }
-            (None, Some(r)) => parse_resolution(r)?,
-            (None, None) => {
+            (None, Some(r), _) => parse_resolution(r)?,
+            (None, None, Some(size)) => size,
+            (None, None, None) => {
                 return Err(UsageError(
-                    "--resolution WIDTHxHEIGHT is needed when the intrinsics are not fixed".into(),
+                    "--resolution WIDTHxHEIGHT is needed with corner files when the intrinsics are not fixed".into(),
                 )
                 .into())
             }
         };
-        let calib = calibrate_stereo(&left, &right, resolution, &config)?;
+        let calib = calibrate_stereo(&left, &right, resolution, &config).inspect_err(|e| {
+            if matches!(e, stereotag::calibrate::CalibError::TooFewViews { .. }) {
+                for m in &misses {
+                    tracing::warn!("no usable board in {m}");
+                }
+            }
+        })?;
         let dir = OutputDir::create(&self.out, self.force)?;
         super::rig::write_rig_exports(&dir, &calib.rig)?;
         let t = calib.rig.right_from_left.translation.vector;
@@ -242,28 +267,19 @@ fn glob(pattern: &str) -> Result<Vec<PathBuf>, UsageError> {
     Ok(out)
 }
 
-/// Detects the target's corners in every left and right image (AprilGrid targets).
-fn detect_views(
-    target: &Target,
-    left: &str,
-    right: &str,
-) -> anyhow::Result<(
-    stereotag::calibrate::ViewCorners,
-    stereotag::calibrate::ViewCorners,
-)> {
+/// Corners detected in the images of both cameras, with the image size and why views were lost.
+struct Detected {
+    left: stereotag::calibrate::ViewCorners,
+    right: stereotag::calibrate::ViewCorners,
+    resolution: (u32, u32),
+    misses: Vec<String>,
+}
+
+/// Detects the target's corners in every left and right image, pairs in parallel.
+fn detect_views(target: &Target, left: &str, right: &str, quiet: bool) -> anyhow::Result<Detected> {
+    use rayon::prelude::*;
+    use stereotag::calibrate::{aprilgrid_corners, chessboard_board_corners, Corner};
     use stereotag::tags::TagDetector;
-    let Target::Aprilgrid {
-        tag_cols,
-        tag_rows,
-        tag_size,
-        tag_spacing,
-    } = target
-    else {
-        return Err(UsageError(
-            "chessboard corner detection in images is not built yet: use an AprilGrid target or --corners-left/--corners-right".into(),
-        )
-        .into());
-    };
     let (lf, rf) = (glob(left)?, glob(right)?);
     if lf.len() != rf.len() {
         return Err(UsageError(format!(
@@ -273,30 +289,115 @@ fn detect_views(
         ))
         .into());
     }
-    let mut detector = stereotag::tags::AprilGridMultiScale::new()?;
-    let (mut lv, mut rv) = (
-        stereotag::calibrate::ViewCorners::new(),
-        stereotag::calibrate::ViewCorners::new(),
-    );
-    for (l, r) in lf.iter().zip(&rf) {
-        let name = l
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        for (path, views) in [(l, &mut lv), (r, &mut rv)] {
-            let found = detector.detect(&io::load_gray(path)?)?;
-            tracing::info!("{}: {} AprilGrid tags", path.display(), found.len());
-            views.insert(
-                name.clone(),
-                stereotag::calibrate::aprilgrid_corners(
-                    &found,
-                    *tag_cols,
-                    *tag_rows,
-                    *tag_size,
-                    *tag_spacing,
-                ),
+    let bar = super::progress(lf.len() as u64, "detect", quiet);
+    // One AprilGrid detector per worker thread (the C detector is not shared).
+    let init = || match target {
+        Target::Aprilgrid { .. } => stereotag::tags::AprilGridMultiScale::new().map(Some),
+        Target::Checkerboard { .. } => Ok(None),
+    };
+    type Found = (Vec<Corner>, Option<String>);
+    let detect = |grid: &mut Option<stereotag::tags::AprilGridMultiScale>,
+                  image: &image::GrayImage|
+     -> anyhow::Result<Found> {
+        Ok(match (target, grid) {
+            (
+                Target::Aprilgrid {
+                    tag_cols,
+                    tag_rows,
+                    tag_size,
+                    tag_spacing,
+                },
+                Some(detector),
+            ) => {
+                let found = detector.detect(image)?;
+                let corners =
+                    aprilgrid_corners(&found, *tag_cols, *tag_rows, *tag_size, *tag_spacing);
+                let note = format!("{} AprilGrid tags", found.len());
+                (corners, Some(note).filter(|_| found.is_empty()))
+            }
+            (
+                Target::Checkerboard {
+                    target_cols,
+                    target_rows,
+                    row_spacing_m,
+                    col_spacing_m,
+                },
+                _,
+            ) => {
+                match stereotag::chessboard::detect_chessboard(image, *target_cols, *target_rows) {
+                    Ok(px) => (
+                        chessboard_board_corners(&px, *target_cols, *col_spacing_m, *row_spacing_m),
+                        None,
+                    ),
+                    Err(miss) => (Vec::new(), Some(miss.to_string())),
+                }
+            }
+            (Target::Aprilgrid { .. }, None) => unreachable!("an AprilGrid detector per thread"),
+        })
+    };
+    type PairFound = anyhow::Result<(String, (u32, u32), Found, Found)>;
+    let pairs: Vec<PairFound> = lf
+        .par_iter()
+        .zip(&rf)
+        .map_init(init, |grid, (l, r)| {
+            let grid = grid.as_mut().map_err(|e| anyhow::anyhow!("{e}"))?;
+            let (li, ri) = (io::load_gray(l)?, io::load_gray(r)?);
+            if li.dimensions() != ri.dimensions() {
+                return Err(UsageError(format!(
+                    "{} is {}x{} but {} is {}x{}: left and right images must be the same size",
+                    l.display(),
+                    li.width(),
+                    li.height(),
+                    r.display(),
+                    ri.width(),
+                    ri.height()
+                ))
+                .into());
+            }
+            let name = l
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let found = (
+                name,
+                li.dimensions(),
+                detect(grid, &li)?,
+                detect(grid, &ri)?,
             );
+            bar.inc(1);
+            Ok(found)
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut out = Detected {
+        left: Default::default(),
+        right: Default::default(),
+        resolution: (0, 0),
+        misses: Vec::new(),
+    };
+    for ((pair, l), r) in pairs.into_iter().zip(&lf).zip(&rf) {
+        let (name, size, (lc, lmiss), (rc, rmiss)) = pair?;
+        if out.resolution != (0, 0) && out.resolution != size {
+            return Err(UsageError(format!(
+                "{} is {}x{} but the images before it are {}x{}: one camera, one size",
+                l.display(),
+                size.0,
+                size.1,
+                out.resolution.0,
+                out.resolution.1
+            ))
+            .into());
         }
+        out.resolution = size;
+        for (path, miss) in [(l, lmiss), (r, rmiss)] {
+            if let Some(m) = miss {
+                tracing::info!("{}: {m}", path.display());
+                out.misses.push(format!("{}: {m}", path.display()));
+            }
+        }
+        tracing::debug!("{name}: {} left, {} right corners", lc.len(), rc.len());
+        out.left.insert(name.clone(), lc);
+        out.right.insert(name, rc);
     }
-    Ok((lv, rv))
+    Ok(out)
 }

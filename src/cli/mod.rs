@@ -135,7 +135,7 @@ pub fn main() -> i32 {
         Command::Map(c) => c.run(),
         Command::Survey(c) => c.run(cli.quiet),
         Command::Localize(c) => c.run(cli.quiet),
-        Command::Calibrate(c) => c.run(),
+        Command::Calibrate(c) => c.run(cli.quiet),
         Command::Plan(c) => c.run(),
         Command::Detect(c) => c.run(),
         Command::Rig(c) => c.run(),
