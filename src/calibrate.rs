@@ -388,35 +388,32 @@ fn epipolar_rms(rig: &StereoRig, views: &[(&str, Vec<Corner>, Vec<Corner>)]) -> 
     (sum / n.max(1) as f64).sqrt()
 }
 
-/// Board corners of detected AprilGrid tags (Kalibr's layout: tag `id` at column `id % cols`,
-/// row `id / cols`, pitch `size · (1 + spacing)`; corner `k` of a tag is the C library's corner `k`:
-/// (x, y), (x + s, y), (x + s, y + s), (x, y + s) on the board). Ids outside the grid are dropped.
+/// Board corners of AprilGrid corner points `(tag id × 4 + k, pixel)` (Kalibr's layout: tag `id`
+/// at column `id % cols`, row `id / cols`, pitch `size · (1 + spacing)`; corner `k` of a tag is the
+/// C library's corner `k`: (x, y), (x + s, y), (x + s, y + s), (x, y + s) on the board). Tags
+/// outside the grid are dropped.
 pub fn aprilgrid_corners(
-    detections: &[crate::tags::TagDetection],
+    points: &[(u32, [f64; 2])],
     cols: u32,
     rows: u32,
     size_m: f64,
     spacing: f64,
 ) -> Vec<Corner> {
     let pitch = size_m * (1.0 + spacing);
-    let mut out = Vec::new();
-    for d in detections.iter().filter(|d| d.id < cols * rows) {
-        let (x, y) = ((d.id % cols) as f64 * pitch, (d.id / cols) as f64 * pitch);
-        let board = [
-            [x, y],
-            [x + size_m, y],
-            [x + size_m, y + size_m],
-            [x, y + size_m],
-        ];
-        for (k, b) in board.iter().enumerate() {
-            out.push(Corner {
-                id: d.id * 4 + k as u32,
-                board_m: [b[0], b[1], 0.0],
-                px: d.corners_px[k],
-            });
-        }
-    }
-    out
+    points
+        .iter()
+        .filter(|(id, _)| id / 4 < cols * rows)
+        .map(|&(id, px)| {
+            let (tag, k) = (id / 4, id % 4);
+            let (x, y) = ((tag % cols) as f64 * pitch, (tag / cols) as f64 * pitch);
+            let (dx, dy) = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)][k as usize];
+            Corner {
+                id,
+                board_m: [x + dx * size_m, y + dy * size_m, 0.0],
+                px,
+            }
+        })
+        .collect()
 }
 
 /// Board corners of a chessboard found by [`crate::chessboard::detect_chessboard`] (index
@@ -449,7 +446,7 @@ fn reprojection_error(cam: &Camera, camera_from_board: &Isometry3<f64>, c: &Corn
 }
 
 /// Normalised DLT homography from board (x, y) to image points.
-fn homography(pairs: &[([f64; 2], [f64; 2])]) -> Option<Matrix3<f64>> {
+pub(crate) fn homography(pairs: &[([f64; 2], [f64; 2])]) -> Option<Matrix3<f64>> {
     if pairs.len() < 4 {
         return None;
     }

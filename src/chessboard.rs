@@ -55,6 +55,9 @@ const SEARCH_FRACTION: f64 = 0.3;
 const EDGE_CONTRAST_FRACTION: f32 = 0.3;
 /// Seeds tried before giving up.
 const MAX_SEEDS: usize = 40;
+/// An AprilGrid corner that ends farther than this from the prediction of its neighbours is
+/// dropped, pixels.
+const KEEP_NEAR_PREDICTION_PX: f64 = 1.0;
 /// Largest half-width of the sub-pixel window (OpenCV's usual `winSize` 11).
 const MAX_REFINE_HALF_WIDTH: i32 = 11;
 
@@ -324,10 +327,107 @@ fn grow(blur: &Plane, cands: &[Candidate], seed: usize) -> Option<Grid> {
     Some(grid)
 }
 
-/// Refines a corner to sub-pixel precision (gradient orthogonality, as OpenCV's `cornerSubPix`).
-/// `None` when the window has no structure or the estimate leaves it.
-pub fn refine_corner(image: &GrayImage, x: f64, y: f64, half_width: i32) -> Option<[f64; 2]> {
-    refine(&Plane::from_gray(image), x, y, half_width)
+/// Refines X-corners in place to sub-pixel precision (gradient orthogonality, as OpenCV's
+/// `cornerSubPix`, on the image blurred as [`detect_chessboard`] blurs it): chessboard corners,
+/// or AprilGrid tag corners, where each tag's black border meets a small black square
+/// diagonally. Each point comes with its window half-width; a point whose estimate fails or
+/// moves more than `max_move_px` keeps its position. Returns how many were refined.
+pub fn refine_x_corners(
+    image: &GrayImage,
+    points: &mut [([f64; 2], i32)],
+    max_move_px: f64,
+) -> usize {
+    let plane = Plane::from_gray(image).blurred().blurred();
+    let mut refined = 0;
+    for (p, hw) in points.iter_mut() {
+        if let Some(q) = refine(&plane, p[0], p[1], *hw) {
+            if (q[0] - p[0]).hypot(q[1] - p[1]) <= max_move_px {
+                *p = q;
+                refined += 1;
+            }
+        }
+    }
+    refined
+}
+
+/// Refines the corners of detected AprilGrid tags (Kalibr layout: tag `id` at column
+/// `id % cols`, row `id / cols`, pitch `1 + spacing` tag edges) as X-corners, where each tag's
+/// black border meets a small black square diagonally.
+///
+/// A detector sometimes closes a tag's quad around one of those squares, putting a corner a
+/// square's width off. So each tag's corners are first checked against a homography fitted to
+/// the corners of the tags around it; a corner more than 1 px off that prediction restarts from
+/// it. Then every corner is refined (window: 15% of the tag's edge in pixels, inside its 2-cell
+/// black border), and a corner that still ends more than 1 px from its prediction is dropped
+/// (its tag loses it; the others stay).
+pub fn refine_aprilgrid(
+    image: &GrayImage,
+    detections: &[crate::tags::TagDetection],
+    cols: u32,
+    spacing: f64,
+) -> Vec<(u32, [f64; 2])> {
+    use nalgebra::Vector3;
+    let pitch = 1.0 + spacing;
+    let board = |id: u32, k: usize| -> [f64; 2] {
+        let (x, y) = ((id % cols) as f64 * pitch, (id / cols) as f64 * pitch);
+        [[x, y], [x + 1.0, y], [x + 1.0, y + 1.0], [x, y + 1.0]][k]
+    };
+    let apply = |h: &nalgebra::Matrix3<f64>, b: [f64; 2]| {
+        let p = h * Vector3::new(b[0], b[1], 1.0);
+        [p.x / p.z, p.y / p.z]
+    };
+    let mut points = Vec::with_capacity(detections.len() * 4);
+    let mut predicted = Vec::with_capacity(detections.len() * 4);
+    for d in detections {
+        let (c, r) = ((d.id % cols) as i64, (d.id / cols) as i64);
+        let near: Vec<([f64; 2], [f64; 2])> = detections
+            .iter()
+            .filter(|o| {
+                let (oc, or) = ((o.id % cols) as i64, (o.id / cols) as i64);
+                o.id != d.id && (oc - c).abs() <= 1 && (or - r).abs() <= 1
+            })
+            .flat_map(|o| (0..4).map(move |k| (board(o.id, k), o.corners_px[k])))
+            .collect();
+        // Fit, drop the worst-fitting neighbours (their own bad corners), fit again.
+        let h = crate::calibrate::homography(&near).and_then(|h| {
+            let mut kept: Vec<_> = near
+                .iter()
+                .filter(|(b, p)| {
+                    let q = apply(&h, *b);
+                    (q[0] - p[0]).hypot(q[1] - p[1]) < 1.5
+                })
+                .cloned()
+                .collect();
+            if kept.len() < 8 {
+                kept = near.clone();
+            }
+            crate::calibrate::homography(&kept)
+        });
+        let cp = &d.corners_px;
+        let side = (0..4)
+            .map(|k| (cp[k][0] - cp[(k + 1) % 4][0]).hypot(cp[k][1] - cp[(k + 1) % 4][1]))
+            .sum::<f64>()
+            / 4.0;
+        let hw = ((0.15 * side).round() as i32).clamp(2, MAX_REFINE_HALF_WIDTH);
+        for (k, p) in cp.iter().enumerate() {
+            let guess = h
+                .filter(|_| near.len() >= 8)
+                .map(|h| apply(&h, board(d.id, k)));
+            let start = match guess {
+                Some(g) if (g[0] - p[0]).hypot(g[1] - p[1]) > 1.0 => g,
+                _ => *p,
+            };
+            points.push((start, hw));
+            predicted.push((d.id * 4 + k as u32, guess.unwrap_or(*p)));
+        }
+    }
+    refine_x_corners(image, &mut points, 2.0);
+    points
+        .iter()
+        .zip(&predicted)
+        .filter(|((p, _), (_, g))| (p[0] - g[0]).hypot(p[1] - g[1]) <= KEEP_NEAR_PREDICTION_PX)
+        .map(|((p, _), (id, _))| (*id, *p))
+        .collect()
 }
 
 fn refine(plane: &Plane, x: f64, y: f64, half_width: i32) -> Option<[f64; 2]> {

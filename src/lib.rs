@@ -8,6 +8,7 @@
 //!
 //! Data flows one way: [`world`] → [`sim`] → [`run`] dataset → [`grid`] → [`hough`] → [`score`].
 
+pub mod board;
 pub mod calibrate;
 pub mod camera;
 pub mod chessboard;

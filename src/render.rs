@@ -197,12 +197,12 @@ impl TagPaint {
 }
 
 /// Albedo of a tag's white paper.
-const TAG_WHITE: f64 = 0.92;
+pub(crate) const TAG_WHITE: f64 = 0.92;
 /// Albedo of a tag's black ink.
-const TAG_BLACK: f64 = 0.08;
+pub(crate) const TAG_BLACK: f64 = 0.08;
 
 /// A smooth, deterministic texture value in [-1, 1] (value noise on a lattice).
-fn texture(u: f64, v: f64) -> f64 {
+pub(crate) fn texture(u: f64, v: f64) -> f64 {
     let hash = |i: i64, j: i64| {
         let mut h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
             ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
@@ -297,7 +297,7 @@ pub fn world_from_left(rig: &StereoRig, world_from_robot: &Pose2) -> Isometry3<f
 
 /// Unit ray directions in the camera frame of the four samples of every pixel, row-major.
 #[derive(Debug, Clone)]
-struct RayTable {
+pub(crate) struct RayTable {
     rays: Vec<Option<[Vector3<f64>; 4]>>,
 }
 
@@ -338,8 +338,11 @@ impl RayTable {
     }
 }
 
-fn render_camera(
-    scene: &Scene,
+/// Albedo and distance of the first surface along a ray `(origin, direction)`.
+pub(crate) type Tracer<'a> = dyn Fn(&Vector3<f64>, &Vector3<f64>) -> (f64, f64) + Sync + 'a;
+
+pub(crate) fn render_camera(
+    trace: &Tracer,
     camera: &Camera,
     table: &RayTable,
     world_from_camera: &Isometry3<f64>,
@@ -362,7 +365,7 @@ fn render_camera(
                 let mut sum = 0.0;
                 for ray in rays {
                     let dir = rotation * ray;
-                    let (t, albedo) = scene.trace(&origin, &dir);
+                    let (t, albedo) = trace(&origin, &dir);
                     let light = if t.is_finite() {
                         1.0 / (1.0 + (t / config.light_half_distance_m).powi(2))
                     } else {
@@ -400,9 +403,9 @@ fn render_camera(
 /// pairs costs only the tracing.
 #[derive(Debug, Clone)]
 pub struct Renderer {
-    rig: StereoRig,
-    left: RayTable,
-    right: RayTable,
+    pub(crate) rig: StereoRig,
+    pub(crate) left: RayTable,
+    pub(crate) right: RayTable,
 }
 
 impl Renderer {
@@ -435,8 +438,9 @@ impl Renderer {
         };
         let wl = world_from_left(rig, &world_from_robot);
         let wr = wl * rig.right_from_left.inverse();
+        let trace = |o: &Vector3<f64>, d: &Vector3<f64>| scene.trace(o, d);
         let left = render_camera(
-            &scene,
+            &trace,
             &rig.left,
             &self.left,
             &wl,
@@ -444,7 +448,7 @@ impl Renderer {
             config.seed.wrapping_mul(2),
         );
         let right = render_camera(
-            &scene,
+            &trace,
             &rig.right,
             &self.right,
             &wr,

@@ -310,8 +310,10 @@ fn detect_views(target: &Target, left: &str, right: &str, quiet: bool) -> anyhow
                 Some(detector),
             ) => {
                 let found = detector.detect(image)?;
+                let points =
+                    stereotag::chessboard::refine_aprilgrid(image, &found, *tag_cols, *tag_spacing);
                 let corners =
-                    aprilgrid_corners(&found, *tag_cols, *tag_rows, *tag_size, *tag_spacing);
+                    aprilgrid_corners(&points, *tag_cols, *tag_rows, *tag_size, *tag_spacing);
                 let note = format!("{} AprilGrid tags", found.len());
                 (corners, Some(note).filter(|_| found.is_empty()))
             }

@@ -139,7 +139,7 @@ pub fn main() -> i32 {
         Command::Plan(c) => c.run(),
         Command::Detect(c) => c.run(),
         Command::Rig(c) => c.run(),
-        Command::Render(c) => c.run(),
+        Command::Render(c) => c.run(cli.quiet),
         Command::Config(c) => c.run(),
         Command::Completions { shell } => {
             clap_complete::generate(

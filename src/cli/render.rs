@@ -7,9 +7,9 @@ use stereotag::render::{render_pair, RenderConfig, Renderer};
 /// Arguments of `stereotag render`.
 #[derive(Debug, clap::Args)]
 pub struct Render {
-    /// World file.
-    #[arg(long)]
-    world: PathBuf,
+    /// World file (not needed with --calibration-sequence).
+    #[arg(long, required_unless_present = "calibration_sequence")]
+    world: Option<PathBuf>,
     /// Stereo rig file (Kalibr camchain).
     #[arg(long, default_value = "calibration/rigs/default.yaml")]
     rig: PathBuf,
@@ -17,14 +17,22 @@ pub struct Render {
     #[arg(
         long,
         allow_hyphen_values = true,
-        required_unless_present = "poses",
-        conflicts_with = "poses"
+        required_unless_present_any = ["poses", "calibration_sequence"],
+        conflicts_with_all = ["poses", "calibration_sequence"]
     )]
     pose: Option<String>,
     /// Sequence mode: a pose CSV (`t_s,x_m,y_m,theta_rad`, e.g. a run's ground_truth.csv); writes
     /// left/NNNNNN.png, right/NNNNNN.png and one truth.json listing every frame.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "calibration_sequence")]
     poses: Option<PathBuf>,
+    /// Calibration mode: N views of the --target board in front of the rig, poses spread over
+    /// the image and tilted; writes left/NNNNNN.png, right/NNNNNN.png, rig.yaml (the true rig)
+    /// and truth.json (board pose and every corner's true pixel in both images, per view).
+    #[arg(long, value_name = "N", requires = "target")]
+    calibration_sequence: Option<usize>,
+    /// Calibration target (Kalibr target YAML) for --calibration-sequence.
+    #[arg(long)]
+    target: Option<PathBuf>,
     /// Output directory: left.png, right.png, truth.json (one pair) or the sequence.
     #[arg(long)]
     out: PathBuf,
@@ -37,9 +45,16 @@ pub struct Render {
 }
 
 impl Render {
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        if let (Some(n), Some(target)) = (self.calibration_sequence, &self.target) {
+            return self.run_calibration_sequence(n, target, quiet);
+        }
+        let world = self
+            .world
+            .as_deref()
+            .ok_or_else(|| UsageError("--world is needed to render a scene".into()))?;
         if let Some(poses) = &self.poses {
-            return self.run_sequence(poses);
+            return self.run_sequence(world, poses, quiet);
         }
         let pose = self.pose.as_deref().unwrap_or_default();
         let parts: Vec<f64> = pose
@@ -60,7 +75,7 @@ impl Render {
         if !(x.is_finite() && y.is_finite() && theta.is_finite()) {
             return Err(UsageError(format!("--pose {pose}: numbers must be finite")).into());
         }
-        let loaded = io::load_world(&self.world)?;
+        let loaded = io::load_world(world)?;
         let rig = io::load_rig(&self.rig)?;
         let config = RenderConfig {
             seed: self.seed,
@@ -90,15 +105,20 @@ impl Render {
         Ok(())
     }
 
-    fn run_sequence(&self, poses_path: &std::path::Path) -> anyhow::Result<()> {
+    fn run_sequence(
+        &self,
+        world: &std::path::Path,
+        poses_path: &std::path::Path,
+        quiet: bool,
+    ) -> anyhow::Result<()> {
         let poses = io::read_poses(poses_path)?;
-        let loaded = io::load_world(&self.world)?;
+        let loaded = io::load_world(world)?;
         let rig = io::load_rig(&self.rig)?;
         let renderer = Renderer::new(&rig);
         let dir = OutputDir::create(&self.out, self.force)?;
         std::fs::create_dir_all(dir.path("left"))?;
         std::fs::create_dir_all(dir.path("right"))?;
-        let bar = super::progress(poses.len() as u64, "render", false);
+        let bar = super::progress(poses.len() as u64, "render", quiet);
         let mut frames = Vec::with_capacity(poses.len());
         for (k, p) in poses.iter().enumerate() {
             let config = RenderConfig {
@@ -106,13 +126,7 @@ impl Render {
                 ..RenderConfig::default()
             };
             let pair = renderer.render(&loaded.world, p.pose, &config)?;
-            let (left, right) = (format!("left/{k:06}.png"), format!("right/{k:06}.png"));
-            pair.left
-                .save(dir.path(&left))
-                .map_err(|e| anyhow::anyhow!("{}: {e}", dir.target().join(&left).display()))?;
-            pair.right
-                .save(dir.path(&right))
-                .map_err(|e| anyhow::anyhow!("{}: {e}", dir.target().join(&right).display()))?;
+            let (left, right) = save_pair(&dir, k, &pair.left, &pair.right)?;
             frames.push(serde_json::json!({
                 "t_s": p.t_s,
                 "world_from_robot": [p.pose.x, p.pose.y, p.pose.theta],
@@ -129,6 +143,97 @@ impl Render {
         )?;
         dir.commit()?;
         tracing::info!("rendered {} pairs -> {}", poses.len(), self.out.display());
+        Ok(())
+    }
+}
+
+/// Writes the `k`th pair of a sequence as left/NNNNNN.png and right/NNNNNN.png; returns the
+/// names.
+fn save_pair(
+    dir: &OutputDir,
+    k: usize,
+    left: &image::GrayImage,
+    right: &image::GrayImage,
+) -> anyhow::Result<(String, String)> {
+    let names = (format!("left/{k:06}.png"), format!("right/{k:06}.png"));
+    for (img, name) in [(left, &names.0), (right, &names.1)] {
+        img.save(dir.path(name))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", dir.target().join(name).display()))?;
+    }
+    Ok(names)
+}
+
+impl Render {
+    fn run_calibration_sequence(
+        &self,
+        n: usize,
+        target_path: &std::path::Path,
+        quiet: bool,
+    ) -> anyhow::Result<()> {
+        use stereotag::board::{calibration_poses, Board};
+        let target = io::load_target(target_path)?;
+        let rig = io::load_rig(&self.rig)?;
+        let board = match &target {
+            io::Target::Aprilgrid {
+                tag_cols,
+                tag_rows,
+                tag_size,
+                tag_spacing,
+            } => Board::aprilgrid(*tag_cols, *tag_rows, *tag_size, *tag_spacing)?,
+            io::Target::Checkerboard {
+                target_cols,
+                target_rows,
+                row_spacing_m,
+                col_spacing_m,
+            } => Board::Chessboard {
+                cols: *target_cols,
+                rows: *target_rows,
+                col_m: *col_spacing_m,
+                row_m: *row_spacing_m,
+            },
+        };
+        let poses = calibration_poses(&rig, &board, n, self.seed);
+        if poses.len() < n {
+            tracing::warn!(
+                "the whole board fits both images in only {} of {n} views tried: a smaller board or a wider lens helps",
+                poses.len()
+            );
+        }
+        let renderer = Renderer::new(&rig);
+        let dir = OutputDir::create(&self.out, self.force)?;
+        std::fs::create_dir_all(dir.path("left"))?;
+        std::fs::create_dir_all(dir.path("right"))?;
+        io::save_rig(&dir.path("rig.yaml"), &rig)?;
+        let bar = super::progress(poses.len() as u64, "render", quiet);
+        let mut frames = Vec::with_capacity(poses.len());
+        for (k, pose) in poses.iter().enumerate() {
+            let config = RenderConfig {
+                seed: self.seed.wrapping_add(k as u64),
+                ..RenderConfig::default()
+            };
+            let view = renderer.render_board(&board, pose, &config);
+            let (left, right) = save_pair(&dir, k, &view.left, &view.right)?;
+            let q = pose.rotation.coords;
+            let t = pose.translation.vector;
+            frames.push(serde_json::json!({
+                "left": left,
+                "right": right,
+                "left_from_board": {"t_m": [t.x, t.y, t.z], "q_xyzw": [q.x, q.y, q.z, q.w]},
+                "corners": view.corners,
+            }));
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        io::save_json(
+            &dir.path("truth.json"),
+            &serde_json::json!({ "target": target, "frames": frames }),
+        )?;
+        dir.commit()?;
+        tracing::info!(
+            "rendered {} calibration pairs -> {}",
+            poses.len(),
+            self.out.display()
+        );
         Ok(())
     }
 }
