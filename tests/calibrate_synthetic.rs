@@ -1,7 +1,7 @@
 //! The solver on a known rig: 30 views of the EuRoC AprilGrid's corners projected through a
 //! known rig (the default robot rig with stronger distortion), spread over the image and tilted,
 //! with 0.1 px Gaussian corner noise. Issue 4's figures for rendered views, for the solver alone
-//! (the solver alone; tests/calibrate_images.rs goes through rendered images): focal lengths and principal points
+//! (tests/calibrate_images.rs goes through rendered images): focal lengths and principal points
 //! within 0.2%, baseline within 0.2%, rotation within 0.05 degree, RMS <= 0.2 px are met; the
 //! largest reprojection difference over the image (< 0.1 px asked) is 0.19 px.
 
