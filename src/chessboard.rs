@@ -93,25 +93,27 @@ impl Plane {
         top * (1.0 - fy) + bottom * fy
     }
 
-    /// Separable binomial blur [1 4 6 4 1] / 16 (about a Gaussian of sigma 1).
+    /// Separable binomial blur [1 4 6 4 1] / 16 (about a Gaussian of sigma 1), edges clamped.
     fn blurred(&self) -> Self {
-        const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
         let (w, h) = (self.w, self.h);
+        let tap = |a: f32, b: f32, c: f32, d: f32, e: f32| (a + e + 4.0 * (b + d) + 6.0 * c) / 16.0;
         let clamp = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
         let mut tmp = vec![0.0f32; w * h];
         for y in 0..h {
+            let src = &self.data[y * w..(y + 1) * w];
+            let dst = &mut tmp[y * w..(y + 1) * w];
             for x in 0..w {
-                tmp[y * w + x] = (0..5)
-                    .map(|k| K[k] * self.data[y * w + clamp(x as isize + k as isize - 2, w)])
-                    .sum();
+                let at = |d: isize| src[clamp(x as isize + d, w)];
+                dst[x] = tap(at(-2), at(-1), at(0), at(1), at(2));
             }
         }
         let mut out = vec![0.0f32; w * h];
         for y in 0..h {
+            let rows: [&[f32]; 5] =
+                std::array::from_fn(|k| &tmp[clamp(y as isize + k as isize - 2, h) * w..][..w]);
+            let dst = &mut out[y * w..(y + 1) * w];
             for x in 0..w {
-                out[y * w + x] = (0..5)
-                    .map(|k| K[k] * tmp[clamp(y as isize + k as isize - 2, h) * w + x])
-                    .sum();
+                dst[x] = tap(rows[0][x], rows[1][x], rows[2][x], rows[3][x], rows[4][x]);
             }
         }
         Self { w, h, data: out }
@@ -144,32 +146,25 @@ fn candidates(blur: &Plane) -> Vec<Candidate> {
     let ring = ring_offsets();
     let r = RING_RADIUS as usize + 1;
     let mut response = vec![0.0f32; w * h];
-    let mut contrast = vec![0.0f32; w * h];
+    // Ring samples as offsets into the row-major buffer.
+    let offsets: [isize; 16] = std::array::from_fn(|k| ring[k].1 * w as isize + ring[k].0);
+    let data = &blur.data;
     for y in r..h.saturating_sub(r) {
-        for x in r..w.saturating_sub(r) {
-            let s: [f32; 16] = std::array::from_fn(|k| {
-                blur.at(
-                    (x as isize + ring[k].0) as usize,
-                    (y as isize + ring[k].1) as usize,
-                )
-            });
-            let sum: f32 = (0..4)
-                .map(|n| ((s[n] + s[n + 8]) - (s[n + 4] + s[n + 12])).abs())
-                .sum();
-            let diff: f32 = (0..8).map(|n| (s[n] - s[n + 8]).abs()).sum();
+        let row = &mut response[y * w..(y + 1) * w];
+        for (x, out) in row.iter_mut().enumerate().take(w.saturating_sub(r)).skip(r) {
+            let i = y * w + x;
+            let s: [f32; 16] = std::array::from_fn(|k| data[(i as isize + offsets[k]) as usize]);
+            let mut sum = 0.0;
+            for n in 0..4 {
+                sum += ((s[n] + s[n + 8]) - (s[n + 4] + s[n + 12])).abs();
+            }
+            let mut diff = 0.0;
+            for n in 0..8 {
+                diff += (s[n] - s[n + 8]).abs();
+            }
             let ring_mean = s.iter().sum::<f32>() / 16.0;
-            let local = (blur.at(x, y)
-                + blur.at(x - 1, y)
-                + blur.at(x + 1, y)
-                + blur.at(x, y - 1)
-                + blur.at(x, y + 1))
-                / 5.0;
-            let mean = (ring_mean - local).abs();
-            response[y * w + x] = sum - diff - 16.0 * mean;
-            let (lo, hi) = s
-                .iter()
-                .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-            contrast[y * w + x] = hi - lo;
+            let local = (data[i] + data[i - 1] + data[i + 1] + data[i - w] + data[i + w]) / 5.0;
+            *out = sum - diff - 16.0 * (ring_mean - local).abs();
         }
     }
     let best = response.iter().cloned().fold(0.0f32, f32::max);
@@ -205,12 +200,13 @@ fn candidates(blur: &Plane) -> Vec<Candidate> {
                     }
                 }
             }
-            if is_max && is_x_corner(blur, &ring, x, y) {
+            if let Some(contrast) = is_max.then(|| x_corner_contrast(blur, &ring, x, y)).flatten()
+            {
                 out.push(Candidate {
                     x: x as f64,
                     y: y as f64,
                     response: v,
-                    contrast: contrast[y * w + x],
+                    contrast,
                 });
             }
         }
@@ -220,9 +216,10 @@ fn candidates(blur: &Plane) -> Vec<Candidate> {
     out
 }
 
-/// Whether the ring around a point crosses its mean grey four times (dark, bright, dark, bright:
-/// an X-corner), not twice (the L-corner where the board's outer squares meet its margin).
-fn is_x_corner(blur: &Plane, ring: &[(isize, isize); 16], x: usize, y: usize) -> bool {
+/// The contrast of the ring around a point if it crosses its mean grey four times (dark, bright,
+/// dark, bright: an X-corner), not twice (the L-corner where the board's outer squares meet its
+/// margin).
+fn x_corner_contrast(blur: &Plane, ring: &[(isize, isize); 16], x: usize, y: usize) -> Option<f32> {
     let s: [f32; 16] = std::array::from_fn(|k| {
         blur.at(
             (x as isize + ring[k].0) as usize,
@@ -242,7 +239,7 @@ fn is_x_corner(blur: &Plane, ring: &[(isize, isize); 16], x: usize, y: usize) ->
     let changes = (0..signs.len())
         .filter(|&k| signs[k] != signs[(k + 1) % signs.len()])
         .count();
-    changes == 4
+    (changes == 4).then_some(hi - lo)
 }
 
 /// Whether the segment between two corners is a square's edge: the grey levels either side of

@@ -69,6 +69,7 @@ impl Calibrate {
                 .into())
             }
         };
+        let detect_s = started.elapsed().as_secs_f64();
         let mut config = CalibConfig::default();
         let resolution = match (&self.fix_intrinsics, &self.resolution, image_size) {
             (Some(rig_path), _, _) => {
@@ -103,6 +104,7 @@ impl Calibrate {
                 }
             }
         })?;
+        let solve_s = started.elapsed().as_secs_f64() - detect_s;
         let dir = OutputDir::create(&self.out, self.force)?;
         super::rig::write_rig_exports(&dir, &calib.rig)?;
         let t = calib.rig.right_from_left.translation.vector;
@@ -120,7 +122,7 @@ impl Calibrate {
                 "coverage_left": calib.coverage.0,
                 "coverage_right": calib.coverage.1,
             },
-            "timings_s": {"total": started.elapsed().as_secs_f64()},
+            "timings_s": {"read_and_detect": detect_s, "solve": solve_s, "total": started.elapsed().as_secs_f64()},
             "target": serde_json::to_value(&target)?,
             "intrinsics_fixed": self.fix_intrinsics.is_some(),
             "left": intr(&calib.rig.left),
