@@ -45,6 +45,18 @@ pub struct CalibConfig {
     pub fixed_intrinsics: Option<(Camera, Camera)>,
     /// Levenberg-Marquardt iterations at most.
     pub max_iterations: usize,
+    /// Lens model of free intrinsics (ours: radtan; equidistant for fisheye lenses).
+    pub model: LensModel,
+}
+
+/// The lens model a free calibration fits (Kalibr's `pinhole-radtan` and `pinhole-equi`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LensModel {
+    /// Radial-tangential k1, k2, p1, p2.
+    #[default]
+    Radtan,
+    /// Equidistant (Kannala-Brandt) k1..k4, for fisheye lenses.
+    Equidistant,
 }
 
 impl Default for CalibConfig {
@@ -55,6 +67,7 @@ impl Default for CalibConfig {
             min_corners: 12,
             fixed_intrinsics: None,
             max_iterations: 100,
+            model: LensModel::Radtan,
         }
     }
 }
@@ -185,8 +198,8 @@ pub fn calibrate_stereo(
     let (mut cam_l, mut cam_r) = match &config.fixed_intrinsics {
         Some((l, r)) => (*l, *r),
         None => (
-            zhang(names.iter().map(|n| &left[*n]), resolution)?,
-            zhang(names.iter().map(|n| &right[*n]), resolution)?,
+            initial_camera(names.iter().map(|n| &left[*n]), resolution, config.model)?,
+            initial_camera(names.iter().map(|n| &right[*n]), resolution, config.model)?,
         ),
     };
     let poses_l: Vec<Isometry3<f64>> = names
@@ -551,6 +564,61 @@ fn zhang<'a>(
     })
 }
 
+/// A camera to start the adjustment from: Zhang's closed form for radtan lenses; for fisheye
+/// lenses, whose raw corners no homography fits, the equidistant focal length (principal point
+/// at the image centre, no distortion) that best reprojects every view's board pose, searched
+/// from a sixth to twice the image width.
+fn initial_camera<'a>(
+    views: impl Iterator<Item = &'a Vec<Corner>> + Clone,
+    resolution: (u32, u32),
+    model: LensModel,
+) -> Result<Camera, CalibError> {
+    if model == LensModel::Radtan {
+        return zhang(views, resolution);
+    }
+    let (w, h) = (resolution.0 as f64, resolution.1 as f64);
+    let guess = |f: f64| Camera {
+        fx: f,
+        fy: f,
+        cx: 0.5 * (w - 1.0),
+        cy: 0.5 * (h - 1.0),
+        distortion: Distortion::Equidistant {
+            k1: 0.0,
+            k2: 0.0,
+            k3: 0.0,
+            k4: 0.0,
+        },
+        width: resolution.0,
+        height: resolution.1,
+    };
+    let cost = |cam: &Camera| -> f64 {
+        let mut errors: Vec<f64> = views
+            .clone()
+            .flat_map(|corners| match board_pose(cam, corners) {
+                Some(pose) => corners
+                    .iter()
+                    .map(|c| reprojection_error(cam, &pose, c))
+                    .collect::<Vec<_>>(),
+                None => vec![f64::INFINITY; corners.len()],
+            })
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        errors
+            .get(errors.len() / 2)
+            .copied()
+            .unwrap_or(f64::INFINITY)
+    };
+    let steps = 60;
+    let (lo, hi) = (w / 6.0, 2.0 * w);
+    let best = (0..=steps)
+        .map(|i| lo * (hi / lo).powf(i as f64 / steps as f64))
+        .map(|f| (f, cost(&guess(f))))
+        .filter(|(_, e)| e.is_finite())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .ok_or(CalibError::Initialisation)?;
+    Ok(guess(best.0))
+}
+
 /// Board pose in a camera from the homography of undistorted normalised points.
 fn board_pose(cam: &Camera, corners: &[Corner]) -> Option<Isometry3<f64>> {
     let pairs: Vec<_> = corners
@@ -609,33 +677,56 @@ struct State {
     poses: Vec<Isometry3<f64>>,
 }
 
+/// `[fx, fy, cx, cy, d0, d1, d2, d3]`: radtan k1, k2, p1, p2 or equidistant k1..k4.
 fn intrinsics_vec(c: &Camera) -> Vec<f64> {
-    let (k1, k2, p1, p2) = match c.distortion {
-        Distortion::Radtan { k1, k2, p1, p2, .. } => (k1, k2, p1, p2),
-        _ => (0.0, 0.0, 0.0, 0.0),
+    let d = match c.distortion {
+        Distortion::Radtan { k1, k2, p1, p2, .. } => [k1, k2, p1, p2],
+        Distortion::Equidistant { k1, k2, k3, k4 } => [k1, k2, k3, k4],
+        Distortion::None => [0.0; 4],
     };
-    vec![c.fx, c.fy, c.cx, c.cy, k1, k2, p1, p2]
+    vec![c.fx, c.fy, c.cx, c.cy, d[0], d[1], d[2], d[3]]
 }
 
+/// The camera of an intrinsics vector, in the model of `like`.
 fn camera_from_vec(v: &[f64], like: &Camera) -> Camera {
-    let k3 = match like.distortion {
-        Distortion::Radtan { k3, .. } => k3,
-        _ => 0.0,
-    };
-    Camera {
-        fx: v[0],
-        fy: v[1],
-        cx: v[2],
-        cy: v[3],
-        distortion: Distortion::Radtan {
+    let distortion = match like.distortion {
+        Distortion::Equidistant { .. } => Distortion::Equidistant {
+            k1: v[4],
+            k2: v[5],
+            k3: v[6],
+            k4: v[7],
+        },
+        Distortion::Radtan { k3, .. } => Distortion::Radtan {
             k1: v[4],
             k2: v[5],
             p1: v[6],
             p2: v[7],
             k3,
         },
+        Distortion::None => Distortion::Radtan {
+            k1: v[4],
+            k2: v[5],
+            p1: v[6],
+            p2: v[7],
+            k3: 0.0,
+        },
+    };
+    Camera {
+        fx: v[0],
+        fy: v[1],
+        cx: v[2],
+        cy: v[3],
+        distortion,
         width: like.width,
         height: like.height,
+    }
+}
+
+/// Names of the intrinsics vector's entries.
+fn intrinsics_names(c: &Camera) -> [&'static str; 8] {
+    match c.distortion {
+        Distortion::Equidistant { .. } => ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
+        _ => ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"],
     }
 }
 
@@ -690,8 +781,11 @@ fn transform<T: sna::RealField>(pose: &sna::DVector<T>, p: [T; 3]) -> [T; 3] {
     ]
 }
 
-/// Pinhole radtan projection (k1, k2, p1, p2), generic.
-fn project<T: sna::RealField>(k: &sna::DVector<T>, p: [T; 3]) -> [T; 2] {
+/// Projection through an intrinsics vector, generic: radtan or equidistant.
+fn project<T: sna::RealField>(k: &sna::DVector<T>, p: [T; 3], equidistant: bool) -> [T; 2] {
+    if equidistant {
+        return project_equidistant(k, p);
+    }
     let x = p[0].clone() / p[2].clone();
     let y = p[1].clone() / p[2].clone();
     let r2 = x.clone() * x.clone() + y.clone() * y.clone();
@@ -709,22 +803,43 @@ fn project<T: sna::RealField>(k: &sna::DVector<T>, p: [T; 3]) -> [T; 2] {
     ]
 }
 
+/// Pinhole equidistant projection (Kannala-Brandt k1..k4), generic: `θ = atan(r)`,
+/// `θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, pixel `f · (θd / r) · (x, y) + c`.
+fn project_equidistant<T: sna::RealField>(k: &sna::DVector<T>, p: [T; 3]) -> [T; 2] {
+    let x = p[0].clone() / p[2].clone();
+    let y = p[1].clone() / p[2].clone();
+    let r = (x.clone() * x.clone() + y.clone() * y.clone() + c::<T>(1e-18)).sqrt();
+    let th = r.clone().atan();
+    let t2 = th.clone() * th.clone();
+    let poly = T::one()
+        + t2.clone()
+            * (k[4].clone()
+                + t2.clone() * (k[5].clone() + t2.clone() * (k[6].clone() + t2 * k[7].clone())));
+    let s = th * poly / r;
+    [
+        k[0].clone() * x * s.clone() + k[2].clone(),
+        k[1].clone() * y * s + k[3].clone(),
+    ]
+}
+
 /// One corner in the left image: params [intrinsics_left, board pose].
 struct LeftCorner {
     board: [f64; 3],
     px: [f64; 2],
+    equidistant: bool,
 }
 
 /// One corner in the right image: params [intrinsics_right, board pose, right_from_left].
 struct RightCorner {
     board: [f64; 3],
     px: [f64; 2],
+    equidistant: bool,
 }
 
 impl<T: sna::RealField> tiny_solver::factors::Factor<T> for LeftCorner {
     fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
         let p = transform(&params[1], self.board.map(c::<T>));
-        let q = project(&params[0], p);
+        let q = project(&params[0], p, self.equidistant);
         sna::DVector::from_vec(vec![
             q[0].clone() - c::<T>(self.px[0]),
             q[1].clone() - c::<T>(self.px[1]),
@@ -735,12 +850,16 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for LeftCorner {
 impl<T: sna::RealField> tiny_solver::factors::Factor<T> for RightCorner {
     fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
         let p = transform(&params[2], transform(&params[1], self.board.map(c::<T>)));
-        let q = project(&params[0], p);
+        let q = project(&params[0], p, self.equidistant);
         sna::DVector::from_vec(vec![
             q[0].clone() - c::<T>(self.px[0]),
             q[1].clone() - c::<T>(self.px[1]),
         ])
     }
+}
+
+fn is_equidistant(cam: &Camera) -> bool {
+    matches!(cam.distortion, Distortion::Equidistant { .. })
 }
 
 const LEFT: &str = "intrinsics_left";
@@ -784,6 +903,7 @@ fn solve(
                 Box::new(LeftCorner {
                     board: corner.board_m,
                     px: corner.px,
+                    equidistant: is_equidistant(&state.left),
                 }),
                 Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
                     config.huber_px.max(1e-3),
@@ -797,6 +917,7 @@ fn solve(
                 Box::new(RightCorner {
                     board: corner.board_m,
                     px: corner.px,
+                    equidistant: is_equidistant(&state.right),
                 }),
                 Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
                     config.huber_px.max(1e-3),
@@ -904,10 +1025,11 @@ fn parameter_sigmas(
         return out;
     };
     let cov: DMatrix<f64> = cov * rms_px * rms_px;
-    let names = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"];
     if free_intrinsics {
-        for (k, n) in names.iter().enumerate() {
+        for (k, n) in intrinsics_names(&state.left).iter().enumerate() {
             out.insert(format!("left.{n}"), cov[(k, k)].max(0.0).sqrt());
+        }
+        for (k, n) in intrinsics_names(&state.right).iter().enumerate() {
             out.insert(format!("right.{n}"), cov[(8 + k, 8 + k)].max(0.0).sqrt());
         }
     }

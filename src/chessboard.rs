@@ -55,8 +55,8 @@ const SEARCH_FRACTION: f64 = 0.3;
 const EDGE_CONTRAST_FRACTION: f32 = 0.3;
 /// Seeds tried before giving up.
 const MAX_SEEDS: usize = 40;
-/// An AprilGrid corner that ends farther than this from the prediction of its neighbours is
-/// dropped, pixels.
+/// An AprilGrid corner this far from the prediction of its neighbours is refined from the
+/// prediction too, and may end this far from it at least, pixels.
 const KEEP_NEAR_PREDICTION_PX: f64 = 1.0;
 /// Largest half-width of the sub-pixel window (OpenCV's usual `winSize` 11).
 const MAX_REFINE_HALF_WIDTH: i32 = 11;
@@ -200,7 +200,9 @@ fn candidates(blur: &Plane) -> Vec<Candidate> {
                     }
                 }
             }
-            if let Some(contrast) = is_max.then(|| x_corner_contrast(blur, &ring, x, y)).flatten()
+            if let Some(contrast) = is_max
+                .then(|| x_corner_contrast(blur, &ring, x, y))
+                .flatten()
             {
                 out.push(Candidate {
                     x: x as f64,
@@ -337,14 +339,17 @@ pub fn refine_x_corners(
     let plane = Plane::from_gray(image).blurred().blurred();
     let mut refined = 0;
     for (p, hw) in points.iter_mut() {
-        if let Some(q) = refine(&plane, p[0], p[1], *hw) {
-            if (q[0] - p[0]).hypot(q[1] - p[1]) <= max_move_px {
-                *p = q;
-                refined += 1;
-            }
+        if let Some(q) = refine_near(&plane, *p, *hw, max_move_px) {
+            *p = q;
+            refined += 1;
         }
     }
     refined
+}
+
+/// The refined corner from `p` if it converges within `max_move_px`.
+fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<[f64; 2]> {
+    refine(plane, p[0], p[1], hw).filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) <= max_move_px)
 }
 
 /// Refines the corners of detected AprilGrid tags (Kalibr layout: tag `id` at column
@@ -352,11 +357,13 @@ pub fn refine_x_corners(
 /// black border meets a small black square diagonally.
 ///
 /// A detector sometimes closes a tag's quad around one of those squares, putting a corner a
-/// square's width off. So each tag's corners are first checked against a homography fitted to
-/// the corners of the tags around it; a corner more than 1 px off that prediction restarts from
-/// it. Then every corner is refined (window: 15% of the tag's edge in pixels, inside its 2-cell
-/// black border), and a corner that still ends more than 1 px from its prediction is dropped
-/// (its tag loses it; the others stay).
+/// square's width off. So each corner is also predicted by a homography fitted to the corners of
+/// the tags around it. The corner is refined from the detection (window: 15% of the tag's edge in
+/// pixels, inside its 2-cell black border) and, when the detection is more than 1 px off the
+/// prediction, from the prediction too; the refined point nearest the prediction is kept if it
+/// lies within a tenth of the tag's edge of it (lens distortion bends the prediction, a square's
+/// width is three tenths), else the corner is dropped (its tag loses it; the others stay). A tag
+/// with too few neighbours keeps its refined detections.
 pub fn refine_aprilgrid(
     image: &GrayImage,
     detections: &[crate::tags::TagDetection],
@@ -364,6 +371,7 @@ pub fn refine_aprilgrid(
     spacing: f64,
 ) -> Vec<(u32, [f64; 2])> {
     use nalgebra::Vector3;
+    let plane = Plane::from_gray(image).blurred().blurred();
     let pitch = 1.0 + spacing;
     let board = |id: u32, k: usize| -> [f64; 2] {
         let (x, y) = ((id % cols) as f64 * pitch, (id / cols) as f64 * pitch);
@@ -373,8 +381,8 @@ pub fn refine_aprilgrid(
         let p = h * Vector3::new(b[0], b[1], 1.0);
         [p.x / p.z, p.y / p.z]
     };
-    let mut points = Vec::with_capacity(detections.len() * 4);
-    let mut predicted = Vec::with_capacity(detections.len() * 4);
+    let dist = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    let mut out = Vec::with_capacity(detections.len() * 4);
     for d in detections {
         let (c, r) = ((d.id % cols) as i64, (d.id / cols) as i64);
         let near: Vec<([f64; 2], [f64; 2])> = detections
@@ -389,10 +397,7 @@ pub fn refine_aprilgrid(
         let h = crate::calibrate::homography(&near).and_then(|h| {
             let mut kept: Vec<_> = near
                 .iter()
-                .filter(|(b, p)| {
-                    let q = apply(&h, *b);
-                    (q[0] - p[0]).hypot(q[1] - p[1]) < 1.5
-                })
+                .filter(|(b, p)| dist(apply(&h, *b), *p) < 1.5)
                 .cloned()
                 .collect();
             if kept.len() < 8 {
@@ -401,30 +406,33 @@ pub fn refine_aprilgrid(
             crate::calibrate::homography(&kept)
         });
         let cp = &d.corners_px;
-        let side = (0..4)
-            .map(|k| (cp[k][0] - cp[(k + 1) % 4][0]).hypot(cp[k][1] - cp[(k + 1) % 4][1]))
-            .sum::<f64>()
-            / 4.0;
+        let side = (0..4).map(|k| dist(cp[k], cp[(k + 1) % 4])).sum::<f64>() / 4.0;
         let hw = ((0.15 * side).round() as i32).clamp(2, MAX_REFINE_HALF_WIDTH);
+        let keep_px = (0.1 * side).max(KEEP_NEAR_PREDICTION_PX);
         for (k, p) in cp.iter().enumerate() {
-            let guess = h
+            let id = d.id * 4 + k as u32;
+            let from_detection = refine_near(&plane, *p, hw, 2.0);
+            let Some(g) = h
                 .filter(|_| near.len() >= 8)
-                .map(|h| apply(&h, board(d.id, k)));
-            let start = match guess {
-                Some(g) if (g[0] - p[0]).hypot(g[1] - p[1]) > 1.0 => g,
-                _ => *p,
+                .map(|h| apply(&h, board(d.id, k)))
+            else {
+                out.push((id, from_detection.unwrap_or(*p)));
+                continue;
             };
-            points.push((start, hw));
-            predicted.push((d.id * 4 + k as u32, guess.unwrap_or(*p)));
+            let from_prediction = (dist(*p, g) > KEEP_NEAR_PREDICTION_PX)
+                .then(|| refine_near(&plane, g, hw, 2.0 * keep_px))
+                .flatten();
+            let best = [from_detection, from_prediction]
+                .into_iter()
+                .flatten()
+                .filter(|q| dist(*q, g) <= keep_px)
+                .min_by(|a, b| dist(*a, g).total_cmp(&dist(*b, g)));
+            if let Some(q) = best {
+                out.push((id, q));
+            }
         }
     }
-    refine_x_corners(image, &mut points, 2.0);
-    points
-        .iter()
-        .zip(&predicted)
-        .filter(|((p, _), (_, g))| (p[0] - g[0]).hypot(p[1] - g[1]) <= KEEP_NEAR_PREDICTION_PX)
-        .map(|((p, _), (id, _))| (*id, *p))
-        .collect()
+    out
 }
 
 fn refine(plane: &Plane, x: f64, y: f64, half_width: i32) -> Option<[f64; 2]> {

@@ -24,6 +24,10 @@ pub struct Calibrate {
     /// Image size WIDTHxHEIGHT (needed with corner files without --fix-intrinsics; images give it).
     #[arg(long)]
     resolution: Option<String>,
+    /// Lens model of the free calibration: radtan (Kalibr pinhole-radtan) or equidistant
+    /// (pinhole-equi, for fisheye lenses).
+    #[arg(long, value_enum, default_value_t = Model::Radtan)]
+    model: Model,
     /// Keep this rig file's intrinsics and distortion; solve right_from_left only.
     #[arg(long, value_name = "RIG")]
     fix_intrinsics: Option<PathBuf>,
@@ -40,6 +44,15 @@ pub struct Calibrate {
     rectify_pair: Vec<PathBuf>,
     #[command(flatten)]
     rerun: super::RerunArgs,
+}
+
+/// Lens models on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Model {
+    /// Radial-tangential k1, k2, p1, p2.
+    Radtan,
+    /// Equidistant (Kannala-Brandt) k1..k4, for fisheye lenses.
+    Equidistant,
 }
 
 impl Calibrate {
@@ -70,7 +83,13 @@ impl Calibrate {
             }
         };
         let detect_s = started.elapsed().as_secs_f64();
-        let mut config = CalibConfig::default();
+        let mut config = CalibConfig {
+            model: match self.model {
+                Model::Radtan => stereotag::calibrate::LensModel::Radtan,
+                Model::Equidistant => stereotag::calibrate::LensModel::Equidistant,
+            },
+            ..CalibConfig::default()
+        };
         let resolution = match (&self.fix_intrinsics, &self.resolution, image_size) {
             (Some(rig_path), _, _) => {
                 let rig = io::load_rig(rig_path)?;
