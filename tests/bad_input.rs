@@ -459,3 +459,66 @@ fn localize_names_a_bad_landmarks_file() {
     );
     assert!(!out.exists());
 }
+
+/// `stereotag calibrate` with image globs; returns the exit code and stderr, checks nothing was
+/// written.
+fn calibrate_images(target: &str, left: &str, right: &str) -> (i32, String) {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("cal");
+    let root = common::root();
+    let (code, err) = stereotag(&[
+        "calibrate",
+        "--target",
+        target,
+        "--left",
+        root.join(left).to_str().unwrap(),
+        "--right",
+        root.join(right).to_str().unwrap(),
+        "--no-rerun",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!out.exists(), "nothing may be written");
+    assert!(!err.contains("panicked"), "{err}");
+    (code, err)
+}
+
+#[test]
+fn calibration_pairs_of_different_sizes_or_counts_are_refused() {
+    let target = common::root().join("calibration/targets/checkerboard_9x6.yaml");
+    let target = target.to_str().unwrap();
+    let (code, err) = calibrate_images(
+        target,
+        "../shared/data/mrpt_stereo_calib/0_left.jpg",
+        "../shared/data/aprilgrid_frames/EuRoC.png",
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("0_left.jpg is 1024x768 but") && err.contains("must be the same size"),
+        "{err}"
+    );
+    let (code, err) = calibrate_images(
+        target,
+        "../shared/data/mrpt_stereo_calib/*_left.jpg",
+        "../shared/data/mrpt_stereo_calib/0_right.jpg",
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("4 left images but 1 right images"), "{err}");
+}
+
+#[test]
+fn calibration_target_with_a_missing_field_names_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let target = tmp.path().join("t.yaml");
+    std::fs::write(&target, "target_type: checkerboard\ntargetCols: 9\ntargetRows: 6\n").unwrap();
+    let (code, err) = calibrate_images(
+        target.to_str().unwrap(),
+        "../shared/data/mrpt_stereo_calib/*_left.jpg",
+        "../shared/data/mrpt_stereo_calib/*_right.jpg",
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("t.yaml") && err.contains("missing field `rowSpacingMeters`"),
+        "{err}"
+    );
+}
