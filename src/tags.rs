@@ -69,12 +69,32 @@ impl TagFamily {
         }
     }
 
-    fn c(&self) -> apriltag::Family {
-        match self {
-            TagFamily::Tag36h11 => apriltag::Family::tag_36h11(),
-            TagFamily::Tag25h9 => apriltag::Family::tag_25h9(),
-            TagFamily::Tag16h5 => apriltag::Family::tag_16h5(),
-            TagFamily::TagStandard41h12 => apriltag::Family::tag_standard_41h12(),
+    /// The C library's family (null if its constructor fails); free it with [`Self::c_destroy`].
+    fn c_create(&self) -> *mut apriltag_sys::apriltag_family_t {
+        // SAFETY: the library's constructors take nothing and return an owned family.
+        unsafe {
+            match self {
+                TagFamily::Tag36h11 => apriltag_sys::tag36h11_create(),
+                TagFamily::Tag25h9 => apriltag_sys::tag25h9_create(),
+                TagFamily::Tag16h5 => apriltag_sys::tag16h5_create(),
+                TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_create(),
+            }
+        }
+    }
+
+    /// Frees a family from [`Self::c_create`] of the same kind.
+    ///
+    /// # Safety
+    /// `family` came from `self.c_create()`, is not null, and is used by no live detector.
+    unsafe fn c_destroy(&self, family: *mut apriltag_sys::apriltag_family_t) {
+        // SAFETY: as the caller promises.
+        unsafe {
+            match self {
+                TagFamily::Tag36h11 => apriltag_sys::tag36h11_destroy(family),
+                TagFamily::Tag25h9 => apriltag_sys::tag25h9_destroy(family),
+                TagFamily::Tag16h5 => apriltag_sys::tag16h5_destroy(family),
+                TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_destroy(family),
+            }
         }
     }
 }
@@ -357,10 +377,19 @@ impl TagDetector for KorniaDetector {
 
 /// The AprilRobotics C library.
 pub struct CDetector {
-    detector: apriltag::Detector,
+    /// `None` only while dropping.
+    detector: Option<apriltag::Detector>,
+    /// The families the detector uses, freed after it: the `apriltag` crate hands families to
+    /// the C detector and never frees them (the C library leaves that to its caller), which
+    /// leaked them once per detector (found by fuzzing with LeakSanitizer).
+    owned: Vec<(TagFamily, *mut apriltag_sys::apriltag_family_t)>,
     families: Vec<TagFamily>,
     subpixel: bool,
+    decimate: f32,
 }
+
+// The family pointers are owned by this value alone and only freed in `drop`.
+unsafe impl Send for CDetector {}
 
 impl CDetector {
     /// A detector with the given settings.
@@ -370,20 +399,57 @@ impl CDetector {
                 "needs at least one family and a decimation >= 1".into(),
             ));
         }
-        let mut builder = apriltag::DetectorBuilder::new();
-        for f in &config.families {
-            builder = builder.add_family_bits(f.c(), config.max_hamming);
-        }
-        let mut detector = builder.build().map_err(|e| TagError::C(format!("{e:?}")))?;
+        // SAFETY: the detector comes from the library's constructor and is owned by the
+        // `apriltag::Detector` made from it; each family comes from its constructor, is added to
+        // that detector and freed after it in `drop` (or here, if construction fails).
+        let (raw, owned) = unsafe {
+            let raw = apriltag_sys::apriltag_detector_create();
+            if raw.is_null() {
+                return Err(TagError::C("apriltag_detector_create failed".into()));
+            }
+            let mut owned = Vec::new();
+            for f in &config.families {
+                let family = f.c_create();
+                if family.is_null() {
+                    apriltag_sys::apriltag_detector_destroy(raw);
+                    for (g, p) in owned {
+                        TagFamily::c_destroy(&g, p);
+                    }
+                    return Err(TagError::C(format!("{} constructor failed", f.name())));
+                }
+                apriltag_sys::apriltag_detector_add_family_bits(
+                    raw,
+                    family,
+                    config.max_hamming as i32,
+                );
+                owned.push((*f, family));
+            }
+            (raw, owned)
+        };
+        // SAFETY: `raw` was created by `apriltag_detector_create` above.
+        let mut detector = unsafe { apriltag::Detector::from_raw(raw) };
         detector.set_decimation(config.decimate as f32);
         detector.set_refine_edges(config.refine_edges);
         detector.set_shapening(config.sharpening);
         detector.set_thread_number(1);
         Ok(Self {
-            detector,
+            detector: Some(detector),
+            owned,
             families: config.families,
             subpixel: config.subpixel,
+            decimate: config.decimate as f32,
         })
+    }
+}
+
+impl Drop for CDetector {
+    fn drop(&mut self) {
+        // The detector first (it refers to the families), then the families.
+        drop(self.detector.take());
+        for (family, ptr) in self.owned.drain(..) {
+            // SAFETY: created by `c_create` in `new`, no longer used by any detector.
+            unsafe { family.c_destroy(ptr) };
+        }
     }
 }
 
@@ -396,8 +462,14 @@ impl TagDetector for CDetector {
         // One family per detector is the common case; with several, the C library does not say
         // which family a detection came from in this binding, so report the first.
         let family = self.families[0].name();
-        let mut out = self
+        let Some(detector) = self
             .detector
+            .as_mut()
+            .filter(|_| c_can_take(image, self.decimate))
+        else {
+            return Ok(Vec::new());
+        };
+        let mut out = detector
             .detect(&img)
             .into_iter()
             .map(|d| TagDetection {
@@ -481,9 +553,25 @@ impl Drop for AprilGridDetector {
     }
 }
 
+/// Smallest image side, in pixels after decimation, handed to the C library: its thresholding
+/// reads past its tile arrays when the decimated image is under one 4-pixel tile (a 256 x 8
+/// image at decimation 3 overflowed the heap; found by fuzzing with AddressSanitizer). No tag
+/// fits in fewer pixels anyway.
+const C_MIN_SIDE_PX: f32 = 8.0;
+
+/// Whether the C library may be given this image at this decimation.
+fn c_can_take(image: &GrayImage, decimate: f32) -> bool {
+    image.width() as f32 / decimate >= C_MIN_SIDE_PX
+        && image.height() as f32 / decimate >= C_MIN_SIDE_PX
+}
+
 impl TagDetector for AprilGridDetector {
     fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, TagError> {
         let mut out = Vec::new();
+        // SAFETY: the detector was created in `new` and is alive.
+        if !c_can_take(image, unsafe { (*self.detector).quad_decimate }) {
+            return Ok(out);
+        }
         // SAFETY: the image buffer is created with the image's size and filled row by row within
         // its stride; the detections array is read within its size and destroyed once.
         unsafe {

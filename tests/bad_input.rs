@@ -510,7 +510,11 @@ fn calibration_pairs_of_different_sizes_or_counts_are_refused() {
 fn calibration_target_with_a_missing_field_names_it() {
     let tmp = tempfile::tempdir().unwrap();
     let target = tmp.path().join("t.yaml");
-    std::fs::write(&target, "target_type: checkerboard\ntargetCols: 9\ntargetRows: 6\n").unwrap();
+    std::fs::write(
+        &target,
+        "target_type: checkerboard\ntargetCols: 9\ntargetRows: 6\n",
+    )
+    .unwrap();
     let (code, err) = calibrate_images(
         target.to_str().unwrap(),
         "../shared/data/mrpt_stereo_calib/*_left.jpg",

@@ -1,0 +1,29 @@
+//! Any image file through every detector: the AprilTag C library, kornia-apriltag, the AprilGrid
+//! detector with its corner refinement, and the chessboard detector. Images are read as the
+//! commands read them (`io::load_gray`); big ones are skipped to keep runs fast.
+#![no_main]
+mod common;
+
+use stereotag::tags::{AprilGridMultiScale, CDetector, DetectorConfig, KorniaDetector, TagDetector};
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    let path = common::write("image.bin", data);
+    let Ok(image) = stereotag::io::load_gray(&path) else {
+        return;
+    };
+    if image.width() as u64 * image.height() as u64 > 256 * 256 {
+        return;
+    }
+    if let Ok(mut c) = CDetector::new(DetectorConfig::default()) {
+        let _ = c.detect(&image);
+    }
+    if let Ok(mut k) = KorniaDetector::new(DetectorConfig::default()) {
+        let _ = k.detect(&image);
+    }
+    if let Ok(mut grid) = AprilGridMultiScale::new() {
+        if let Ok(found) = grid.detect(&image) {
+            let _ = stereotag::chessboard::refine_aprilgrid(&image, &found, 6, 0.3);
+        }
+    }
+    let _ = stereotag::chessboard::detect_chessboard(&image, 9, 6);
+});
