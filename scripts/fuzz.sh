@@ -7,7 +7,8 @@
 # samples and ../shared/data (fuzz/corpus is not committed), runs each target for the given time
 # (two at a time on two cores), and prints the executions and any crash per target. A crash
 # leaves its input in fuzz/artifacts/TARGET/; reproduce it with
-# `cargo +nightly fuzz run TARGET fuzz/artifacts/TARGET/crash-...`.
+# `cargo +nightly fuzz run TARGET fuzz/artifacts/TARGET/crash-...`. With FUZZ_FAIL_ON_CRASH=1
+# (CI) it exits 1 when a target left a crash input.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs="${1:-600}"
@@ -80,3 +81,11 @@ for ((i = 0; i < ${#targets[@]}; i += 2)); do
     if [ $((i + 1)) -lt ${#targets[@]} ]; then run "${targets[i + 1]}" & fi
     wait
 done
+if [ "${FUZZ_FAIL_ON_CRASH:-0}" = 1 ]; then
+    for t in "${targets[@]}"; do
+        if [ -n "$(ls "fuzz/artifacts/$t" 2>/dev/null)" ]; then
+            echo "fuzz: $t left crash inputs in fuzz/artifacts/$t" >&2
+            exit 1
+        fi
+    done
+fi

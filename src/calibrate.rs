@@ -86,7 +86,7 @@ pub enum CalibError {
         min_corners: usize,
     },
     /// Zhang's initialisation has no positive-definite solution.
-    #[error("the closed-form initialisation failed (views too alike: tilt the board more)")]
+    #[error("the closed-form initialisation failed: the board views are too alike (all square-on to the camera?), so the focal length cannot be told from the distance; tilt the board up to 45 degrees in turn towards each edge")]
     Initialisation,
     /// The solver returned nothing.
     #[error("the bundle adjustment did not converge")]
@@ -1144,5 +1144,44 @@ mod tests {
             (t.norm() - right_from_left.translation.vector.norm()).abs() < 1e-4,
             "{t}"
         );
+    }
+
+    #[test]
+    fn fronto_parallel_views_are_an_error_saying_what_cannot_be_observed() {
+        let cam = Camera {
+            fx: 460.0,
+            fy: 460.0,
+            cx: 320.0,
+            cy: 240.0,
+            distortion: Distortion::Radtan {
+                k1: -0.05,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+                k3: 0.0,
+            },
+            width: 640,
+            height: 480,
+        };
+        let right_from_left = Isometry3::translation(-0.12, 0.0, 0.0);
+        let (mut left_views, mut right_views) = (ViewCorners::new(), ViewCorners::new());
+        for k in 0..8 {
+            let a = k as f64;
+            let pose = Isometry3::translation(-0.1 + 0.02 * a, -0.05 + 0.01 * a, 0.5 + 0.05 * a);
+            left_views.insert(format!("{k}"), grid_corners(&cam, &pose));
+            right_views.insert(
+                format!("{k}"),
+                grid_corners(&cam, &(right_from_left * pose)),
+            );
+        }
+        let result = calibrate_stereo(
+            &left_views,
+            &right_views,
+            (640, 480),
+            &CalibConfig::default(),
+        );
+        // Square-on views cannot separate the focal length from the distance: a clear error.
+        let msg = result.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(msg.contains("focal length cannot be told"), "{msg}");
     }
 }
