@@ -615,9 +615,12 @@ impl TagDetector for AprilGridDetector {
 pub const APRILGRID_DECIMATIONS: [f32; 3] = [1.0, 2.0, 3.0];
 
 /// AprilGrid detection at several decimations, merged by id: each tag is taken from the finest
-/// decimation that found it (the corners are refined on the full image at every level).
+/// decimation that found it (the corners are refined on the full image at every level); then a
+/// pass on the image with its dark areas thinned adds the tags still missing.
 pub struct AprilGridMultiScale {
     levels: Vec<AprilGridDetector>,
+    /// Runs on the image with its dark areas thinned by one pixel (see [`lighten_3x3`]).
+    thinned: AprilGridDetector,
 }
 
 impl AprilGridMultiScale {
@@ -628,8 +631,37 @@ impl AprilGridMultiScale {
                 .iter()
                 .map(|&d| AprilGridDetector::new(d, true))
                 .collect::<Result<_, _>>()?,
+            thinned: AprilGridDetector::new(THINNED_DECIMATION, true)?,
         })
     }
+}
+
+/// Decimation of the pass on the thinned image.
+const THINNED_DECIMATION: f32 = 2.0;
+
+/// The image with each pixel the brightest of its 3 x 3 neighbourhood: dark areas lose a pixel
+/// at their edges. On a blurred or low-contrast AprilGrid the small squares between tags bleed
+/// into the tags' black borders at their corners, and the C library then sees one dark blob
+/// instead of a tag; thinning cuts those bridges (TUM-VI's fisheye frame: 22 of 36 tags found
+/// without, 36 with).
+fn lighten_3x3(image: &GrayImage) -> GrayImage {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let src = image.as_raw();
+    let mut rows = vec![0u8; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (a, b) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            rows[y * w + x] = src[y * w + a].max(src[y * w + x]).max(src[y * w + b]);
+        }
+    }
+    let mut out = vec![0u8; w * h];
+    for y in 0..h {
+        let (a, b) = (y.saturating_sub(1), (y + 1).min(h - 1));
+        for x in 0..w {
+            out[y * w + x] = rows[a * w + x].max(rows[y * w + x]).max(rows[b * w + x]);
+        }
+    }
+    GrayImage::from_raw(w as u32, h as u32, out).unwrap_or_else(|| image.clone())
 }
 
 impl TagDetector for AprilGridMultiScale {
@@ -638,6 +670,20 @@ impl TagDetector for AprilGridMultiScale {
         for level in &mut self.levels {
             for d in level.detect(image)? {
                 if !out.iter().any(|o| o.id == d.id) {
+                    out.push(d);
+                }
+            }
+        }
+        if image.width() > 0 && image.height() > 0 {
+            for mut d in self.thinned.detect(&lighten_3x3(image))? {
+                if !out.iter().any(|o| o.id == d.id) {
+                    // Thinning moved each corner about one pixel in along the diagonal: undo it.
+                    for c in &mut d.corners_px {
+                        let (dx, dy) = (c[0] - d.centre_px[0], c[1] - d.centre_px[1]);
+                        let n = dx.hypot(dy).max(1e-9);
+                        c[0] += std::f64::consts::SQRT_2 * dx / n;
+                        c[1] += std::f64::consts::SQRT_2 * dy / n;
+                    }
                     out.push(d);
                 }
             }

@@ -111,12 +111,13 @@ fn max_projection_difference_px(truth: &Camera, est: &Camera) -> f64 {
     worst
 }
 
-/// Checks intrinsics and baseline (within `share`) and rotation (0.05 degree) against the true
-/// rig.
+/// Checks intrinsics and baseline (within `share`) and rotation (within `degrees`) against the
+/// true rig.
 fn assert_recovers(
     truth: &stereotag::camera::StereoRig,
     est: &stereotag::camera::StereoRig,
     share: f64,
+    degrees: f64,
 ) {
     for (t, e) in [(&truth.left, &est.left), (&truth.right, &est.right)] {
         for (name, a, b) in [
@@ -126,7 +127,7 @@ fn assert_recovers(
             ("cy", t.cy, e.cy),
         ] {
             assert!(
-                (a - b).abs() <= 0.002 * a,
+                (a - b).abs() <= share * a,
                 "{name}: true {a}, estimated {b}"
             );
         }
@@ -138,7 +139,7 @@ fn assert_recovers(
     assert!((bt - be).abs() <= share * bt, "baseline {be} vs {bt}");
     let angle = (truth.right_from_left.rotation.inverse() * est.right_from_left.rotation).angle();
     assert!(
-        angle.to_degrees() < 0.05,
+        angle.to_degrees() < degrees,
         "rotation off by {} deg",
         angle.to_degrees()
     );
@@ -154,13 +155,13 @@ fn rendered_aprilgrid_sequence_recovers_the_rig() {
     );
     let m = &report["metrics"];
     eprintln!("aprilgrid: {m}");
-    assert_recovers(&truth, &est, 0.002);
+    assert_recovers(&truth, &est, 0.002, 0.05);
     let worst = max_projection_difference_px(&truth.left, &est.left)
         .max(max_projection_difference_px(&truth.right, &est.right));
     eprintln!("aprilgrid: largest projection difference over the image {worst:.3} px");
-    // Issue 4 asks <= 0.2 px RMS and < 0.1 px; measured 0.25 px and about 0.5 px (README).
-    assert!(m["rms_px"].as_f64().unwrap() <= 0.3, "RMS {}", m["rms_px"]);
-    assert!(worst < 0.8, "largest projection difference {worst} px");
+    // Issue 4 asks <= 0.2 px RMS and < 0.1 px; measured 0.23 px and 0.23 px (README).
+    assert!(m["rms_px"].as_f64().unwrap() <= 0.26, "RMS {}", m["rms_px"]);
+    assert!(worst < 0.4, "largest projection difference {worst} px");
     assert!(m["views_used"].as_u64().unwrap() >= 28);
 }
 
@@ -174,7 +175,7 @@ fn rendered_chessboard_sequence_recovers_the_rig() {
     );
     let m = &report["metrics"];
     eprintln!("chessboard: {m}");
-    assert_recovers(&truth, &est, 0.002);
+    assert_recovers(&truth, &est, 0.002, 0.05);
     let worst = max_projection_difference_px(&truth.left, &est.left)
         .max(max_projection_difference_px(&truth.right, &est.right));
     eprintln!("chessboard: largest projection difference over the image {worst:.3} px");
@@ -196,7 +197,7 @@ fn rendered_fisheye_sequence_recovers_the_equidistant_rig() {
         est.left.distortion,
         stereotag::camera::Distortion::Equidistant { .. }
     ));
-    assert_recovers(&truth, &est, 0.005);
+    assert_recovers(&truth, &est, 0.005, 0.1);
     let worst = max_projection_difference_px(&truth.left, &est.left)
         .max(max_projection_difference_px(&truth.right, &est.right));
     eprintln!("fisheye: largest projection difference over the image {worst:.3} px");
