@@ -806,13 +806,15 @@ pub fn calibration_blueprint() -> bp::Blueprint {
 /// Residuals magnified this many times in the recording's arrows.
 pub const RESIDUAL_ARROW_SCALE: f32 = 20.0;
 
-/// Logs a calibration: per view (the `view` sequence) the corners and residual arrows (x20) in
-/// each image, the board's pose in 3D, the per-view RMS; once, the cameras and coverage heat maps.
+/// Logs a calibration: per view (the `view` sequence) the images (when given, keyed by view
+/// name, JPEG), the corners and residual arrows (x20) in each image, the board's pose in 3D, the
+/// per-view RMS; once, the cameras and coverage heat maps.
 pub fn log_calibration(
     recorder: &Recorder,
     calib: &crate::calibrate::Calibration,
     report_markdown: &str,
     rectified_pair: Option<&image::GrayImage>,
+    view_images: &std::collections::BTreeMap<String, (Vec<u8>, Vec<u8>)>,
 ) -> Result<(), VizError> {
     let rec = recorder.stream();
     if let Some(img) = rectified_pair {
@@ -861,6 +863,14 @@ pub fn log_calibration(
             "rig/board/corners",
             &rerun::Points3D::new(v.left.iter().map(|c| f32s(c.board_m))).with_radii([0.003f32]),
         )?;
+        if let Some((l, r)) = view_images.get(&v.name) {
+            for (side, jpeg) in [("left", l), ("right", r)] {
+                rec.log(
+                    format!("views/{side}/image"),
+                    &rerun::EncodedImage::from_file_contents(jpeg.clone()),
+                )?;
+            }
+        }
         let right_from_board = rig.right_from_left * v.left_from_board;
         for (side, cam, pose, corners) in [
             ("left", &rig.left, v.left_from_board, &v.left),

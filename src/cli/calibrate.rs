@@ -59,6 +59,7 @@ impl Calibrate {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let started = std::time::Instant::now();
         let target = io::load_target(&self.target)?;
+        let mut view_images = ViewImages::new();
         let (left, right, image_size, misses) = match (
             &self.corners_left,
             &self.corners_right,
@@ -72,7 +73,8 @@ impl Calibrate {
                 Vec::new(),
             ),
             (_, _, Some(gl), Some(gr)) => {
-                let d = detect_views(&target, gl, gr, quiet)?;
+                let d = detect_views(&target, gl, gr, quiet, !self.rerun.no_rerun)?;
+                view_images = d.images;
                 (d.left, d.right, Some(d.resolution), d.misses)
             }
             _ => {
@@ -174,11 +176,11 @@ impl Calibrate {
                 "# stereotag calibration\n\n```json\n{}\n```\n",
                 serde_json::to_string_pretty(&report["metrics"])?
             );
-            stereotag::viz::log_calibration(&rec, &calib, &md, rectified.as_ref())?;
+            stereotag::viz::log_calibration(&rec, &calib, &md, rectified.as_ref(), &view_images)?;
             rec.finish()?;
         }
         #[cfg(not(feature = "rerun"))]
-        let _ = (recorder, rectified);
+        let _ = (recorder, rectified, view_images);
         dir.commit()?;
         tracing::info!(
             "{} views, {} outliers left out; RMS {:.3} px (left {:.3}, right {:.3}); baseline {:.2} mm ± {:.2}",
@@ -288,16 +290,27 @@ fn glob(pattern: &str) -> Result<Vec<PathBuf>, UsageError> {
     Ok(out)
 }
 
-/// Corners detected in the images of both cameras, with the image size and why views were lost.
+/// Each view's left and right images as JPEG, for the recording.
+type ViewImages = std::collections::BTreeMap<String, (Vec<u8>, Vec<u8>)>;
+
+/// Corners detected in the images of both cameras, with the image size, why views were lost and
+/// the images for the recording.
 struct Detected {
     left: stereotag::calibrate::ViewCorners,
     right: stereotag::calibrate::ViewCorners,
     resolution: (u32, u32),
     misses: Vec<String>,
+    images: ViewImages,
 }
 
 /// Detects the target's corners in every left and right image, pairs in parallel.
-fn detect_views(target: &Target, left: &str, right: &str, quiet: bool) -> anyhow::Result<Detected> {
+fn detect_views(
+    target: &Target,
+    left: &str,
+    right: &str,
+    quiet: bool,
+    keep_images: bool,
+) -> anyhow::Result<Detected> {
     use rayon::prelude::*;
     use stereotag::calibrate::{aprilgrid_corners, chessboard_board_corners, Corner};
     use stereotag::tags::TagDetector;
@@ -358,7 +371,8 @@ fn detect_views(target: &Target, left: &str, right: &str, quiet: bool) -> anyhow
             (Target::Aprilgrid { .. }, None) => unreachable!("an AprilGrid detector per thread"),
         })
     };
-    type PairFound = anyhow::Result<(String, (u32, u32), Found, Found)>;
+    /// A pair's name, size, corners found in each image and JPEGs for the recording.
+    type PairFound = anyhow::Result<(String, (u32, u32), Found, Found, Option<(Vec<u8>, Vec<u8>)>)>;
     let pairs: Vec<PairFound> = lf
         .par_iter()
         .zip(&rf)
@@ -381,11 +395,22 @@ fn detect_views(target: &Target, left: &str, right: &str, quiet: bool) -> anyhow
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
+            #[cfg(feature = "rerun")]
+            let jpegs = keep_images
+                .then(|| stereotag::viz::jpeg_pair(&li, &ri))
+                .flatten();
+            // Without the recording there is nothing to keep the images for.
+            #[cfg(not(feature = "rerun"))]
+            let jpegs: Option<(Vec<u8>, Vec<u8>)> = {
+                let _ = keep_images;
+                None
+            };
             let found = (
                 name,
                 li.dimensions(),
                 detect(grid, &li)?,
                 detect(grid, &ri)?,
+                jpegs,
             );
             bar.inc(1);
             Ok(found)
@@ -397,9 +422,13 @@ fn detect_views(target: &Target, left: &str, right: &str, quiet: bool) -> anyhow
         right: Default::default(),
         resolution: (0, 0),
         misses: Vec::new(),
+        images: ViewImages::new(),
     };
     for ((pair, l), r) in pairs.into_iter().zip(&lf).zip(&rf) {
-        let (name, size, (lc, lmiss), (rc, rmiss)) = pair?;
+        let (name, size, (lc, lmiss), (rc, rmiss), jpegs) = pair?;
+        if let Some(j) = jpegs {
+            out.images.insert(name.clone(), j);
+        }
         if out.resolution != (0, 0) && out.resolution != size {
             return Err(UsageError(format!(
                 "{} is {}x{} but the images before it are {}x{}: one camera, one size",

@@ -225,7 +225,7 @@ pub struct RerunArgs {
     connect: Option<String>,
     /// Record nothing.
     #[arg(long, conflicts_with_all = ["save", "spawn", "connect"])]
-    no_rerun: bool,
+    pub(crate) no_rerun: bool,
 }
 
 #[cfg(feature = "rerun")]
