@@ -10,7 +10,7 @@
 //! [`crate::calibrate::chessboard_board_corners`].
 
 use crate::camera::StereoRig;
-use crate::render::{render_camera, texture, RenderConfig, RenderError, Renderer};
+use crate::render::{texture, RenderConfig, RenderError, Renderer};
 use crate::render::{TAG_BLACK, TAG_WHITE};
 use crate::tags::TagFamily;
 use image::GrayImage;
@@ -305,22 +305,7 @@ impl Renderer {
             )
         };
         let rig = &self.rig;
-        let left = render_camera(
-            &trace,
-            &rig.left,
-            &self.left,
-            &Isometry3::identity(),
-            config,
-            config.seed.wrapping_mul(2),
-        );
-        let right = render_camera(
-            &trace,
-            &rig.right,
-            &self.right,
-            &rig.right_from_left.inverse(),
-            config,
-            config.seed.wrapping_mul(2) + 1,
-        );
+        let (left, right) = self.render_both(&trace, &Isometry3::identity(), config);
         let corners = board
             .corners()
             .into_iter()

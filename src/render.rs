@@ -297,7 +297,7 @@ pub fn world_from_left(rig: &StereoRig, world_from_robot: &Pose2) -> Isometry3<f
 
 /// Unit ray directions in the camera frame of the four samples of every pixel, row-major.
 #[derive(Debug, Clone)]
-pub(crate) struct RayTable {
+struct RayTable {
     rays: Vec<Option<[Vector3<f64>; 4]>>,
 }
 
@@ -341,7 +341,7 @@ impl RayTable {
 /// Albedo and distance of the first surface along a ray `(origin, direction)`.
 pub(crate) type Tracer<'a> = dyn Fn(&Vector3<f64>, &Vector3<f64>) -> (f64, f64) + Sync + 'a;
 
-pub(crate) fn render_camera(
+fn render_camera(
     trace: &Tracer,
     camera: &Camera,
     table: &RayTable,
@@ -404,8 +404,8 @@ pub(crate) fn render_camera(
 #[derive(Debug, Clone)]
 pub struct Renderer {
     pub(crate) rig: StereoRig,
-    pub(crate) left: RayTable,
-    pub(crate) right: RayTable,
+    left: RayTable,
+    right: RayTable,
 }
 
 impl Renderer {
@@ -437,23 +437,10 @@ impl Renderer {
             ceiling_m: config.ceiling_m,
         };
         let wl = world_from_left(rig, &world_from_robot);
-        let wr = wl * rig.right_from_left.inverse();
-        let trace = |o: &Vector3<f64>, d: &Vector3<f64>| scene.trace(o, d);
-        let left = render_camera(
-            &trace,
-            &rig.left,
-            &self.left,
+        let (left, right) = self.render_both(
+            &|o: &Vector3<f64>, d: &Vector3<f64>| scene.trace(o, d),
             &wl,
             config,
-            config.seed.wrapping_mul(2),
-        );
-        let right = render_camera(
-            &trace,
-            &rig.right,
-            &self.right,
-            &wr,
-            config,
-            config.seed.wrapping_mul(2) + 1,
         );
         let truth = truths(world, &scene.tags, rig, &wl, config);
         Ok(RenderedPair {
@@ -463,6 +450,25 @@ impl Renderer {
             world_from_left: wl,
             tags: truth,
         })
+    }
+}
+
+impl Renderer {
+    /// Both images of a scene given by its tracer, the left camera at `world_from_left`; each
+    /// image's noise seeded from `config.seed` and its side.
+    pub(crate) fn render_both(
+        &self,
+        trace: &Tracer,
+        world_from_left: &Isometry3<f64>,
+        config: &RenderConfig,
+    ) -> (GrayImage, GrayImage) {
+        let rig = &self.rig;
+        let seed = config.seed.wrapping_mul(2);
+        let wr = world_from_left * rig.right_from_left.inverse();
+        (
+            render_camera(trace, &rig.left, &self.left, world_from_left, config, seed),
+            render_camera(trace, &rig.right, &self.right, &wr, config, seed + 1),
+        )
     }
 }
 
