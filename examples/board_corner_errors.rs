@@ -76,6 +76,17 @@ fn main() -> anyhow::Result<()> {
                     (found, Vec::new())
                 }
             };
+            if std::env::var("DUMP").is_ok() {
+                for (id, p) in &found {
+                    if let Some(w) = want.get(&(*id as u64)) {
+                        eprintln!(
+                            "E {} {side} {id} {:.4}",
+                            frame[side],
+                            (p[0] - w[0]).hypot(p[1] - w[1])
+                        );
+                    }
+                }
+            }
             for (out, list) in [(&mut errors, &found), (&mut raw_errors, &raw)] {
                 for (id, p) in list {
                     if let Some(w) = want.get(&(*id as u64)) {

@@ -371,7 +371,7 @@ pub fn refine_aprilgrid(
     spacing: f64,
 ) -> Vec<(u32, [f64; 2])> {
     use nalgebra::Vector3;
-    let plane = Plane::from_gray(image).blurred().blurred();
+    let plane = Plane::from_gray(image).blurred();
     let pitch = 1.0 + spacing;
     let board = |id: u32, k: usize| -> [f64; 2] {
         let (x, y) = ((id % cols) as f64 * pitch, (id / cols) as f64 * pitch);

@@ -28,3 +28,23 @@ fn thin_images_do_not_reach_the_c_library() {
         detect_everything(&GrayImage::from_pixel(w, h, image::Luma([77])));
     }
 }
+
+/// corners_csv: a tag_id of 2676116726 overflowed `tag_id × 4 + corner_idx` (a panic with debug
+/// assertions, a wrong id without). Now a located error.
+#[test]
+fn a_huge_tag_id_in_a_corner_csv_is_a_located_error() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("1.csv"),
+        "#ts,tag_rows,tag_cols,tag_size,tag_spacing,kp_x,kp_y,p_x,p_y,p_z,tag_id,corner_idx\n\
+         1,6,6,0.088,0.3,152.7,244.0,0.2288,0.5456,0.0,2676116726,0\n",
+    )
+    .unwrap();
+    let err = stereotag::io::load_corner_csvs(dir.path())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("1.csv:2") && err.contains("tag_id: 2676116726 is too large"),
+        "{err}"
+    );
+}

@@ -133,8 +133,16 @@ pub fn load_corner_csvs(dir: &Path) -> Result<ViewCorners, IoError> {
                     format!("corner_idx: {idx}, expected 0 to 3"),
                 ));
             }
+            // Corner ids are tag_id × 4 + corner_idx in 32 bits.
+            let id = tag.checked_mul(4).map(|t| t + idx).ok_or_else(|| {
+                IoError::line(
+                    &path,
+                    line_no,
+                    format!("tag_id: {tag} is too large (at most {})", u32::MAX / 4),
+                )
+            })?;
             corners.push(Corner {
-                id: tag * 4 + idx,
+                id,
                 board_m: [num(7, "p_x")?, num(8, "p_y")?, num(9, "p_z")?],
                 px: [num(5, "kp_x")?, num(6, "kp_y")?],
             });
