@@ -363,7 +363,8 @@ fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<
 /// prediction, from the prediction too; the refined point nearest the prediction is kept if it
 /// lies within a tenth of the tag's edge of it (lens distortion bends the prediction, a square's
 /// width is three tenths), else the corner is dropped (its tag loses it; the others stay). A tag
-/// with too few neighbours keeps its refined detections.
+/// with too few neighbours keeps its refined detections. The refinement runs on the image blurred
+/// once (a chessboard's larger squares take twice): the tag borders are narrow.
 pub fn refine_aprilgrid(
     image: &GrayImage,
     detections: &[crate::tags::TagDetection],
