@@ -51,9 +51,12 @@ enum Command {
     ///
     /// Example: stereotag detect --backend kornia --decimate 1 photo.jpg
     Detect(detect::Detect),
-    /// Render the stereo pair a robot sees at a pose, with ground truth of every tag in view.
+    /// Render the stereo pair a robot sees at a pose, with ground truth of every tag in view; or
+    /// a sequence along poses; or a calibration sequence of a target.
     ///
     /// Example: stereotag render --world samples/office/world.yaml --pose 1.2,5.8,2.3 --out pair
+    ///
+    /// Example: stereotag render --calibration-sequence 30 --target calibration/targets/aprilgrid_6x6.yaml --out calseq
     Render(render::Render),
     /// Check a stereo rig file and export it for OpenCV and ROS (with its Bouguet rectification).
     ///
@@ -74,8 +77,11 @@ enum Command {
     ///
     /// Example: stereotag plan --map maps/museum --out plan
     Plan(plan::PlanArgs),
-    /// Calibrate a stereo rig from board corners: Zhang initialisation, bundle adjustment of both
-    /// cameras and right_from_left with outliers listed; writes Kalibr, OpenCV and ROS files.
+    /// Calibrate a stereo rig from chessboard or AprilGrid images (or corners already detected):
+    /// Zhang initialisation, bundle adjustment of both cameras and right_from_left with outliers
+    /// listed; writes Kalibr, OpenCV and ROS files, a report and a Rerun recording.
+    ///
+    /// Example: stereotag calibrate --target calibration/targets/checkerboard_9x6.yaml --left 'cam0/*.png' --right 'cam1/*.png' --out calib
     ///
     /// Example: stereotag calibrate --target calibration/targets/aprilgrid_6x6.yaml --corners-left cam0 --corners-right cam1 --resolution 752x480 --out calib
     Calibrate(calibrate::Calibrate),
