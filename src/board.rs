@@ -87,8 +87,9 @@ impl Board {
         })
     }
 
-    /// Board corners `(id, position on the board)`, as the calibration numbers them.
+    /// Board corners `(id, position on the board)`, as the calibration numbers and places them.
     pub fn corners(&self) -> Vec<(u32, [f64; 3])> {
+        use crate::calibrate::{aprilgrid_board_point, chessboard_board_point};
         match self {
             Self::AprilGrid {
                 cols,
@@ -96,29 +97,16 @@ impl Board {
                 size_m,
                 spacing,
                 ..
-            } => {
-                let pitch = size_m * (1.0 + spacing);
-                (0..cols * rows)
-                    .flat_map(|id| {
-                        let (x, y) = ((id % cols) as f64 * pitch, (id / cols) as f64 * pitch);
-                        let s = *size_m;
-                        [[x, y], [x + s, y], [x + s, y + s], [x, y + s]]
-                            .into_iter()
-                            .enumerate()
-                            .map(move |(k, p)| (id * 4 + k as u32, [p[0], p[1], 0.0]))
-                    })
-                    .collect()
-            }
+            } => (0..cols * rows * 4)
+                .map(|id| (id, aprilgrid_board_point(id, *cols, *size_m, *spacing)))
+                .collect(),
             Self::Chessboard {
                 cols,
                 rows,
                 col_m,
                 row_m,
             } => (0..cols * rows)
-                .map(|k| {
-                    let (c, r) = ((k % cols) as f64, (k / cols) as f64);
-                    (k, [c * col_m, r * row_m, 0.0])
-                })
+                .map(|k| (k, chessboard_board_point(k, *cols, *col_m, *row_m)))
                 .collect(),
         }
     }

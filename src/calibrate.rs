@@ -401,10 +401,31 @@ fn epipolar_rms(rig: &StereoRig, views: &[(&str, Vec<Corner>, Vec<Corner>)]) -> 
     (sum / n.max(1) as f64).sqrt()
 }
 
-/// Board corners of AprilGrid corner points `(tag id × 4 + k, pixel)` (Kalibr's layout: tag `id`
-/// at column `id % cols`, row `id / cols`, pitch `size · (1 + spacing)`; corner `k` of a tag is the
-/// C library's corner `k`: (x, y), (x + s, y), (x + s, y + s), (x, y + s) on the board). Tags
-/// outside the grid are dropped.
+/// Position on the board of AprilGrid corner `id` (tag id × 4 + k), in Kalibr's layout: tag
+/// `id / 4` at column `tag % cols`, row `tag / cols`, pitch `size · (1 + spacing)`; corner `k` of a
+/// tag is the C library's corner `k`: (x, y), (x + s, y), (x + s, y + s), (x, y + s).
+pub fn aprilgrid_board_point(id: u32, cols: u32, size_m: f64, spacing: f64) -> [f64; 3] {
+    let pitch = size_m * (1.0 + spacing);
+    let (tag, k) = (id / 4, id % 4);
+    let (x, y) = ((tag % cols) as f64 * pitch, (tag / cols) as f64 * pitch);
+    let (dx, dy) = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)][k as usize];
+    [x + dx * size_m, y + dy * size_m, 0.0]
+}
+
+/// Position on the board of chessboard corner `k` (index `r · cols + c`): `(c · col_spacing,
+/// r · row_spacing, 0)`, as Kalibr's checkerboard target places it.
+pub fn chessboard_board_point(
+    k: u32,
+    cols: u32,
+    col_spacing_m: f64,
+    row_spacing_m: f64,
+) -> [f64; 3] {
+    let (c, r) = (k % cols, k / cols);
+    [c as f64 * col_spacing_m, r as f64 * row_spacing_m, 0.0]
+}
+
+/// Board corners of AprilGrid corner points `(tag id × 4 + k, pixel)` (layout:
+/// [`aprilgrid_board_point`]). Tags outside the grid are dropped.
 pub fn aprilgrid_corners(
     points: &[(u32, [f64; 2])],
     cols: u32,
@@ -412,26 +433,19 @@ pub fn aprilgrid_corners(
     size_m: f64,
     spacing: f64,
 ) -> Vec<Corner> {
-    let pitch = size_m * (1.0 + spacing);
     points
         .iter()
         .filter(|(id, _)| id / 4 < cols * rows)
-        .map(|&(id, px)| {
-            let (tag, k) = (id / 4, id % 4);
-            let (x, y) = ((tag % cols) as f64 * pitch, (tag / cols) as f64 * pitch);
-            let (dx, dy) = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)][k as usize];
-            Corner {
-                id,
-                board_m: [x + dx * size_m, y + dy * size_m, 0.0],
-                px,
-            }
+        .map(|&(id, px)| Corner {
+            id,
+            board_m: aprilgrid_board_point(id, cols, size_m, spacing),
+            px,
         })
         .collect()
 }
 
 /// Board corners of a chessboard found by [`crate::chessboard::detect_chessboard`] (index
-/// `r · cols + c`): corner `(c, r)` at `(c · col_spacing, r · row_spacing, 0)` on the board, as
-/// Kalibr's checkerboard target places them.
+/// `r · cols + c`; layout: [`chessboard_board_point`]).
 pub fn chessboard_board_corners(
     px: &[[f64; 2]],
     cols: u32,
@@ -440,13 +454,10 @@ pub fn chessboard_board_corners(
 ) -> Vec<Corner> {
     px.iter()
         .enumerate()
-        .map(|(k, p)| {
-            let (c, r) = (k as u32 % cols, k as u32 / cols);
-            Corner {
-                id: k as u32,
-                board_m: [c as f64 * col_spacing_m, r as f64 * row_spacing_m, 0.0],
-                px: *p,
-            }
+        .map(|(k, p)| Corner {
+            id: k as u32,
+            board_m: chessboard_board_point(k as u32, cols, col_spacing_m, row_spacing_m),
+            px: *p,
         })
         .collect()
 }

@@ -326,27 +326,6 @@ fn grow(blur: &Plane, cands: &[Candidate], seed: usize) -> Option<Grid> {
     Some(grid)
 }
 
-/// Refines X-corners in place to sub-pixel precision (gradient orthogonality, as OpenCV's
-/// `cornerSubPix`, on the image blurred as [`detect_chessboard`] blurs it): chessboard corners,
-/// or AprilGrid tag corners, where each tag's black border meets a small black square
-/// diagonally. Each point comes with its window half-width; a point whose estimate fails or
-/// moves more than `max_move_px` keeps its position. Returns how many were refined.
-pub fn refine_x_corners(
-    image: &GrayImage,
-    points: &mut [([f64; 2], i32)],
-    max_move_px: f64,
-) -> usize {
-    let plane = Plane::from_gray(image).blurred().blurred();
-    let mut refined = 0;
-    for (p, hw) in points.iter_mut() {
-        if let Some(q) = refine_near(&plane, *p, *hw, max_move_px) {
-            *p = q;
-            refined += 1;
-        }
-    }
-    refined
-}
-
 /// The refined corner from `p` if it converges within `max_move_px`.
 fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<[f64; 2]> {
     refine(plane, p[0], p[1], hw).filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) <= max_move_px)
@@ -373,10 +352,10 @@ pub fn refine_aprilgrid(
 ) -> Vec<(u32, [f64; 2])> {
     use nalgebra::Vector3;
     let plane = Plane::from_gray(image).blurred();
-    let pitch = 1.0 + spacing;
-    let board = |id: u32, k: usize| -> [f64; 2] {
-        let (x, y) = ((id % cols) as f64 * pitch, (id / cols) as f64 * pitch);
-        [[x, y], [x + 1.0, y], [x + 1.0, y + 1.0], [x, y + 1.0]][k]
+    // Board positions in tag edges (the homographies need no metres).
+    let board = |tag: u32, k: usize| -> [f64; 2] {
+        let p = crate::calibrate::aprilgrid_board_point(tag * 4 + k as u32, cols, 1.0, spacing);
+        [p[0], p[1]]
     };
     let apply = |h: &nalgebra::Matrix3<f64>, b: [f64; 2]| {
         let p = h * Vector3::new(b[0], b[1], 1.0);
