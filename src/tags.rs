@@ -383,7 +383,6 @@ pub struct CDetector {
     /// the C detector and never frees them (the C library leaves that to its caller), which
     /// leaked them once per detector (found by fuzzing with LeakSanitizer).
     owned: Vec<(TagFamily, *mut apriltag_sys::apriltag_family_t)>,
-    families: Vec<TagFamily>,
     subpixel: bool,
     decimate: f32,
 }
@@ -435,7 +434,6 @@ impl CDetector {
         Ok(Self {
             detector: Some(detector),
             owned,
-            families: config.families,
             subpixel: config.subpixel,
             decimate: config.decimate as f32,
         })
@@ -461,7 +459,7 @@ impl TagDetector for CDetector {
         img.as_slice_mut().copy_from_slice(image.as_raw());
         // One family per detector is the common case; with several, the C library does not say
         // which family a detection came from in this binding, so report the first.
-        let family = self.families[0].name();
+        let family = self.owned.first().map_or("", |(f, _)| f.name());
         let Some(detector) = self
             .detector
             .as_mut()

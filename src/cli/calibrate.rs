@@ -368,7 +368,9 @@ fn detect_views(
                     Err(miss) => (Vec::new(), Some(miss.to_string())),
                 }
             }
-            (Target::Aprilgrid { .. }, None) => unreachable!("an AprilGrid detector per thread"),
+            (Target::Aprilgrid { .. }, None) => {
+                anyhow::bail!("no AprilGrid detector was made for this thread")
+            }
         })
     };
     /// A pair's name, size, corners found in each image and JPEGs for the recording.
