@@ -34,18 +34,14 @@ fn main() -> anyhow::Result<()> {
                 .collect();
             expected += want.len();
             let (found, raw): (Points, Points) = match &target {
-                Target::Aprilgrid {
-                    tag_cols,
-                    tag_spacing,
-                    ..
-                } => {
+                Target::Aprilgrid(g) => {
                     use stereotag::tags::TagDetector;
                     let raw = grid.detect(&image)?;
                     let refined = stereotag::chessboard::refine_aprilgrid(
                         &image,
                         &raw,
-                        *tag_cols,
-                        *tag_spacing,
+                        g.tag_cols,
+                        g.tag_spacing,
                     );
                     let ids = |d: &[stereotag::tags::TagDetection]| {
                         d.iter()
@@ -56,15 +52,11 @@ fn main() -> anyhow::Result<()> {
                     };
                     (refined, ids(&raw))
                 }
-                Target::Checkerboard {
-                    target_cols,
-                    target_rows,
-                    ..
-                } => {
+                Target::Checkerboard(c) => {
                     let found = stereotag::chessboard::detect_chessboard(
                         &image,
-                        *target_cols,
-                        *target_rows,
+                        c.target_cols,
+                        c.target_rows,
                     )
                     .map(|px| {
                         px.into_iter()
@@ -80,9 +72,13 @@ fn main() -> anyhow::Result<()> {
                 for (id, p) in &found {
                     if let Some(w) = want.get(&(*id as u64)) {
                         eprintln!(
-                            "E {} {side} {id} {:.4}",
+                            "E {} {side} {id} {:.4} {:.4} {:.4} {:.1} {:.1}",
                             frame[side],
-                            (p[0] - w[0]).hypot(p[1] - w[1])
+                            (p[0] - w[0]).hypot(p[1] - w[1]),
+                            p[0] - w[0],
+                            p[1] - w[1],
+                            w[0],
+                            w[1]
                         );
                     }
                 }

@@ -58,6 +58,15 @@ const MAX_SEEDS: usize = 40;
 /// An AprilGrid corner this far from the prediction of its neighbours is refined from the
 /// prediction too, and may end this far from it at least, pixels.
 const KEEP_NEAR_PREDICTION_PX: f64 = 1.0;
+/// Width of an AprilGrid tag's black border (2 of its 10 cells), as a share of its edge.
+const GRID_BORDER: f64 = 0.2;
+/// Half-width of the band an edge is fitted in, as a share of the tag's dark border.
+const EDGE_BAND_SHARE: f64 = 0.3;
+/// Part of an edge left out at each end (and next to each gap square), as a share of its length.
+const EDGE_END_SHARE: f64 = 0.04;
+/// A corner of a tag without enough neighbours to predict it is kept only when its edge and
+/// X-corner estimates agree within this, pixels.
+const UNCHECKED_AGREEMENT_PX: f64 = 0.5;
 /// Largest half-width of the sub-pixel window (OpenCV's usual `winSize` 11).
 const MAX_REFINE_HALF_WIDTH: i32 = 11;
 
@@ -332,18 +341,27 @@ fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<
 }
 
 /// Refines the corners of detected AprilGrid tags (Kalibr layout: tag `id` at column
-/// `id % cols`, row `id / cols`, pitch `1 + spacing` tag edges) as X-corners, where each tag's
-/// black border meets a small black square diagonally.
+/// `id % cols`, row `id / cols`, pitch `1 + spacing` tag edges).
 ///
-/// A detector sometimes closes a tag's quad around one of those squares, putting a corner a
-/// square's width off. So each corner is also predicted by a homography fitted to the corners of
-/// the tags around it. The corner is refined from the detection (window: 15% of the tag's edge in
-/// pixels, inside its 2-cell black border) and, when the detection is more than 1 px off the
-/// prediction, from the prediction too; the refined point nearest the prediction is kept if it
-/// lies within a tenth of the tag's edge of it (lens distortion bends the prediction, a square's
-/// width is three tenths), else the corner is dropped (its tag loses it; the others stay). A tag
-/// with too few neighbours keeps its refined detections. The refinement runs on the image blurred
-/// once (a chessboard's larger squares take twice): the tag borders are narrow.
+/// A detector sometimes closes a tag's quad around one of the small black squares in the gaps,
+/// putting a corner a square's width off. So each corner is also predicted by a homography
+/// fitted to the corners of the tags around it. Then two refinements:
+/// 1. **X-corner**, where the tag's black border meets a gap square diagonally (window 15% of the
+///    tag's edge, inside its 2-cell border, on the image blurred once): from the detection and,
+///    when the detection is more than 1 px off the prediction, from the prediction too; the
+///    refined point nearest the prediction is kept if within a tenth of the tag's edge of it
+///    (lens distortion bends the prediction; a square's width is three tenths).
+/// 2. **Edges**, from those corners: each of the tag's four border edges is fitted (a quadratic
+///    across its chord, [`fit_edge`]) together with the edges of the two gap squares that carry
+///    it on past its ends, and each corner is where two fitted edges cross. This uses every
+///    pixel along the edges rather than a small window at the corner, and places the corner
+///    inside the fitted stretch rather than at its end; it is kept when it lies within a tenth
+///    of the tag's edge of the prediction, else the X-corner is. On 30 rendered views the
+///    median error fell from 0.105 to 0.038 px and the 95th percentile from 0.30 to 0.083 px.
+///
+/// A tag with too few neighbours for a prediction keeps a corner only when its edge and X-corner
+/// estimates agree within half a pixel; other corners that fail their checks are dropped (their
+/// tag loses them; the others stay).
 pub fn refine_aprilgrid(
     image: &GrayImage,
     detections: &[crate::tags::TagDetection],
@@ -351,7 +369,8 @@ pub fn refine_aprilgrid(
     spacing: f64,
 ) -> Vec<(u32, [f64; 2])> {
     use nalgebra::Vector3;
-    let plane = Plane::from_gray(image).blurred();
+    let sharp = Plane::from_gray(image);
+    let plane = sharp.blurred();
     // Board positions in tag edges (the homographies need no metres).
     let board = |tag: u32, k: usize| -> [f64; 2] {
         let p = crate::calibrate::aprilgrid_board_point(tag * 4 + k as u32, cols, 1.0, spacing);
@@ -389,30 +408,230 @@ pub fn refine_aprilgrid(
         let side = (0..4).map(|k| dist(cp[k], cp[(k + 1) % 4])).sum::<f64>() / 4.0;
         let hw = ((0.15 * side).round() as i32).clamp(2, MAX_REFINE_HALF_WIDTH);
         let keep_px = (0.1 * side).max(KEEP_NEAR_PREDICTION_PX);
-        for (k, p) in cp.iter().enumerate() {
-            let id = d.id * 4 + k as u32;
-            let from_detection = refine_near(&plane, *p, hw, 2.0);
-            let Some(g) = h
-                .filter(|_| near.len() >= 8)
+        let predicted: [Option<[f64; 2]>; 4] = std::array::from_fn(|k| {
+            h.filter(|_| near.len() >= 8)
                 .map(|h| apply(&h, board(d.id, k)))
-            else {
-                out.push((id, from_detection.unwrap_or(*p)));
-                continue;
+        });
+        // X-corners: from the detection and, when that is off, from the prediction.
+        let x_corners: [Option<[f64; 2]>; 4] = std::array::from_fn(|k| {
+            let p = cp[k];
+            let from_detection = refine_near(&plane, p, hw, 2.0);
+            let Some(g) = predicted[k] else {
+                return Some(from_detection.unwrap_or(p));
             };
-            let from_prediction = (dist(*p, g) > KEEP_NEAR_PREDICTION_PX)
+            let from_prediction = (dist(p, g) > KEEP_NEAR_PREDICTION_PX)
                 .then(|| refine_near(&plane, g, hw, 2.0 * keep_px))
                 .flatten();
-            let best = [from_detection, from_prediction]
+            [from_detection, from_prediction]
                 .into_iter()
                 .flatten()
                 .filter(|q| dist(*q, g) <= keep_px)
-                .min_by(|a, b| dist(*a, g).total_cmp(&dist(*b, g)));
-            if let Some(q) = best {
-                out.push((id, q));
+                .min_by(|a, b| dist(*a, g).total_cmp(&dist(*b, g)))
+        });
+        // Edges: the tag's four border lines, each carried on by the gap squares' edges.
+        let start: [[f64; 2]; 4] =
+            std::array::from_fn(|k| x_corners[k].or(predicted[k]).unwrap_or(cp[k]));
+        let edges = fit_quad(&sharp, &start, GRID_BORDER, Some(spacing))
+            .and_then(|q| fit_quad(&sharp, &q, GRID_BORDER, Some(spacing)));
+        for k in 0..4 {
+            let edge = edges.map(|e| e[k]);
+            let kept = match predicted[k] {
+                Some(g) => edge.filter(|e| dist(*e, g) <= keep_px).or(x_corners[k]),
+                // Nothing to check against but the X-corner: both must agree.
+                None => edge.filter(|e| {
+                    x_corners[k].is_some_and(|x| dist(*e, x) <= UNCHECKED_AGREEMENT_PX)
+                }),
+            };
+            if let Some(q) = kept {
+                out.push((d.id * 4 + k as u32, q));
             }
         }
     }
     out
+}
+
+/// A tag edge on the image: its offset `across` the chord from `origin` along `dir` (unit, the
+/// chord's length `len`), as a quadratic in the share `s` of the way along it:
+/// `across(s) = c[0] + c[1] s + c[2] s²` (lens distortion bends straight edges).
+#[derive(Debug, Clone, Copy)]
+struct EdgeCurve {
+    origin: [f64; 2],
+    dir: [f64; 2],
+    /// Unit normal, pointing out of the quad.
+    normal: [f64; 2],
+    len: f64,
+    c: [f64; 3],
+}
+
+impl EdgeCurve {
+    /// Share along and offset across the chord of a point.
+    fn local(&self, p: [f64; 2]) -> (f64, f64) {
+        let (dx, dy) = (p[0] - self.origin[0], p[1] - self.origin[1]);
+        (
+            (self.dir[0] * dx + self.dir[1] * dy) / self.len,
+            self.normal[0] * dx + self.normal[1] * dy,
+        )
+    }
+
+    /// How far `p` lies off the curve across the chord, and its gradient in `p`.
+    fn residual(&self, p: [f64; 2]) -> (f64, [f64; 2]) {
+        let (s, across) = self.local(p);
+        let c = self.c;
+        let slope = (c[1] + 2.0 * c[2] * s) / self.len;
+        (
+            across - (c[0] + c[1] * s + c[2] * s * s),
+            [
+                self.normal[0] - slope * self.dir[0],
+                self.normal[1] - slope * self.dir[1],
+            ],
+        )
+    }
+
+    /// Where two edges cross, by Newton's method from `start`; `None` when they run nearly
+    /// parallel or the crossing wanders off.
+    fn cross(&self, other: &EdgeCurve, start: [f64; 2]) -> Option<[f64; 2]> {
+        let mut p = start;
+        for _ in 0..8 {
+            let (r1, g1) = self.residual(p);
+            let (r2, g2) = other.residual(p);
+            let det = g1[0] * g2[1] - g1[1] * g2[0];
+            if det.abs() < 0.1 {
+                return None;
+            }
+            let dx = (r1 * g2[1] - r2 * g1[1]) / det;
+            let dy = (g1[0] * r2 - g2[0] * r1) / det;
+            p = [p[0] - dx, p[1] - dy];
+            if dx.hypot(dy) < 1e-6 {
+                break;
+            }
+        }
+        ((p[0] - start[0]).hypot(p[1] - start[1]) < 0.25 * self.len).then_some(p)
+    }
+}
+
+/// Fits the edge between the corner estimates `a` and `b` of a dark quad on a bright surround
+/// (`inside` a point within the quad) from the image gradient in a band `half_band` pixels
+/// either side of it, leaving out [`EDGE_END_SHARE`] of it at each end, where the other edges
+/// meet it. With `squares` (an AprilGrid's gap squares, their edge as a share of the tag's) the
+/// edge is carried on past both ends along the squares' edges, which lie on the same line with
+/// the dark side flipped, so the corner falls inside the fitted stretch. The edge is a quadratic
+/// across its chord: lens distortion bends straight edges (in one rendered AprilGrid sequence a
+/// straight fit left the largest projection difference of the calibrated cameras at 0.094 px,
+/// the quadratic at 0.058 px).
+///
+/// Every pixel centre in the band is a point of the edge weighted by its gradient across the
+/// edge (dark to bright): for any blur symmetric about the edge, that weighted mean lies on the
+/// edge, also when the pixels are whole-area samples, so the fit has none of the half-pixel
+/// pull that interpolating a profile gives. The band follows the fit; four rounds.
+fn fit_edge(
+    plane: &Plane,
+    a: [f64; 2],
+    b: [f64; 2],
+    inside: [f64; 2],
+    half_band: f64,
+    squares: Option<f64>,
+) -> Option<EdgeCurve> {
+    let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+    if len < 4.0 {
+        return None;
+    }
+    let dir = [(b[0] - a[0]) / len, (b[1] - a[1]) / len];
+    let mut normal = [-dir[1], dir[0]];
+    if normal[0] * (inside[0] - a[0]) + normal[1] * (inside[1] - a[1]) > 0.0 {
+        normal = [-normal[0], -normal[1]];
+    }
+    let mut edge = EdgeCurve {
+        origin: a,
+        dir,
+        normal,
+        len,
+        c: [0.0; 3],
+    };
+    let end = EDGE_END_SHARE;
+    let sq = squares.unwrap_or(0.0);
+    let reach = 2.0 * half_band + 1.0 + sq * len;
+    let lo = |i: usize| a[i].min(b[i]) - reach;
+    let hi = |i: usize| a[i].max(b[i]) + reach;
+    let (x0, x1) = (
+        lo(0).floor().max(1.0),
+        hi(0).ceil().min(plane.w as f64 - 2.0),
+    );
+    let (y0, y1) = (
+        lo(1).floor().max(1.0),
+        hi(1).ceil().min(plane.h as f64 - 2.0),
+    );
+    if x0 > x1 || y0 > y1 {
+        return None;
+    }
+    for _ in 0..4 {
+        // Weighted least squares of the offset across on 1, s, s².
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atb = nalgebra::Vector3::<f64>::zeros();
+        for qy in y0 as usize..=y1 as usize {
+            for qx in x0 as usize..=x1 as usize {
+                let (s, across) = edge.local([qx as f64, qy as f64]);
+                let on_edge = s >= end && s <= 1.0 - end;
+                let on_square = sq > 0.0
+                    && ((s >= end - sq && s <= -end) || (s >= 1.0 + end && s <= 1.0 + sq - end));
+                if !on_edge && !on_square {
+                    continue;
+                }
+                let c = edge.c;
+                if (across - (c[0] + c[1] * s + c[2] * s * s)).abs() > half_band {
+                    continue;
+                }
+                let gx = 0.5 * (plane.at(qx + 1, qy) - plane.at(qx - 1, qy)) as f64;
+                let gy = 0.5 * (plane.at(qx, qy + 1) - plane.at(qx, qy - 1)) as f64;
+                let w = (gx * normal[0] + gy * normal[1]) * if on_edge { 1.0 } else { -1.0 };
+                if w <= 0.0 {
+                    continue;
+                }
+                let basis = nalgebra::Vector3::new(1.0, s, s * s);
+                ata += w * basis * basis.transpose();
+                atb += w * across * basis;
+            }
+        }
+        let sol = ata.cholesky()?.solve(&atb);
+        edge.c = [sol[0], sol[1], sol[2]];
+    }
+    Some(edge)
+}
+
+/// The corners of a dark quad (corners in order around it) as the crossings of its four edges
+/// fitted by [`fit_edge`]; `border` is the width of the dark border inside the quad as a share
+/// of its edge (the band stays inside it).
+fn fit_quad(
+    plane: &Plane,
+    quad: &[[f64; 2]; 4],
+    border: f64,
+    squares: Option<f64>,
+) -> Option<[[f64; 2]; 4]> {
+    let side = (0..4)
+        .map(|k| (quad[k][0] - quad[(k + 1) % 4][0]).hypot(quad[k][1] - quad[(k + 1) % 4][1]))
+        .sum::<f64>()
+        / 4.0;
+    let half_band = (EDGE_BAND_SHARE * border * side).clamp(1.0, 4.0);
+    let inside = [
+        quad.iter().map(|p| p[0]).sum::<f64>() / 4.0,
+        quad.iter().map(|p| p[1]).sum::<f64>() / 4.0,
+    ];
+    let edges: Vec<EdgeCurve> = (0..4)
+        .map(|k| {
+            fit_edge(
+                plane,
+                quad[k],
+                quad[(k + 1) % 4],
+                inside,
+                half_band,
+                squares,
+            )
+        })
+        .collect::<Option<_>>()?;
+    let mut out = [[0.0; 2]; 4];
+    for k in 0..4 {
+        out[k] = edges[(k + 3) % 4].cross(&edges[k], quad[k])?;
+    }
+    Some(out)
 }
 
 fn refine(plane: &Plane, x: f64, y: f64, half_width: i32) -> Option<[f64; 2]> {

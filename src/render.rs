@@ -4,7 +4,7 @@
 //! pixel is unprojected (undistorted) to a ray, and the ray meets the floor, the ceiling, the
 //! walls (vertical planes over their segments, up to their height) or a tag (a square on its wall,
 //! drawn from the family's true code bits with a white quiet zone). Four samples per pixel
-//! (a 2x2 grid) give anti-aliased edges. Surfaces carry a mild procedural texture; light falls
+//! (2 x 2 jittered strata; `n x n` with [`Renderer::with_samples`]) give anti-aliased edges. Surfaces carry a mild procedural texture; light falls
 //! off with distance, the lens vignettes, and the sensor adds Gaussian noise. The same inputs and
 //! seed give the same bytes.
 //!
@@ -295,13 +295,18 @@ pub fn world_from_left(rig: &StereoRig, world_from_robot: &Pose2) -> Isometry3<f
     robot * rig.robot_from_left
 }
 
-/// Unit ray directions in the camera frame of the four samples of every pixel, row-major.
+/// Unit ray directions in the camera frame of the samples of every pixel, row-major.
 #[derive(Debug, Clone)]
 struct RayTable {
-    rays: Vec<Option<[Vector3<f64>; 4]>>,
+    /// Samples per pixel (`n x n` strata).
+    per_pixel: usize,
+    /// `per_pixel` rays per pixel.
+    rays: Vec<Vector3<f64>>,
+    /// Whether the pixel's rays exist (a fisheye's pixels beyond its field have none).
+    valid: Vec<bool>,
 }
 
-/// A deterministic offset in [-0.25, 0.25)² for sample `k` of pixel `i`.
+/// A deterministic point in [0, 1)² for sample `k` of pixel `i`.
 fn jitter(i: u64, k: u64) -> (f64, f64) {
     let mut h = i.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k + 1).wrapping_mul(0xD1B5_4A32_D192_ED03);
     h ^= h >> 31;
@@ -309,32 +314,43 @@ fn jitter(i: u64, k: u64) -> (f64, f64) {
     h ^= h >> 29;
     let a = (h & 0xFFFF_FFFF) as f64 / 4_294_967_296.0;
     let b = (h >> 32) as f64 / 4_294_967_296.0;
-    (0.5 * a - 0.25, 0.5 * b - 0.25)
+    (a, b)
 }
 
-/// The 2x2 sample grid inside a pixel.
-const SAMPLE_OFFSETS: [(f64, f64); 4] =
-    [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
-
 impl RayTable {
-    fn new(camera: &Camera) -> Self {
+    /// Rays of `n x n` jittered strata per pixel.
+    fn new(camera: &Camera, n: usize) -> Self {
         let (w, h) = (camera.width as usize, camera.height as usize);
-        let rays = (0..w * h)
+        let n = n.max(1);
+        let per_pixel = n * n;
+        let per: Vec<Option<Vec<Vector3<f64>>>> = (0..w * h)
             .into_par_iter()
             .map(|i| {
                 let (col, row) = ((i % w) as f64, (i / w) as f64);
-                let mut out = [Vector3::zeros(); 4];
-                for (k, (du, dv)) in SAMPLE_OFFSETS.iter().enumerate() {
-                    // Jittered strata: a fixed pseudo-random point inside each quarter of the
-                    // pixel, so edge positions are not quantised to half pixels along a line.
-                    let (ju, jv) = jitter(i as u64, k as u64);
-                    let n = camera.unproject(&Point2::new(col + du + ju, row + dv + jv))?;
-                    out[k] = Vector3::new(n.x, n.y, 1.0).normalize();
-                }
-                Some(out)
+                (0..per_pixel)
+                    .map(|k| {
+                        // Jittered strata: a fixed pseudo-random point inside each of the n x n
+                        // cells of the pixel, so edge positions are not quantised to 1/n pixel
+                        // along a line.
+                        let (ju, jv) = jitter(i as u64, k as u64);
+                        let du = -0.5 + ((k % n) as f64 + ju) / n as f64;
+                        let dv = -0.5 + ((k / n) as f64 + jv) / n as f64;
+                        let p = camera.unproject(&Point2::new(col + du, row + dv))?;
+                        Some(Vector3::new(p.x, p.y, 1.0).normalize())
+                    })
+                    .collect()
             })
             .collect();
-        Self { rays }
+        let valid = per.iter().map(Option::is_some).collect();
+        let rays = per
+            .into_iter()
+            .flat_map(|r| r.unwrap_or_else(|| vec![Vector3::zeros(); per_pixel]))
+            .collect();
+        Self {
+            per_pixel,
+            rays,
+            valid,
+        }
     }
 }
 
@@ -359,9 +375,11 @@ fn render_camera(
         .enumerate()
         .for_each(|(row, out)| {
             for (col, px) in out.iter_mut().enumerate() {
-                let Some(rays) = &table.rays[row * w + col] else {
+                let i = row * w + col;
+                if !table.valid[i] {
                     continue;
-                };
+                }
+                let rays = &table.rays[i * table.per_pixel..(i + 1) * table.per_pixel];
                 let mut sum = 0.0;
                 for ray in rays {
                     let dir = rotation * ray;
@@ -375,7 +393,7 @@ fn render_camera(
                 }
                 let r2 = ((col as f64 - camera.cx).powi(2) + (row as f64 - camera.cy).powi(2))
                     / half_diag2;
-                *px = 0.25 * sum * (1.0 - config.vignetting * r2.min(1.0));
+                *px = sum / table.per_pixel as f64 * (1.0 - config.vignetting * r2.min(1.0));
             }
         });
     let noise = Normal::new(0.0, config.noise_sigma.max(0.0))
@@ -409,12 +427,18 @@ pub struct Renderer {
 }
 
 impl Renderer {
-    /// Prepares the ray tables of both cameras.
+    /// Prepares the ray tables of both cameras, four samples per pixel (2 x 2 jittered strata).
     pub fn new(rig: &StereoRig) -> Self {
+        Self::with_samples(rig, 2)
+    }
+
+    /// Prepares the ray tables of both cameras with `n x n` jittered samples per pixel (more
+    /// samples come closer to a sensor that integrates light over each pixel's whole area).
+    pub fn with_samples(rig: &StereoRig, n: usize) -> Self {
         Self {
             rig: rig.clone(),
-            left: RayTable::new(&rig.left),
-            right: RayTable::new(&rig.right),
+            left: RayTable::new(&rig.left, n),
+            right: RayTable::new(&rig.right, n),
         }
     }
 

@@ -526,3 +526,32 @@ fn calibration_target_with_a_missing_field_names_it() {
         "{err}"
     );
 }
+
+#[test]
+fn calibration_target_with_a_wrong_typed_or_unknown_key_names_the_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (text, want) in [
+        (
+            "target_type: aprilgrid\ntagCols: six\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n",
+            "t.yaml:2: column 10: tagCols: invalid type",
+        ),
+        (
+            "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\ncolour: red\n",
+            "t.yaml:6: column 1: unknown field `colour`",
+        ),
+        (
+            "# a ring of circles\ntarget_type: circles\n",
+            "t.yaml:2: target_type `circles`: expected `aprilgrid` or `checkerboard`",
+        ),
+    ] {
+        let target = tmp.path().join("t.yaml");
+        std::fs::write(&target, text).unwrap();
+        let (code, err) = calibrate_images(
+            target.to_str().unwrap(),
+            "../shared/data/mrpt_stereo_calib/*_left.jpg",
+            "../shared/data/mrpt_stereo_calib/*_right.jpg",
+        );
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(want), "{err}\nwanted: {want}");
+    }
+}

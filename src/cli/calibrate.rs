@@ -326,49 +326,43 @@ fn detect_views(
     let bar = super::progress(lf.len() as u64, "detect", quiet);
     // One AprilGrid detector per worker thread (the C detector is not shared).
     let init = || match target {
-        Target::Aprilgrid { .. } => stereotag::tags::AprilGridMultiScale::new().map(Some),
-        Target::Checkerboard { .. } => Ok(None),
+        Target::Aprilgrid(_) => stereotag::tags::AprilGridMultiScale::new().map(Some),
+        Target::Checkerboard(_) => Ok(None),
     };
     type Found = (Vec<Corner>, Option<String>);
     let detect = |grid: &mut Option<stereotag::tags::AprilGridMultiScale>,
                   image: &image::GrayImage|
      -> anyhow::Result<Found> {
         Ok(match (target, grid) {
-            (
-                Target::Aprilgrid {
-                    tag_cols,
-                    tag_rows,
-                    tag_size,
-                    tag_spacing,
-                },
-                Some(detector),
-            ) => {
+            (Target::Aprilgrid(g), Some(detector)) => {
                 let found = detector.detect(image)?;
-                let points =
-                    stereotag::chessboard::refine_aprilgrid(image, &found, *tag_cols, *tag_spacing);
+                let points = stereotag::chessboard::refine_aprilgrid(
+                    image,
+                    &found,
+                    g.tag_cols,
+                    g.tag_spacing,
+                );
                 let corners =
-                    aprilgrid_corners(&points, *tag_cols, *tag_rows, *tag_size, *tag_spacing);
+                    aprilgrid_corners(&points, g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing);
                 let note = format!("{} AprilGrid tags", found.len());
                 (corners, Some(note).filter(|_| found.is_empty()))
             }
-            (
-                Target::Checkerboard {
-                    target_cols,
-                    target_rows,
-                    row_spacing_m,
-                    col_spacing_m,
-                },
-                _,
-            ) => {
-                match stereotag::chessboard::detect_chessboard(image, *target_cols, *target_rows) {
+            (Target::Checkerboard(c), _) => {
+                match stereotag::chessboard::detect_chessboard(image, c.target_cols, c.target_rows)
+                {
                     Ok(px) => (
-                        chessboard_board_corners(&px, *target_cols, *col_spacing_m, *row_spacing_m),
+                        chessboard_board_corners(
+                            &px,
+                            c.target_cols,
+                            c.col_spacing_m,
+                            c.row_spacing_m,
+                        ),
                         None,
                     ),
                     Err(miss) => (Vec::new(), Some(miss.to_string())),
                 }
             }
-            (Target::Aprilgrid { .. }, None) => {
+            (Target::Aprilgrid(_), None) => {
                 anyhow::bail!("no AprilGrid detector was made for this thread")
             }
         })

@@ -7,56 +7,88 @@ use std::path::Path;
 
 /// A calibration target as Kalibr describes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "target_type", rename_all = "lowercase", deny_unknown_fields)]
+#[serde(tag = "target_type", rename_all = "lowercase")]
 pub enum Target {
     /// Kalibr AprilGrid: tag36h11 tags with 2-bit borders in a grid.
-    Aprilgrid {
-        /// Tags across.
-        #[serde(rename = "tagCols")]
-        tag_cols: u32,
-        /// Tags down.
-        #[serde(rename = "tagRows")]
-        tag_rows: u32,
-        /// Tag edge, metres.
-        #[serde(rename = "tagSize")]
-        tag_size: f64,
-        /// Gap between tags over the tag edge.
-        #[serde(rename = "tagSpacing")]
-        tag_spacing: f64,
-    },
+    Aprilgrid(AprilGridTarget),
     /// Chessboard by inner corners.
-    Checkerboard {
-        /// Inner corners across.
-        #[serde(rename = "targetCols")]
-        target_cols: u32,
-        /// Inner corners down.
-        #[serde(rename = "targetRows")]
-        target_rows: u32,
-        /// Square height, metres.
-        #[serde(rename = "rowSpacingMeters")]
-        row_spacing_m: f64,
-        /// Square width, metres.
-        #[serde(rename = "colSpacingMeters")]
-        col_spacing_m: f64,
-    },
+    Checkerboard(CheckerboardTarget),
+}
+
+/// A Kalibr AprilGrid (`target_type: aprilgrid`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AprilGridTarget {
+    /// Tags across.
+    #[serde(rename = "tagCols")]
+    pub tag_cols: u32,
+    /// Tags down.
+    #[serde(rename = "tagRows")]
+    pub tag_rows: u32,
+    /// Tag edge, metres.
+    #[serde(rename = "tagSize")]
+    pub tag_size: f64,
+    /// Gap between tags over the tag edge.
+    #[serde(rename = "tagSpacing")]
+    pub tag_spacing: f64,
+    #[serde(default, rename = "target_type", skip_serializing)]
+    kind: Option<serde::de::IgnoredAny>,
+}
+
+/// A chessboard by its inner corners (`target_type: checkerboard`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckerboardTarget {
+    /// Inner corners across.
+    #[serde(rename = "targetCols")]
+    pub target_cols: u32,
+    /// Inner corners down.
+    #[serde(rename = "targetRows")]
+    pub target_rows: u32,
+    /// Square height, metres.
+    #[serde(rename = "rowSpacingMeters")]
+    pub row_spacing_m: f64,
+    /// Square width, metres.
+    #[serde(rename = "colSpacingMeters")]
+    pub col_spacing_m: f64,
+    #[serde(default, rename = "target_type", skip_serializing)]
+    kind: Option<serde::de::IgnoredAny>,
+}
+
+/// `target_type` alone (other keys ignored), to pick the variant before its fields are read
+/// from the text with their line numbers (an internally tagged enum reads the document into a
+/// buffer first and loses them).
+#[derive(Deserialize)]
+struct TargetKind {
+    target_type: String,
 }
 
 /// Reads and checks a Kalibr target YAML file.
 pub fn load_target(path: &Path) -> Result<Target, IoError> {
-    let target: Target = parse_yaml(path, &read_text(path)?)?;
+    let text = read_text(path)?;
+    let kind: TargetKind = parse_yaml(path, &text)?;
+    let target = match kind.target_type.as_str() {
+        "aprilgrid" => Target::Aprilgrid(parse_yaml(path, &text)?),
+        "checkerboard" => Target::Checkerboard(parse_yaml(path, &text)?),
+        other => {
+            let line = text
+                .lines()
+                .position(|l| l.trim_start().starts_with("target_type"))
+                .map_or(1, |i| i as u64 + 1);
+            return Err(IoError::line(
+                path,
+                line,
+                format!("target_type `{other}`: expected `aprilgrid` or `checkerboard`"),
+            ));
+        }
+    };
     let ok = match &target {
-        Target::Aprilgrid {
-            tag_cols,
-            tag_rows,
-            tag_size,
-            tag_spacing,
-        } => *tag_cols > 0 && *tag_rows > 0 && *tag_size > 0.0 && *tag_spacing >= 0.0,
-        Target::Checkerboard {
-            target_cols,
-            target_rows,
-            row_spacing_m,
-            col_spacing_m,
-        } => *target_cols > 1 && *target_rows > 1 && *row_spacing_m > 0.0 && *col_spacing_m > 0.0,
+        Target::Aprilgrid(g) => {
+            g.tag_cols > 0 && g.tag_rows > 0 && g.tag_size > 0.0 && g.tag_spacing >= 0.0
+        }
+        Target::Checkerboard(c) => {
+            c.target_cols > 1 && c.target_rows > 1 && c.row_spacing_m > 0.0 && c.col_spacing_m > 0.0
+        }
     };
     if !ok {
         return Err(IoError::content(
