@@ -25,6 +25,7 @@ pub mod score;
 pub mod sim;
 pub mod sonar;
 pub mod stereo;
+mod subpixel;
 pub mod tags;
 #[cfg(feature = "rerun")]
 pub mod viz;

@@ -120,6 +120,10 @@ struct TagPaint {
     white: Vec<bool>,
 }
 
+/// A tag's printed face stands this far in front of its wall, metres (so the wall never shows
+/// through it); its drawn corners and its true corners both lie on that face.
+const TAG_STANDOFF_M: f64 = 0.001;
+
 /// White cells drawn around the black square (the standard image has 1; we draw 2 so a tag on
 /// a textured wall keeps its quiet zone).
 const QUIET_ZONE_CELLS: i64 = 2;
@@ -165,8 +169,9 @@ impl TagPaint {
     fn corners(&self, size_m: f64) -> [Vector3<f64>; 4] {
         let h = 0.5 * size_m;
         let down = Vector3::new(0.0, 0.0, -1.0);
+        let face = self.centre + self.normal * TAG_STANDOFF_M;
         [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)]
-            .map(|(x, y)| self.centre + self.right * (x * h) + down * (y * h))
+            .map(|(x, y)| face + self.right * (x * h) + down * (y * h))
     }
 
     /// Distance along the ray to the tag and its albedo there.
@@ -175,8 +180,7 @@ impl TagPaint {
         if denom >= -1e-9 {
             return None; // seen from behind or edge-on
         }
-        // The tag sits 1 mm in front of its wall.
-        let t = (self.centre + self.normal * 0.001 - origin).dot(&self.normal) / denom;
+        let t = (self.centre + self.normal * TAG_STANDOFF_M - origin).dot(&self.normal) / denom;
         if t <= 0.0 {
             return None;
         }

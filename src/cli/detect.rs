@@ -40,9 +40,9 @@ pub struct Detect {
     /// Turn edge refinement off.
     #[arg(long)]
     no_refine_edges: bool,
-    /// Apply our sub-pixel corner refinement after the backend (experimental).
+    /// Keep the backend's own corners (no sub-pixel edge fit of ours on top).
     #[arg(long)]
-    subpixel: bool,
+    no_subpixel: bool,
     /// Sharpening of the decoded bits.
     #[arg(long, default_value_t = 0.25)]
     sharpening: f64,
@@ -69,7 +69,7 @@ impl Detect {
             decimate: self.decimate,
             refine_edges: !self.no_refine_edges,
             sharpening: self.sharpening,
-            subpixel: self.subpixel,
+            subpixel: !self.no_subpixel,
             ..DetectorConfig::default()
         };
         let mut detector: Box<dyn TagDetector> = match self.backend {
