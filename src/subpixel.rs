@@ -20,6 +20,11 @@ const MAX_BAND_PX: f64 = 4.0;
 /// Edges without gap squares at least this long, pixels, are fitted as quadratics (on 200
 /// rendered office pairs: corner error 95th percentile 0.180 px all straight, 0.147 px so).
 const CURVED_EDGE_MIN_PX: f64 = 60.0;
+/// Largest gradient spread across an edge (RMS, pixels) as a share of the dark border's width
+/// for the fit to be used. On 200 rendered office pairs blurred by a Gaussian of 1 px the fit
+/// took the corner error's 95th percentile from 0.31 px (C library alone) to 0.29 px with this
+/// guard and to 0.46 px without; sharp rendered edges measure about 0.8 px, a 15% share.
+const MAX_SPREAD_SHARE: f64 = 0.2;
 /// Part of an edge left out at each end (and next to each gap square), as a share of its length.
 const EDGE_END_SHARE: f64 = 0.04;
 
@@ -93,6 +98,9 @@ struct EdgeCurve {
     normal: [f64; 2],
     len: f64,
     c: [f64; 3],
+    /// Root mean square distance of the gradient from the fitted edge, pixels: how blurred the
+    /// edge is.
+    spread: f64,
 }
 
 impl EdgeCurve {
@@ -179,6 +187,7 @@ fn fit_edge(
         normal,
         len,
         c: [0.0; 3],
+        spread: 0.0,
     };
     let end = EDGE_END_SHARE;
     // A lone edge's corner is at the end of the fitted stretch, where a quadratic's curvature
@@ -199,10 +208,12 @@ fn fit_edge(
     if x0 > x1 || y0 > y1 {
         return None;
     }
-    for _ in 0..4 {
+    let spread_band = (2.0 * half_band).max(3.0);
+    for round in 0..4 {
         // Weighted least squares of the offset across on 1, s, s².
         let mut ata = nalgebra::Matrix3::<f64>::zeros();
         let mut atb = nalgebra::Vector3::<f64>::zeros();
+        let (mut sw, mut swr2) = (0.0, 0.0);
         for qy in y0 as usize..=y1 as usize {
             for qx in x0 as usize..=x1 as usize {
                 let (s, across) = edge.local([qx as f64, qy as f64]);
@@ -213,7 +224,8 @@ fn fit_edge(
                     continue;
                 }
                 let c = edge.c;
-                if (across - (c[0] + c[1] * s + c[2] * s * s)).abs() > half_band {
+                let off = across - (c[0] + c[1] * s + c[2] * s * s);
+                if off.abs() > spread_band || (round < 3 && off.abs() > half_band) {
                     continue;
                 }
                 let gx = 0.5 * (plane.at(qx + 1, qy) - plane.at(qx - 1, qy)) as f64;
@@ -221,6 +233,14 @@ fn fit_edge(
                 let w = (gx * normal[0] + gy * normal[1]) * if on_edge { 1.0 } else { -1.0 };
                 if w <= 0.0 {
                     continue;
+                }
+                if round == 3 {
+                    // The last round also measures how wide the edge's gradient is.
+                    sw += w;
+                    swr2 += w * off * off;
+                    if off.abs() > half_band {
+                        continue;
+                    }
                 }
                 let basis = nalgebra::Vector3::new(1.0, s, if curved { s * s } else { 0.0 });
                 ata += w * basis * basis.transpose();
@@ -232,6 +252,9 @@ fn fit_edge(
         }
         let sol = ata.cholesky()?.solve(&atb);
         edge.c = [sol[0], sol[1], sol[2]];
+        if round == 3 && sw > 0.0 {
+            edge.spread = (swr2 / sw).sqrt();
+        }
     }
     Some(edge)
 }
@@ -266,6 +289,12 @@ pub(crate) fn fit_quad(
             )
         })
         .collect::<Option<_>>()?;
+    // A blurred edge's gradient reaches the border's inner edge, whose opposite gradient eats
+    // into it and pushes the fit outwards: fit only edges sharp for the border's width.
+    let blurriest = edges.iter().map(|e| e.spread).fold(0.0, f64::max);
+    if blurriest > MAX_SPREAD_SHARE * border * side {
+        return None;
+    }
     let mut out = [[0.0; 2]; 4];
     for k in 0..4 {
         out[k] = edges[(k + 3) % 4].cross(&edges[k], quad[k])?;

@@ -27,17 +27,87 @@ fn parse_expected(text: &str) -> Vec<Expected> {
         .collect()
 }
 
-/// Largest corner distance between an expected tag and a detection, corners in the same order.
-/// The expected file is the C library's own output, in its pixel-corner convention.
-fn corner_error(e: &[[f64; 2]; 4], d: &TagDetection) -> f64 {
+/// How two corners are compared.
+#[derive(Clone, Copy, Debug)]
+enum Metric {
+    /// Distance in the image.
+    Distance,
+    /// Largest difference of one coordinate, as the C library's regression test compares.
+    PerCoordinate,
+}
+
+/// Largest corner difference between an expected tag and a detection, corners in the same
+/// order. The expected file is the C library's own output, in its pixel-corner convention.
+fn corner_error(e: &[[f64; 2]; 4], d: &TagDetection, metric: Metric) -> f64 {
     let shift = stereotag::tags::LIBRARY_TO_CENTRE_PX;
     (0..4)
-        .map(|i| (e[i][0] + shift - d.corners_px[i][0]).hypot(e[i][1] + shift - d.corners_px[i][1]))
+        .map(|i| {
+            let (dx, dy) = (
+                e[i][0] + shift - d.corners_px[i][0],
+                e[i][1] + shift - d.corners_px[i][1],
+            );
+            match metric {
+                Metric::Distance => dx.hypot(dy),
+                Metric::PerCoordinate => dx.abs().max(dy.abs()),
+            }
+        })
         .fold(0.0, f64::max)
 }
 
+extern "C" {
+    // The AprilTag C library's own JPEG decoder (common/pjpeg.h), built into the static library
+    // the `apriltag-sys` crate links: its regression test decodes these photos with it.
+    fn pjpeg_create_from_buffer(
+        buf: *mut u8,
+        buflen: std::os::raw::c_int,
+        flags: u32,
+        error: *mut std::os::raw::c_int,
+    ) -> *mut std::ffi::c_void;
+    fn pjpeg_to_u8_baseline(pj: *mut std::ffi::c_void) -> *mut apriltag_sys::image_u8_t;
+    fn pjpeg_destroy(pj: *mut std::ffi::c_void);
+}
+
+/// A JPEG decoded to grey as the C library's regression test does (`pjpeg_to_u8_baseline`).
+fn load_pjpeg(path: &std::path::Path) -> image::GrayImage {
+    let mut bytes = std::fs::read(path).unwrap();
+    let mut error = 0;
+    // SAFETY: the buffer outlives the decoder, which copies what it decodes; the image and the
+    // decoder are freed here once copied out.
+    unsafe {
+        let pj = pjpeg_create_from_buffer(bytes.as_mut_ptr(), bytes.len() as i32, 0, &mut error);
+        assert!(!pj.is_null() && error == 0, "pjpeg error {error}");
+        let im = pjpeg_to_u8_baseline(pj);
+        let (w, h, stride) = (
+            (*im).width as u32,
+            (*im).height as u32,
+            (*im).stride as usize,
+        );
+        let rows = std::slice::from_raw_parts((*im).buf, stride * h as usize);
+        let gray = image::GrayImage::from_fn(w, h, |x, y| {
+            image::Luma([rows[y as usize * stride + x as usize]])
+        });
+        apriltag_sys::image_u8_destroy(im);
+        pjpeg_destroy(pj);
+        gray
+    }
+}
+
+/// How the test photos are decoded.
+#[derive(Clone, Copy, Debug)]
+enum Decoder {
+    /// Ours (the `image` crate, Rec. 601 luma), as every command reads images.
+    Ours,
+    /// The C library's pjpeg, as its regression test reads them.
+    Pjpeg,
+}
+
 /// (found within tolerance, expected, worst error among the found).
-fn score(detector: &mut dyn TagDetector, tolerance_px: f64) -> Option<(usize, usize, f64)> {
+fn score(
+    detector: &mut dyn TagDetector,
+    tolerance_px: f64,
+    decoder: Decoder,
+    metric: Metric,
+) -> Option<(usize, usize, f64)> {
     let dir = common::shared("apriltag_test")?;
     let (mut found, mut total, mut worst) = (0, 0, 0.0f64);
     let mut names: Vec<_> = std::fs::read_dir(&dir)
@@ -51,15 +121,21 @@ fn score(detector: &mut dyn TagDetector, tolerance_px: f64) -> Option<(usize, us
         .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
     {
         let expected = parse_expected(&std::fs::read_to_string(jpg.with_extension("txt")).unwrap());
-        let image = stereotag::io::load_gray(jpg).unwrap();
+        let image = match decoder {
+            Decoder::Ours => stereotag::io::load_gray(jpg).unwrap(),
+            Decoder::Pjpeg => load_pjpeg(jpg),
+        };
         let detections = detector.detect(&image).unwrap();
         for (id, corners) in &expected {
             total += 1;
             let best = detections
                 .iter()
                 .filter(|d| d.id == *id)
-                .map(|d| corner_error(corners, d))
+                .map(|d| corner_error(corners, d, metric))
                 .fold(f64::INFINITY, f64::min);
+            if best > tolerance_px && std::env::var("SHOW_MISSES").is_ok() {
+                eprintln!("  miss: {} tag {id}: nearest {best:.3} px", jpg.display());
+            }
             if best <= tolerance_px {
                 found += 1;
                 worst = worst.max(best);
@@ -67,7 +143,7 @@ fn score(detector: &mut dyn TagDetector, tolerance_px: f64) -> Option<(usize, us
         }
     }
     eprintln!(
-        "{}: {found} of {total} within {tolerance_px} px (worst {worst:.3} px)",
+        "{} ({decoder:?} JPEG decoding, {metric:?}): {found} of {total} within {tolerance_px} px (worst {worst:.3} px)",
         detector.name()
     );
     Some((found, total, worst))
@@ -86,18 +162,27 @@ fn regression_settings() -> DetectorConfig {
 #[test]
 fn c_library_reproduces_its_own_regression_output() {
     let mut c = CDetector::new(regression_settings()).unwrap();
-    let Some((found, total, _)) = score(&mut c, 0.5) else {
+    // Decoded and compared as its regression test does (0.1 px per coordinate).
+    let Some((found, total, _)) = score(&mut c, 0.1, Decoder::Pjpeg, Metric::PerCoordinate) else {
         return;
     };
     assert_eq!(total, 47);
+    // Measured 45, all within 0.012 px; tag 0 in two photos is 0.106 and 0.140 px off. The
+    // expected files come from the library's 2026 head; apriltag-sys 0.3 builds its 3.2.0.
+    assert!(
+        found >= 45,
+        "C backend, pjpeg: {found} of {total} within 0.1 px"
+    );
+    // Decoded by the image crate, as our commands read images: the grey levels differ here and
+    // there, which moves some tags by 0.1 to 0.3 px.
+    let Some((found, _, _)) = score(&mut c, 0.5, Decoder::Ours, Metric::Distance) else {
+        return;
+    };
     assert!(
         found >= 46,
         "C backend found {found} of {total} within 0.5 px"
     );
-    // Issue 3 asks all within 0.1 px. The C test decodes the JPEGs with its own decoder (pjpeg);
-    // ours (image-rs) differs by a grey level here and there, which moves 6 of 47 tags by
-    // 0.1 to 0.3 px.
-    let Some((found, _, _)) = score(&mut c, 0.1) else {
+    let Some((found, _, _)) = score(&mut c, 0.1, Decoder::Ours, Metric::Distance) else {
         return;
     };
     assert!(
@@ -109,12 +194,15 @@ fn c_library_reproduces_its_own_regression_output() {
 #[test]
 fn kornia_backend_uses_the_c_corner_order() {
     let mut k = KorniaDetector::new(regression_settings()).unwrap();
-    let Some((found, total, _)) = score(&mut k, 0.5) else {
-        return;
-    };
-    // Issue 3 asks 46 of 47; kornia-apriltag 0.2 alone reaches 34 here (see README).
-    assert!(
-        found >= 34,
-        "kornia backend found {found} of {total} within 0.5 px"
-    );
+    for decoder in [Decoder::Pjpeg, Decoder::Ours] {
+        let Some((found, total, _)) = score(&mut k, 0.5, decoder, Metric::Distance) else {
+            return;
+        };
+        // Issue 3 asks 46 of 47; kornia-apriltag 0.2 alone reaches 33 (pjpeg) and 34 (ours)
+        // here (see README).
+        assert!(
+            found >= 33,
+            "kornia backend found {found} of {total} within 0.5 px"
+        );
+    }
 }

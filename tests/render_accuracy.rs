@@ -81,7 +81,21 @@ fn two_hundred_rendered_pairs() {
         }
         pairs += 1;
         let pair = renderer.render(&w.world, pose, &config).unwrap();
-        let (l, r) = detect_pair(&mut det, &pair.left, &pair.right).unwrap();
+        // BLUR=SIGMA blurs both images by a Gaussian first: a robustness measurement (README);
+        // issue 3's figures are asserted on the sharp images only.
+        let blur: f32 = std::env::var("BLUR")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
+        let (bl, br) = if blur > 0.0 {
+            (
+                image::imageops::blur(&pair.left, blur),
+                image::imageops::blur(&pair.right, blur),
+            )
+        } else {
+            (pair.left.clone(), pair.right.clone())
+        };
+        let (l, r) = detect_pair(&mut det, &bl, &br).unwrap();
         let visible: Vec<u32> = pair.tags.iter().map(|t| t.id).collect();
         wrong_ids += l
             .iter()
@@ -146,6 +160,9 @@ fn two_hundred_rendered_pairs() {
         100.0 * med_rel
     );
     assert_eq!(pairs, 200);
+    if std::env::var("BLUR").is_ok() {
+        return;
+    }
     assert_eq!(wrong_ids, 0);
     // Issue 3: recall >= 0.99, corner error median <= 0.1 px and 95th percentile <= 0.3 px,
     // centre 3D error median <= 0.5% of range and within 1.5x the stereo bound, NEES in
