@@ -209,7 +209,7 @@ fn rendered_aprilgrid(samples: &str) -> (f64, f64, f64) {
 #[test]
 fn rendered_aprilgrid_sequence_recovers_the_rig() {
     // The calibration sequence's default, 16 samples per pixel. Issue 4: RMS <= 0.2 px,
-    // largest reprojection difference < 0.1 px; measured 0.023 px and 0.050 px (README).
+    // largest reprojection difference < 0.1 px; measured 0.023 px and 0.053 px (README).
     let (rms, whole, distortion) = rendered_aprilgrid("16");
     assert!(rms <= 0.05, "RMS {rms}");
     assert!(whole < 0.1, "largest projection difference {whole} px");
@@ -218,8 +218,8 @@ fn rendered_aprilgrid_sequence_recovers_the_rig() {
 
 #[test]
 fn rendered_aprilgrid_sequence_at_four_samples_per_pixel() {
-    // The scene default, 4 jittered samples: measured RMS 0.050 px, whole cameras 0.117 px,
-    // distortion alone 0.080 px (README).
+    // The scene default, 4 jittered samples: measured RMS 0.050 px, whole cameras 0.112 px,
+    // distortion alone 0.077 px (README).
     let (rms, whole, distortion) = rendered_aprilgrid("4");
     assert!(rms <= 0.1, "RMS {rms}");
     assert!(whole < 0.15, "largest projection difference {whole} px");
