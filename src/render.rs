@@ -5,7 +5,9 @@
 //! walls (vertical planes over their segments, up to their height) or a tag (a square on its wall,
 //! drawn from the family's true code bits with a white quiet zone). Four samples per pixel
 //! (2 x 2 jittered strata; `n x n` with [`Renderer::with_samples`]) give anti-aliased edges. Surfaces carry a mild procedural texture; light falls
-//! off with distance, the lens vignettes, and the sensor adds Gaussian noise. The same inputs and
+//! off with distance, the lens vignettes, and the sensor adds Gaussian noise; optionally the robot
+//! moves during the exposure (motion blur: each sample sees the scene from one of 16 poses along
+//! the motion). The same inputs and
 //! seed give the same bytes.
 //!
 //! Ground truth: each tag whose four corners are in front of the camera, inside the image, facing
@@ -36,6 +38,10 @@ pub struct RenderConfig {
     pub light_half_distance_m: f64,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Motion blur: how far the robot moves during the exposure, in its own frame (x forward,
+    /// y left, metres; turn, radians), centred on the pose rendered (whose truth is given);
+    /// `None` for a still exposure (ours).
+    pub motion: Option<Pose2>,
 }
 
 impl Default for RenderConfig {
@@ -46,6 +52,7 @@ impl Default for RenderConfig {
             vignetting: 0.3,
             light_half_distance_m: 6.0,
             seed: 1,
+            motion: None,
         }
     }
 }
@@ -365,13 +372,17 @@ fn render_camera(
     trace: &Tracer,
     camera: &Camera,
     table: &RayTable,
-    world_from_camera: &Isometry3<f64>,
+    exposure: &[Isometry3<f64>],
     config: &RenderConfig,
     seed: u64,
 ) -> GrayImage {
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let origin = world_from_camera.translation.vector;
-    let rotation = world_from_camera.rotation.to_rotation_matrix();
+    // The camera's poses through the exposure (one for a still one): each sample of a pixel
+    // sees the scene from one of them, picked by a hash so neighbours differ.
+    let poses: Vec<(Vector3<f64>, nalgebra::Rotation3<f64>)> = exposure
+        .iter()
+        .map(|p| (p.translation.vector, p.rotation.to_rotation_matrix()))
+        .collect();
     let half_diag2 = (0.5 * w as f64).powi(2) + (0.5 * h as f64).powi(2);
     let mut radiance = vec![0.0f64; w * h];
     radiance
@@ -385,9 +396,15 @@ fn render_camera(
                 }
                 let rays = &table.rays[i * table.per_pixel..(i + 1) * table.per_pixel];
                 let mut sum = 0.0;
-                for ray in rays {
+                for (k, ray) in rays.iter().enumerate() {
+                    let (origin, rotation) = &poses[if poses.len() > 1 {
+                        (jitter(i as u64, (k + 1000) as u64).0 * poses.len() as f64) as usize
+                            % poses.len()
+                    } else {
+                        0
+                    }];
                     let dir = rotation * ray;
-                    let (t, albedo) = trace(&origin, &dir);
+                    let (t, albedo) = trace(origin, &dir);
                     let light = if t.is_finite() {
                         1.0 / (1.0 + (t / config.light_half_distance_m).powi(2))
                     } else {
@@ -420,6 +437,9 @@ fn render_camera(
         });
     GrayImage::from_raw(w as u32, h as u32, pixels).unwrap_or_default()
 }
+
+/// Poses through a blurred exposure.
+const MOTION_STEPS: usize = 16;
 
 /// A renderer for one rig: the rays of every pixel sample are computed once, so rendering many
 /// pairs costs only the tracing.
@@ -465,9 +485,19 @@ impl Renderer {
             ceiling_m: config.ceiling_m,
         };
         let wl = world_from_left(rig, &world_from_robot);
-        let (left, right) = self.render_both(
+        let exposure: Vec<Isometry3<f64>> = match config.motion {
+            Some(m) => (0..MOTION_STEPS)
+                .map(|j| {
+                    let t = (j as f64 + 0.5) / MOTION_STEPS as f64 - 0.5;
+                    let step = Pose2::new(m.x * t, m.y * t, m.theta * t);
+                    world_from_left(rig, &world_from_robot.compose(&step))
+                })
+                .collect(),
+            None => vec![wl],
+        };
+        let (left, right) = self.render_exposure(
             &|o: &Vector3<f64>, d: &Vector3<f64>| scene.trace(o, d),
-            &wl,
+            &exposure,
             config,
         );
         let truth = truths(world, &scene.tags, rig, &wl, config);
@@ -490,12 +520,26 @@ impl Renderer {
         world_from_left: &Isometry3<f64>,
         config: &RenderConfig,
     ) -> (GrayImage, GrayImage) {
+        self.render_exposure(trace, std::slice::from_ref(world_from_left), config)
+    }
+
+    /// Both images with the left camera moving through `exposure` (its poses during the
+    /// exposure, evenly spaced in time).
+    fn render_exposure(
+        &self,
+        trace: &Tracer,
+        exposure: &[Isometry3<f64>],
+        config: &RenderConfig,
+    ) -> (GrayImage, GrayImage) {
         let rig = &self.rig;
         let seed = config.seed.wrapping_mul(2);
-        let wr = world_from_left * rig.right_from_left.inverse();
+        let right: Vec<Isometry3<f64>> = exposure
+            .iter()
+            .map(|wl| wl * rig.right_from_left.inverse())
+            .collect();
         (
-            render_camera(trace, &rig.left, &self.left, world_from_left, config, seed),
-            render_camera(trace, &rig.right, &self.right, &wr, config, seed + 1),
+            render_camera(trace, &rig.left, &self.left, exposure, config, seed),
+            render_camera(trace, &rig.right, &self.right, &right, config, seed + 1),
         )
     }
 }

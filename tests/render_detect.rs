@@ -108,3 +108,39 @@ fn both_backends_find_rendered_tags_where_the_truth_says() {
     }
     assert!(seen >= 6, "tag 0 in view in {seen} poses");
 }
+
+#[test]
+fn motion_blur_smears_the_tag_around_its_mid_exposure_pose() {
+    let w = load_world(&common::sample("office/world.yaml")).unwrap();
+    let rig = load_rig(&common::root().join("calibration/rigs/default.yaml")).unwrap();
+    let pose = Pose2::new(1.0, 6.3, 2.35);
+    let blurred = |turn: f64| RenderConfig {
+        motion: Some(Pose2::new(0.0, 0.0, turn)),
+        ..RenderConfig::default()
+    };
+    let still = render_pair(&w.world, &rig, pose, &RenderConfig::default()).unwrap();
+    let mild = render_pair(&w.world, &rig, pose, &blurred(0.005)).unwrap();
+    let again = render_pair(&w.world, &rig, pose, &blurred(0.005)).unwrap();
+    assert_eq!(mild.left.as_raw(), again.left.as_raw(), "deterministic");
+    assert_ne!(mild.left.as_raw(), still.left.as_raw(), "blurred");
+    // The truth is the mid-exposure pose's.
+    assert_eq!(mild.tags[0].left_corners_px, still.tags[0].left_corners_px);
+    // A 2 px smear: still found, corners near the mid-exposure truth.
+    let mut det = CDetector::new(DetectorConfig {
+        decimate: 1,
+        ..DetectorConfig::default()
+    })
+    .unwrap();
+    let found = det.detect(&mild.left).unwrap();
+    let tag = found.iter().find(|d| d.id == 0).expect("tag 0 found");
+    for k in 0..4 {
+        let (p, q) = (tag.corners_px[k], mild.tags[0].left_corners_px[k]);
+        assert!(
+            (p[0] - q[0]).hypot(p[1] - q[1]) < 0.5,
+            "corner {k}: {p:?} vs {q:?}"
+        );
+    }
+    // A 37 px smear hides it.
+    let strong = render_pair(&w.world, &rig, pose, &blurred(0.08)).unwrap();
+    assert!(det.detect(&strong.left).unwrap().is_empty());
+}

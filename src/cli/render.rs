@@ -42,6 +42,14 @@ pub struct Render {
     /// a pixel, where four jittered samples leave edge noise no real sensor has).
     #[arg(long, value_parser = samples_per_pixel)]
     samples: Option<usize>,
+    /// Motion blur: how far the robot moves during the exposure, `x,y,theta` in its own frame
+    /// (metres forward and left, radians), centred on the pose rendered, e.g. 0.02,0,0.05.
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        conflicts_with = "calibration_sequence"
+    )]
+    motion: Option<String>,
     /// Sensor noise seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -54,6 +62,28 @@ pub struct Render {
 const SCENE_SAMPLES: usize = 4;
 /// Samples per pixel of calibration views.
 const CALIBRATION_SAMPLES: usize = 16;
+
+/// Parses `x,y,theta` (metres, radians) given to `flag`.
+fn parse_pose(flag: &str, text: &str) -> Result<[f64; 3], UsageError> {
+    let parts: Vec<f64> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            UsageError(format!(
+                "{flag} {text}: expected x,y,theta in metres and radians, e.g. 2.5,2.5,0"
+            ))
+        })?;
+    let [x, y, theta] = parts[..] else {
+        return Err(UsageError(format!(
+            "{flag} {text}: expected three numbers x,y,theta"
+        )));
+    };
+    if !(x.is_finite() && y.is_finite() && theta.is_finite()) {
+        return Err(UsageError(format!("{flag} {text}: numbers must be finite")));
+    }
+    Ok([x, y, theta])
+}
 
 /// Parses `--samples`: a square number from 1 to 64.
 fn samples_per_pixel(text: &str) -> Result<usize, String> {
@@ -70,6 +100,22 @@ fn samples_per_pixel(text: &str) -> Result<usize, String> {
 }
 
 impl Render {
+    /// Render settings with the noise seed and `--motion`.
+    fn config(&self, seed: u64) -> Result<RenderConfig, UsageError> {
+        let motion = match &self.motion {
+            Some(text) => {
+                let [x, y, theta] = parse_pose("--motion", text)?;
+                Some(Pose2::new(x, y, theta))
+            }
+            None => None,
+        };
+        Ok(RenderConfig {
+            seed,
+            motion,
+            ..RenderConfig::default()
+        })
+    }
+
     /// The renderer for `rig` with `--samples` per pixel.
     fn renderer(&self, rig: &stereotag::camera::StereoRig) -> Renderer {
         let default = if self.calibration_sequence.is_some() {
@@ -92,31 +138,10 @@ impl Render {
         if let Some(poses) = &self.poses {
             return self.run_sequence(world, poses, quiet);
         }
-        let pose = self.pose.as_deref().unwrap_or_default();
-        let parts: Vec<f64> = pose
-            .split(',')
-            .map(|p| p.trim().parse::<f64>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| {
-                UsageError(format!(
-                    "--pose {}: expected x,y,theta in metres and radians, e.g. 2.5,2.5,0",
-                    pose
-                ))
-            })?;
-        let [x, y, theta] = parts[..] else {
-            return Err(
-                UsageError(format!("--pose {}: expected three numbers x,y,theta", pose)).into(),
-            );
-        };
-        if !(x.is_finite() && y.is_finite() && theta.is_finite()) {
-            return Err(UsageError(format!("--pose {pose}: numbers must be finite")).into());
-        }
+        let [x, y, theta] = parse_pose("--pose", self.pose.as_deref().unwrap_or_default())?;
         let loaded = io::load_world(world)?;
         let rig = io::load_rig(&self.rig)?;
-        let config = RenderConfig {
-            seed: self.seed,
-            ..RenderConfig::default()
-        };
+        let config = self.config(self.seed)?;
         let start = std::time::Instant::now();
         let pair = self
             .renderer(&rig)
@@ -159,10 +184,7 @@ impl Render {
         let bar = super::progress(poses.len() as u64, "render", quiet);
         let mut frames = Vec::with_capacity(poses.len());
         for (k, p) in poses.iter().enumerate() {
-            let config = RenderConfig {
-                seed: self.seed.wrapping_add(k as u64),
-                ..RenderConfig::default()
-            };
+            let config = self.config(self.seed.wrapping_add(k as u64))?;
             let pair = renderer.render(&loaded.world, p.pose, &config)?;
             let (left, right) = save_pair(&dir, k, &pair.left, &pair.right)?;
             frames.push(serde_json::json!({
