@@ -35,6 +35,7 @@ fn two_hundred_rendered_pairs() {
     let (mut pairs, mut found, mut wrong_ids) = (0, 0, 0);
     let (mut corner_err, mut rel_err, mut nees, mut disp_err, mut depth_err) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut stereo_normal_err, mut pnp_normal_err) = (Vec::new(), Vec::new());
     let mut attempts = 0;
     while pairs < 200 && attempts < 5000 {
         attempts += 1;
@@ -127,6 +128,18 @@ fn two_hundred_rendered_pairs() {
             let dm = t.corners_px[k][0] - t.right_corners_px[k][0];
             disp_err.push(dm - dt);
         }
+        // Facing: stereo against one camera's PnP, both against the truth.
+        let left_from_world = pair.world_from_left.inverse();
+        let true_corners = truth
+            .corners_world_m
+            .map(|c| left_from_world * nalgebra::Point3::from(c))
+            .map(|p| p.coords);
+        let true_normal = stereotag::stereo::fit_square(&true_corners, tag.size_m).normal;
+        let angle = |n: &Vector3<f64>| n.angle(&true_normal).to_degrees();
+        stereo_normal_err.push(angle(&Vector3::from(t.normal_in_left)));
+        if let Some(v) = stereotag::stereo::pnp_square(&rig.left, &t.corners_px, tag.size_m) {
+            pnp_normal_err.push(angle(&-v.rotation.column(2).into_owned()));
+        }
         let e = Vector3::from(t.position_in_left_m) - Vector3::from(truth.centre_in_left_m);
         rel_err.push(e.norm() / d);
         depth_err.push((e.z, truth.centre_in_left_m[2]));
@@ -158,6 +171,21 @@ fn two_hundred_rendered_pairs() {
          3D error median {:.3}% of range, sigma_d {sigma_d:.3} px, centre depth error / stereo bound \
          (RMS) {bound_ratio:.2}, mean NEES {mean_nees:.2}",
         100.0 * med_rel
+    );
+    let (n_s, n_p) = (stereo_normal_err.len(), pnp_normal_err.len());
+    let (s_med, s_p95, s_max) = (
+        percentile(&mut stereo_normal_err, 0.5),
+        percentile(&mut stereo_normal_err, 0.95),
+        percentile(&mut stereo_normal_err, 1.0),
+    );
+    let (p_med, p_p95, p_max) = (
+        percentile(&mut pnp_normal_err, 0.5),
+        percentile(&mut pnp_normal_err, 0.95),
+        percentile(&mut pnp_normal_err, 1.0),
+    );
+    eprintln!(
+        "tag facing error, degrees (median / p95 / max): stereo {s_med:.2} / {s_p95:.2} / {s_max:.2} \
+         ({n_s} tags), left camera PnP alone {p_med:.2} / {p_p95:.2} / {p_max:.2} ({n_p} tags)"
     );
     assert_eq!(pairs, 200);
     if std::env::var("BLUR").is_ok() {
