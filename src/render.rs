@@ -19,7 +19,7 @@ use crate::geometry::Pose2;
 use crate::tags::TagFamily;
 use crate::world::{Tag, World};
 use image::GrayImage;
-use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
@@ -212,6 +212,18 @@ pub(crate) const TAG_WHITE: f64 = 0.92;
 /// Albedo of a tag's black ink.
 pub(crate) const TAG_BLACK: f64 = 0.08;
 
+/// `x.floor()` without the libm call the baseline x86-64 target makes of it (no SSE4.1 round
+/// instruction); exact for |x| < 2^52.
+#[inline]
+fn fast_floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
 /// A smooth, deterministic texture value in [-1, 1] (value noise on a lattice).
 pub(crate) fn texture(u: f64, v: f64) -> f64 {
     let hash = |i: i64, j: i64| {
@@ -222,7 +234,7 @@ pub(crate) fn texture(u: f64, v: f64) -> f64 {
         h ^= h >> 32;
         (h & 0xFFFF) as f64 / 32767.5 - 1.0
     };
-    let (i, j) = (u.floor(), v.floor());
+    let (i, j) = (fast_floor(u), fast_floor(v));
     let (fu, fv) = (u - i, v - j);
     let (su, sv) = (fu * fu * (3.0 - 2.0 * fu), fv * fv * (3.0 - 2.0 * fv));
     let (i, j) = (i as i64, j as i64);
@@ -254,18 +266,26 @@ impl Scene<'_> {
         } else if dir.z > 1e-9 {
             best = ((self.ceiling_m - origin.z) / dir.z, Surface::Ceiling);
         }
-        let o2 = Point2::new(origin.x, origin.y);
-        let horiz = Vector2::new(dir.x, dir.y);
-        let hn = horiz.norm();
-        if hn > 1e-12 {
-            let d2 = horiz / hn;
+        if dir.x * dir.x + dir.y * dir.y > 1e-24 {
+            // Each wall as origin + t dir (t along the 3D ray) meeting a + u e, u in [0, 1].
             for (i, w) in self.world.walls.iter().enumerate() {
-                let Some(h) = w.segment.ray_hit(o2, d2, best.0 * hn) else {
+                let (a, b) = (w.segment.a, w.segment.b);
+                let (ex, ey) = (b.x - a.x, b.y - a.y);
+                let denom = dir.x * ey - dir.y * ex;
+                if denom.abs() < 1e-12 {
                     continue;
-                };
-                let t = h.range_m / hn;
+                }
+                let (wx, wy) = (a.x - origin.x, a.y - origin.y);
+                let t = (wx * ey - wy * ex) / denom;
+                if t <= 1e-9 || t >= best.0 {
+                    continue;
+                }
+                let u = (wx * dir.y - wy * dir.x) / denom;
+                if !(0.0..=1.0).contains(&u) {
+                    continue;
+                }
                 let z = origin.z + dir.z * t;
-                if z < 0.0 || z > w.height_m || t >= best.0 {
+                if z < 0.0 || z > w.height_m {
                     continue;
                 }
                 best = (t, Surface::Wall(i));
