@@ -632,11 +632,24 @@ fn initial_camera<'a>(
 
 /// Board pose in a camera from the homography of undistorted normalised points.
 fn board_pose(cam: &Camera, corners: &[Corner]) -> Option<Isometry3<f64>> {
-    let pairs: Vec<_> = corners
-        .iter()
-        .filter_map(|c| {
-            let n = cam.unproject(&nalgebra::Point2::new(c.px[0], c.px[1]))?;
-            Some(([c.board_m[0], c.board_m[1]], [n.x, n.y]))
+    plane_pose(
+        cam,
+        corners.iter().map(|c| ([c.board_m[0], c.board_m[1]], c.px)),
+    )
+}
+
+/// Pose in a camera of a plane whose points `(x, y)` (metres, z = 0 on the plane) are seen at
+/// the given pixels: the homography of the undistorted normalised points, decomposed (planar
+/// PnP). Points that do not unproject are left out; `None` when fewer than four remain or the
+/// homography is degenerate.
+pub(crate) fn plane_pose(
+    cam: &Camera,
+    points: impl Iterator<Item = ([f64; 2], [f64; 2])>,
+) -> Option<Isometry3<f64>> {
+    let pairs: Vec<_> = points
+        .filter_map(|(plane, px)| {
+            let n = cam.unproject(&nalgebra::Point2::new(px[0], px[1]))?;
+            Some((plane, [n.x, n.y]))
         })
         .collect();
     let h = homography(&pairs)?;

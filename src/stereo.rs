@@ -14,7 +14,7 @@
 
 use crate::camera::{Camera, Rectification, StereoRig};
 use crate::tags::TagDetection;
-use nalgebra::{Matrix3, Point2, SMatrix, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point2, Rotation3, SMatrix, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 /// Settings of stereo association and triangulation.
@@ -125,56 +125,17 @@ pub fn fit_square(corners: &[Vector3<f64>; 4], size_m: f64) -> SquareFit {
     }
 }
 
-/// A tag's pose from one camera alone (planar PnP: the homography from the tag's plane to the
-/// undistorted image, decomposed), in that camera's frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SingleView {
-    /// Rotation camera-from-tag.
-    pub rotation: Matrix3<f64>,
-    /// Tag centre, metres.
-    pub position: Vector3<f64>,
-}
-
 /// Planar PnP of a square of edge `size_m` from its corners in one camera (C library order, as
-/// [`fit_square`]); `None` if a corner does not unproject or the homography is degenerate.
-pub fn pnp_square(camera: &Camera, corners_px: &[[f64; 2]; 4], size_m: f64) -> Option<SingleView> {
+/// [`fit_square`]): the camera-from-tag pose, `None` if a corner does not unproject or the
+/// homography is degenerate.
+pub fn pnp_square(
+    camera: &Camera,
+    corners_px: &[[f64; 2]; 4],
+    size_m: f64,
+) -> Option<Isometry3<f64>> {
     let h = 0.5 * size_m;
-    let model = [(-h, h), (h, h), (h, -h), (-h, -h)];
-    let mut pairs = Vec::with_capacity(4);
-    for (m, px) in model.iter().zip(corners_px) {
-        let n = camera.unproject(&Point2::new(px[0], px[1]))?;
-        pairs.push(([m.0, m.1], [n.x, n.y]));
-    }
-    let hom = crate::calibrate::homography(&pairs)?;
-    let (h1, h2, h3) = (
-        hom.column(0).into_owned(),
-        hom.column(1).into_owned(),
-        hom.column(2).into_owned(),
-    );
-    let mut scale = 2.0 / (h1.norm() + h2.norm());
-    // The tag is in front of the camera.
-    if h3.z * scale < 0.0 {
-        scale = -scale;
-    }
-    let (r1, r2) = (h1 * scale, h2 * scale);
-    let approx = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]);
-    let svd = approx.svd(true, true);
-    let (u, v_t) = (svd.u?, svd.v_t?);
-    let d = (u * v_t).determinant().signum();
-    let rotation = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
-    Some(SingleView {
-        rotation,
-        position: h3 * scale,
-    })
-}
-
-/// Angle between two rotations, degrees.
-fn rotation_angle_deg(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
-    let r = a.transpose() * b;
-    ((r.trace() - 1.0) / 2.0)
-        .clamp(-1.0, 1.0)
-        .acos()
-        .to_degrees()
+    let model = [[-h, h], [h, h], [h, -h], [-h, -h]];
+    crate::calibrate::plane_pose(camera, model.into_iter().zip(corners_px.iter().copied()))
 }
 
 /// Why a left detection found no partner.
@@ -332,19 +293,12 @@ pub fn triangulate_tags(
         let centre = corners.iter().sum::<Vector3<f64>>() / 4.0;
         let pose = fit_square(&corners, known_size_m.unwrap_or(size_m));
         // PnP in each camera, brought into the left frame.
-        let left_from_right = rig.right_from_left.inverse();
-        let (rl, tl) = (
-            left_from_right.rotation.to_rotation_matrix().into_inner(),
-            left_from_right.translation.vector,
-        );
+        let stereo_rotation =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(pose.rotation));
         let views = [
             pnp_square(&rig.left, &l.corners_px, known_size_m.unwrap_or(size_m)),
-            pnp_square(&rig.right, &r.corners_px, known_size_m.unwrap_or(size_m)).map(|v| {
-                SingleView {
-                    rotation: rl * v.rotation,
-                    position: rl * v.position + tl,
-                }
-            }),
+            pnp_square(&rig.right, &r.corners_px, known_size_m.unwrap_or(size_m))
+                .map(|v| rig.right_from_left.inverse() * v),
         ];
         tags.push(StereoTag {
             id: l.id,
@@ -364,8 +318,8 @@ pub fn triangulate_tags(
             normal_in_left: [pose.normal.x, pose.normal.y, pose.normal.z],
             fit_rms_m: pose.rms_m,
             pnp_angle_deg: views
-                .map(|v| v.map(|v| rotation_angle_deg(&v.rotation, &pose.rotation))),
-            pnp_distance_m: views.map(|v| v.map(|v| (v.position - centre).norm())),
+                .map(|v| v.map(|v| v.rotation.angle_to(&stereo_rotation).to_degrees())),
+            pnp_distance_m: views.map(|v| v.map(|v| (v.translation.vector - centre).norm())),
         });
     }
     (tags, rejected)

@@ -138,7 +138,7 @@ fn two_hundred_rendered_pairs() {
         let angle = |n: &Vector3<f64>| n.angle(&true_normal).to_degrees();
         stereo_normal_err.push(angle(&Vector3::from(t.normal_in_left)));
         if let Some(v) = stereotag::stereo::pnp_square(&rig.left, &t.corners_px, tag.size_m) {
-            pnp_normal_err.push(angle(&-v.rotation.column(2).into_owned()));
+            pnp_normal_err.push(angle(&-(v.rotation * Vector3::z())));
         }
         let e = Vector3::from(t.position_in_left_m) - Vector3::from(truth.centre_in_left_m);
         rel_err.push(e.norm() / d);
