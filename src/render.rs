@@ -354,29 +354,27 @@ impl RayTable {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let n = n.max(1);
         let per_pixel = n * n;
-        let per: Vec<Option<Vec<Vector3<f64>>>> = (0..w * h)
-            .into_par_iter()
-            .map(|i| {
+        let mut rays = vec![Vector3::zeros(); w * h * per_pixel];
+        let mut valid = vec![false; w * h];
+        rays.par_chunks_mut(per_pixel)
+            .zip(valid.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (out, ok))| {
                 let (col, row) = ((i % w) as f64, (i / w) as f64);
-                (0..per_pixel)
-                    .map(|k| {
-                        // Jittered strata: a fixed pseudo-random point inside each of the n x n
-                        // cells of the pixel, so edge positions are not quantised to 1/n pixel
-                        // along a line.
-                        let (ju, jv) = jitter(i as u64, k as u64);
-                        let du = -0.5 + ((k % n) as f64 + ju) / n as f64;
-                        let dv = -0.5 + ((k / n) as f64 + jv) / n as f64;
-                        let p = camera.unproject(&Point2::new(col + du, row + dv))?;
-                        Some(Vector3::new(p.x, p.y, 1.0).normalize())
-                    })
-                    .collect()
-            })
-            .collect();
-        let valid = per.iter().map(Option::is_some).collect();
-        let rays = per
-            .into_iter()
-            .flat_map(|r| r.unwrap_or_else(|| vec![Vector3::zeros(); per_pixel]))
-            .collect();
+                *ok = out.iter_mut().enumerate().all(|(k, ray)| {
+                    // Jittered strata: a fixed pseudo-random point inside each of the n x n
+                    // cells of the pixel, so edge positions are not quantised to 1/n pixel
+                    // along a line.
+                    let (ju, jv) = jitter(i as u64, k as u64);
+                    let du = -0.5 + ((k % n) as f64 + ju) / n as f64;
+                    let dv = -0.5 + ((k / n) as f64 + jv) / n as f64;
+                    let Some(p) = camera.unproject(&Point2::new(col + du, row + dv)) else {
+                        return false;
+                    };
+                    *ray = Vector3::new(p.x, p.y, 1.0).normalize();
+                    true
+                });
+            });
         Self {
             per_pixel,
             rays,
