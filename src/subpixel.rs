@@ -26,6 +26,8 @@ const CURVED_EDGE_MIN_PX: f64 = 60.0;
 /// took the corner error's 95th percentile from 0.31 px (C library alone) to 0.29 px with this
 /// guard and to 0.46 px without; sharp rendered edges measure about 0.8 px, a 15% share.
 const MAX_SPREAD_SHARE: f64 = 0.2;
+/// Rounds of fitting an edge, the band following the fit.
+const EDGE_ROUNDS: usize = 4;
 /// Part of an edge left out at each end (and next to each gap square), as a share of its length.
 const EDGE_END_SHARE: f64 = 0.04;
 
@@ -164,7 +166,7 @@ impl EdgeCurve {
 /// Every pixel centre in the band is a point of the edge weighted by its gradient across the
 /// edge (dark to bright): for any blur symmetric about the edge, that weighted mean lies on the
 /// edge, also when the pixels are whole-area samples, so the fit has none of the half-pixel
-/// pull that interpolating a profile gives. The band follows the fit; four rounds.
+/// pull that interpolating a profile gives. The band follows the fit over [`EDGE_ROUNDS`] rounds.
 fn fit_edge(
     plane: &Plane,
     a: [f64; 2],
@@ -210,7 +212,8 @@ fn fit_edge(
         return None;
     }
     let spread_band = (2.0 * half_band).max(3.0);
-    for round in 0..4 {
+    for round in 0..EDGE_ROUNDS {
+        let last = round + 1 == EDGE_ROUNDS;
         // Weighted least squares of the offset across on 1, s, s².
         let mut ata = nalgebra::Matrix3::<f64>::zeros();
         let mut atb = nalgebra::Vector3::<f64>::zeros();
@@ -226,7 +229,7 @@ fn fit_edge(
                 }
                 let c = edge.c;
                 let off = across - (c[0] + c[1] * s + c[2] * s * s);
-                if off.abs() > spread_band || (round < 3 && off.abs() > half_band) {
+                if off.abs() > spread_band || (!last && off.abs() > half_band) {
                     continue;
                 }
                 let gx = 0.5 * (plane.at(qx + 1, qy) - plane.at(qx - 1, qy)) as f64;
@@ -235,7 +238,7 @@ fn fit_edge(
                 if w <= 0.0 {
                     continue;
                 }
-                if round == 3 {
+                if last {
                     // The last round also measures how wide the edge's gradient is.
                     sw += w;
                     swr2 += w * off * off;
@@ -253,7 +256,7 @@ fn fit_edge(
         }
         let sol = ata.cholesky()?.solve(&atb);
         edge.c = [sol[0], sol[1], sol[2]];
-        if round == 3 && sw > 0.0 {
+        if last && sw > 0.0 {
             edge.spread = (swr2 / sw).sqrt();
         }
     }

@@ -47,9 +47,10 @@ pub struct Render {
     #[arg(
         long,
         allow_hyphen_values = true,
-        conflicts_with = "calibration_sequence"
+        conflicts_with = "calibration_sequence",
+        value_parser = motion_arg
     )]
-    motion: Option<String>,
+    motion: Option<Pose2>,
     /// Sensor noise seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -64,25 +65,27 @@ const SCENE_SAMPLES: usize = 4;
 const CALIBRATION_SAMPLES: usize = 16;
 
 /// Parses `x,y,theta` (metres, radians) given to `flag`.
-fn parse_pose(flag: &str, text: &str) -> Result<[f64; 3], UsageError> {
+fn parse_pose(flag: &str, text: &str) -> Result<[f64; 3], String> {
     let parts: Vec<f64> = text
         .split(',')
         .map(|p| p.trim().parse::<f64>())
         .collect::<Result<_, _>>()
         .map_err(|_| {
-            UsageError(format!(
-                "{flag} {text}: expected x,y,theta in metres and radians, e.g. 2.5,2.5,0"
-            ))
+            format!("{flag} {text}: expected x,y,theta in metres and radians, e.g. 2.5,2.5,0")
         })?;
     let [x, y, theta] = parts[..] else {
-        return Err(UsageError(format!(
-            "{flag} {text}: expected three numbers x,y,theta"
-        )));
+        return Err(format!("{flag} {text}: expected three numbers x,y,theta"));
     };
     if !(x.is_finite() && y.is_finite() && theta.is_finite()) {
-        return Err(UsageError(format!("{flag} {text}: numbers must be finite")));
+        return Err(format!("{flag} {text}: numbers must be finite"));
     }
     Ok([x, y, theta])
+}
+
+/// Parses `--motion`.
+fn motion_arg(text: &str) -> Result<Pose2, String> {
+    let [x, y, theta] = parse_pose("--motion", text)?;
+    Ok(Pose2::new(x, y, theta))
 }
 
 /// Parses `--samples`: a square number from 1 to 64.
@@ -101,19 +104,12 @@ fn samples_per_pixel(text: &str) -> Result<usize, String> {
 
 impl Render {
     /// Render settings with the noise seed and `--motion`.
-    fn config(&self, seed: u64) -> Result<RenderConfig, UsageError> {
-        let motion = match &self.motion {
-            Some(text) => {
-                let [x, y, theta] = parse_pose("--motion", text)?;
-                Some(Pose2::new(x, y, theta))
-            }
-            None => None,
-        };
-        Ok(RenderConfig {
+    fn config(&self, seed: u64) -> RenderConfig {
+        RenderConfig {
             seed,
-            motion,
+            motion: self.motion,
             ..RenderConfig::default()
-        })
+        }
     }
 
     /// The renderer for `rig` with `--samples` per pixel.
@@ -138,10 +134,11 @@ impl Render {
         if let Some(poses) = &self.poses {
             return self.run_sequence(world, poses, quiet);
         }
-        let [x, y, theta] = parse_pose("--pose", self.pose.as_deref().unwrap_or_default())?;
+        let [x, y, theta] =
+            parse_pose("--pose", self.pose.as_deref().unwrap_or_default()).map_err(UsageError)?;
         let loaded = io::load_world(world)?;
         let rig = io::load_rig(&self.rig)?;
-        let config = self.config(self.seed)?;
+        let config = self.config(self.seed);
         let start = std::time::Instant::now();
         let pair = self
             .renderer(&rig)
@@ -184,7 +181,7 @@ impl Render {
         let bar = super::progress(poses.len() as u64, "render", quiet);
         let mut frames = Vec::with_capacity(poses.len());
         for (k, p) in poses.iter().enumerate() {
-            let config = self.config(self.seed.wrapping_add(k as u64))?;
+            let config = self.config(self.seed.wrapping_add(k as u64));
             let pair = renderer.render(&loaded.world, p.pose, &config)?;
             let (left, right) = save_pair(&dir, k, &pair.left, &pair.right)?;
             frames.push(serde_json::json!({
