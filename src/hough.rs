@@ -15,7 +15,7 @@
 //! [`HoughConfig::min_spread_deg`] (30 degrees by default). A wall point is only voted from
 //! near its normal (the arc is tangent to the wall there), so rule 3 rejects most of it.
 //!
-//! (4) Finally the grid vetoes features in the middle of a straight wall ([`reject_mid_wall`]):
+//! (4) Finally the grid vetoes features in the middle of a straight wall ([`is_mid_wall`]):
 //! at the paper's following distances the arcs are short and curved, so a wall point voted from
 //! a stretch of travel gathers directions as wide as a corner's.
 //!
@@ -27,6 +27,7 @@
 use crate::grid::OccupancyMap;
 use crate::run::{pose_at, StampedPose};
 use crate::sonar::PlacedReading;
+use crate::walls::{place_peak, PeakPlace};
 use serde::{Deserialize, Serialize};
 
 /// Settings of the Hough transform. Defaults are the paper's office experiment.
@@ -236,8 +237,8 @@ impl Accumulator {
         best as f64 * 360.0 / SPREAD_SECTORS as f64
     }
 
-    /// Peaks by the module's rule, strongest first.
-    pub fn peaks(&self, threshold: u32, peak_radius: usize, min_spread_deg: f64) -> Vec<Feature> {
+    /// Local maxima at or above `threshold` (rules 1 and 2), strongest first, with their spread.
+    pub fn peaks(&self, threshold: u32, peak_radius: usize) -> Vec<Feature> {
         let mut out = Vec::new();
         let r = peak_radius as i64;
         for &i in &self.touched {
@@ -269,9 +270,6 @@ impl Accumulator {
                 continue;
             }
             let spread = self.spread_deg(i);
-            if spread < min_spread_deg {
-                continue;
-            }
             out.push(Feature {
                 x_m: (self.sum_x[i] / v as f32) as f64,
                 y_m: (self.sum_y[i] / v as f32) as f64,
@@ -304,11 +302,41 @@ pub fn merge_features(mut features: Vec<Feature>, radius_m: f64) -> Vec<Feature>
     out
 }
 
-/// Online features: windows of travel or turn along `trajectory`, merged.
+/// Features from the peaks of an accumulator, placed among the walls found in `readings`
+/// ([`place_peak`]): a peak with two walls crossing near it moves to their crossing, a peak at a
+/// wall's end onto the wall, a peak in a wall's middle is dropped; a peak with no wall through it
+/// must pass the spread rule and the grid's mid-wall veto ([`is_mid_wall`]).
+pub fn locate_features(
+    peaks: Vec<Feature>,
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    map: &OccupancyMap,
+    config: &HoughConfig,
+) -> Vec<Feature> {
+    let mut out = Vec::new();
+    for f in peaks {
+        match place_peak(readings, half_cone_rad, (f.x_m, f.y_m), map) {
+            PeakPlace::Corner(x_m, y_m) | PeakPlace::WallEnd(x_m, y_m) => {
+                out.push(Feature { x_m, y_m, ..f })
+            }
+            PeakPlace::MidWall => {}
+            PeakPlace::Unknown => {
+                if f.spread_deg >= config.min_spread_deg && !is_mid_wall(&f, map) {
+                    out.push(f);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Online features: windows of travel or turn along `trajectory`, each window's peaks located
+/// with the readings up to its end, merged.
 pub fn features_online(
     readings: &[PlacedReading],
     trajectory: &[StampedPose],
     half_cone_rad: f64,
+    map: &OccupancyMap,
     config: &HoughConfig,
 ) -> Vec<Feature> {
     // Cumulative travel and turn of the robot at each reading.
@@ -340,10 +368,13 @@ pub fn features_online(
             acc.vote(&readings[end], half_cone_rad, config.arc_sample_m);
             end += 1;
         }
-        found.extend(acc.peaks(
-            config.threshold,
-            config.peak_radius_cells,
-            config.min_spread_deg,
+        let peaks = acc.peaks(config.threshold, config.peak_radius_cells);
+        found.extend(locate_features(
+            peaks,
+            &readings[..end],
+            half_cone_rad,
+            map,
+            config,
         ));
         acc.clear();
         if end >= readings.len() {
@@ -362,10 +393,12 @@ pub fn features_online(
     merge_features(found, config.merge_radius_m)
 }
 
-/// Offline features: one accumulator over the whole run. Returns the accumulator too (for display).
+/// Offline features: one accumulator over the whole run, its peaks located with all readings.
+/// Returns the accumulator too (for display).
 pub fn features_offline(
     readings: &[PlacedReading],
     half_cone_rad: f64,
+    map: &OccupancyMap,
     config: &HoughConfig,
 ) -> (Vec<Feature>, Accumulator) {
     let mut acc = Accumulator::new(config);
@@ -373,63 +406,59 @@ pub fn features_offline(
         acc.vote(r, half_cone_rad, config.arc_sample_m);
     }
     let threshold = config.offline_threshold.unwrap_or(config.threshold);
-    let peaks = acc.peaks(threshold, config.peak_radius_cells, config.min_spread_deg);
-    (merge_features(peaks, config.merge_radius_m), acc)
+    let peaks = acc.peaks(threshold, config.peak_radius_cells);
+    let located = locate_features(peaks, readings, half_cone_rad, map, config);
+    (merge_features(located, config.merge_radius_m), acc)
 }
 
-/// Ring around a feature inspected for wall cells by [`reject_mid_wall`]: 0.25 to 0.7 m.
+/// Ring around a feature inspected for wall cells by [`is_mid_wall`]: 0.25 to 0.7 m.
 const WALL_RING_M: (f64, f64) = (0.25, 0.7);
 /// Axial concentration above which the occupied cells around a feature form one straight line.
 const STRAIGHT_AXIAL: f64 = 0.6;
 /// ... and mean resultant below which that line runs through the feature (both ways).
 const STRAIGHT_THROUGH: f64 = 0.45;
 
-/// Rule 4, from the grid: drops features that sit in the middle of a straight wall. Around a
+/// Rule 4, from the grid: whether a feature sits in the middle of a straight wall. Around a
 /// wall point the occupied cells lie in two opposite directions (their doubled angles agree, their
 /// angles cancel); around a corner they lie in two directions at an angle, around a wall end in
-/// one. Features with fewer than three occupied cells around them are dropped too: a corner is
-/// made of walls.
-pub fn reject_mid_wall(features: Vec<Feature>, map: &OccupancyMap) -> Vec<Feature> {
+/// one. A feature with fewer than three occupied cells around it counts as mid-wall too: a corner
+/// is made of walls.
+pub fn is_mid_wall(f: &Feature, map: &OccupancyMap) -> bool {
     let g = &map.geometry;
     let reach = (WALL_RING_M.1 / g.resolution_m).ceil() as i64;
-    features
-        .into_iter()
-        .filter(|f| {
-            let Some((c0, r0)) = g.cell_of(f.x_m, f.y_m) else {
-                return false;
-            };
-            let (mut n, mut s1, mut c1, mut s2, mut c2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            for dr in -reach..=reach {
-                for dc in -reach..=reach {
-                    let (c, r) = (c0 as i64 + dc, r0 as i64 + dr);
-                    if c < 0 || r < 0 || c >= g.width as i64 || r >= g.height as i64 {
-                        continue;
-                    }
-                    let idx = r as usize * g.width + c as usize;
-                    if !map.is_occupied(idx) {
-                        continue;
-                    }
-                    let (x, y) = g.centre(c as usize, r as usize);
-                    let d = (x - f.x_m).hypot(y - f.y_m);
-                    if !(WALL_RING_M.0..=WALL_RING_M.1).contains(&d) {
-                        continue;
-                    }
-                    let a = (y - f.y_m).atan2(x - f.x_m);
-                    n += 1.0;
-                    s1 += a.sin();
-                    c1 += a.cos();
-                    s2 += (2.0 * a).sin();
-                    c2 += (2.0 * a).cos();
-                }
+    let Some((c0, r0)) = g.cell_of(f.x_m, f.y_m) else {
+        return true;
+    };
+    let (mut n, mut s1, mut c1, mut s2, mut c2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for dr in -reach..=reach {
+        for dc in -reach..=reach {
+            let (c, r) = (c0 as i64 + dc, r0 as i64 + dr);
+            if c < 0 || r < 0 || c >= g.width as i64 || r >= g.height as i64 {
+                continue;
             }
-            if n < 3.0 {
-                return false;
+            let idx = r as usize * g.width + c as usize;
+            if !map.is_occupied(idx) {
+                continue;
             }
-            let axial = s2.hypot(c2) / n;
-            let through = s1.hypot(c1) / n;
-            !(axial > STRAIGHT_AXIAL && through < STRAIGHT_THROUGH)
-        })
-        .collect()
+            let (x, y) = g.centre(c as usize, r as usize);
+            let d = (x - f.x_m).hypot(y - f.y_m);
+            if !(WALL_RING_M.0..=WALL_RING_M.1).contains(&d) {
+                continue;
+            }
+            let a = (y - f.y_m).atan2(x - f.x_m);
+            n += 1.0;
+            s1 += a.sin();
+            c1 += a.cos();
+            s2 += (2.0 * a).sin();
+            c2 += (2.0 * a).cos();
+        }
+    }
+    if n < 3.0 {
+        return true;
+    }
+    let axial = s2.hypot(c2) / n;
+    let through = s1.hypot(c1) / n;
+    axial > STRAIGHT_AXIAL && through < STRAIGHT_THROUGH
 }
 
 /// Ring around a feature inspected by [`classify_features`]: 0.3 to 0.6 m.
@@ -497,7 +526,11 @@ mod tests {
                 range_m: Some(1.2),
             });
         }
-        let (f, _) = features_offline(&readings, 15f64.to_radians(), &HoughConfig::default());
+        let mut acc = Accumulator::new(&HoughConfig::default());
+        for r in &readings {
+            acc.vote(r, 15f64.to_radians(), 0.01);
+        }
+        let f = acc.peaks(70, 2);
         assert!(!f.is_empty());
         assert!(
             (f[0].x_m - target.0).hypot(f[0].y_m - target.1) < 0.1,

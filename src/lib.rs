@@ -29,4 +29,5 @@ mod subpixel;
 pub mod tags;
 #[cfg(feature = "rerun")]
 pub mod viz;
+pub mod walls;
 pub mod world;

@@ -11,9 +11,7 @@ use crate::geometry::Pose2;
 use crate::grid::{
     CountingGrid, GridError, LogOddsGrid, MappingConfig, OccupancyGrid, OccupancyMap,
 };
-use crate::hough::{
-    classify_features, features_offline, features_online, reject_mid_wall, Accumulator, Feature,
-};
+use crate::hough::{classify_features, features_offline, features_online, Accumulator, Feature};
 use crate::run::{PoseSource, RunDataset, StampedPose};
 use crate::score::{score_features, score_map, FeatureScore, MapScore};
 use crate::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
@@ -102,16 +100,12 @@ pub fn map_trajectory(
 
     let half = 0.5 * layout.cone_rad;
     let t = Instant::now();
-    let mut online = reject_mid_wall(
-        features_online(&readings, trajectory, half, &config.hough),
-        &counting,
-    );
+    let mut online = features_online(&readings, trajectory, half, &counting, &config.hough);
     classify_features(&mut online, &counting);
     timings_s.insert("hough_online".into(), t.elapsed().as_secs_f64());
 
     let t = Instant::now();
-    let (offline, accumulator) = features_offline(&readings, half, &config.hough);
-    let mut offline = reject_mid_wall(offline, &counting);
+    let (mut offline, accumulator) = features_offline(&readings, half, &counting, &config.hough);
     classify_features(&mut offline, &counting);
     timings_s.insert("hough_offline".into(), t.elapsed().as_secs_f64());
     timings_s.insert("total".into(), start.elapsed().as_secs_f64());

@@ -11,6 +11,10 @@ use stereotag::sim::simulate;
 const OCCUPIED_PRECISION_GT: f64 = 0.85;
 /// Occupied recall with ground-truth poses (issue 2: 0.85).
 const OCCUPIED_RECALL_GT: f64 = 0.85;
+/// Feature precision with ground-truth poses (issue 2: 0.8).
+const FEATURE_PRECISION_GT: f64 = 0.8;
+/// Feature recall of the corners that came within 1.5 m of a sonar (issue 2: 0.8).
+const FEATURE_RECALL_GT: f64 = 0.8;
 
 #[test]
 fn office_with_ground_truth_poses_maps_the_walls() {
@@ -44,6 +48,12 @@ fn office_with_ground_truth_poses_maps_the_walls() {
         gt_scores.counting.free_accuracy >= 0.9,
         "{:?}",
         gt_scores.counting
+    );
+    // Features, offline pass (issue 2: precision and recall >= 0.8 of the reachable corners).
+    let features = &gt_scores.features_offline;
+    assert!(
+        features.precision >= FEATURE_PRECISION_GT && features.recall >= FEATURE_RECALL_GT,
+        "{features:?}"
     );
     // The paper's claim, measured: simple counting is at least as precise as log-odds here.
     assert!(gt_scores.counting.occupied_precision >= gt_scores.log_odds.occupied_precision - 0.02);

@@ -1,0 +1,469 @@
+//! Walls near a point, from the sonar arcs tangent to them, and room corners as their crossings.
+//!
+//! A sonar echo off a flat wall comes from the foot of the perpendicular, so the wall is tangent
+//! to the reading's arc: for each direction `a` inside the cone, the reading votes for the line
+//! with normal `a` at distance `range` from the sensor (a line Hough transform, as in Tardós et
+//! al., "Robust mapping and localization in indoor environments using sonar data", 2002). Every
+//! reading of one wall votes for the same line, whatever the robot's position along it; the
+//! line's position is as precise as the ranges, not the 30 degree beam.
+//!
+//! The point Hough transform ([`crate::hough`]) finds *where* something reflects from many
+//! directions; around a room corner its peak sits on one of the walls 0.2-0.6 m from the corner,
+//! because the robot rounds the corner close to both walls. [`place_peak`] looks for two walls
+//! near such a peak and, when they cross near it and both reach the crossing, moves the feature
+//! there. A peak on a wall where the grid shows free space on one side is the wall's end (a door
+//! jamb); one with the wall going on to both sides is dropped.
+
+use crate::grid::OccupancyMap;
+use crate::sonar::PlacedReading;
+
+/// Tangent points farther than this from the candidate are ignored: 1 m.
+const SEARCH_RADIUS_M: f64 = 1.5;
+/// Angular cell of the line accumulator: 1 degree.
+const ANGLE_STEP_DEG: f64 = 1.0;
+/// Distance cell of the line accumulator: 3 cm (range noise is about 1-2 cm).
+const DIST_STEP_M: f64 = 0.03;
+/// A wall needs this many votes (readings): 6.
+const MIN_WALL_VOTES: u32 = 6;
+/// Walls closer than this in angle (and [`SUPPRESS_DIST_M`] in distance) are one.
+const SUPPRESS_ANGLE_DEG: f64 = 15.0;
+/// ... and closer than this in distance.
+const SUPPRESS_DIST_M: f64 = 0.15;
+/// Two walls make a corner when they meet at this angle or more: 60 degrees (the cone's edge
+/// echoes make weak false walls 10-35 degrees off the true ones).
+const MIN_CORNER_ANGLE_DEG: f64 = 60.0;
+/// A corner further than this from the candidate is not its corner: 0.8 m.
+const MAX_SNAP_M: f64 = 1.0;
+/// Each wall must have been seen this close to the crossing: 0.4 m (no corner where two
+/// walls' extensions meet in open space).
+const MAX_WALL_GAP_M: f64 = 1.0;
+/// A wall ends at a crossing when it was seen no further than this past it: 15 cm.
+const END_SLACK_M: f64 = 0.15;
+/// Walls searched per candidate.
+const MAX_WALLS: usize = 6;
+
+/// A wall line near a point: `n . (p - centre) = offset_m`, `n = (cos a, sin a)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalWall {
+    /// Normal direction, radians, in [0, pi).
+    pub normal_rad: f64,
+    /// Signed distance of the line from the centre it was found around, metres.
+    pub offset_m: f64,
+    /// Readings that voted for it.
+    pub votes: u32,
+}
+
+/// The tangent lines one reading votes for: `(normal in [0, pi), offset from centre, tangent
+/// point)` for each accumulator angle inside the cone whose tangent point lies within
+/// [`SEARCH_RADIUS_M`] of `centre`.
+fn tangents(
+    r: &PlacedReading,
+    half_cone_rad: f64,
+    centre: (f64, f64),
+) -> impl Iterator<Item = (f64, f64, (f64, f64))> + '_ {
+    let step = ANGLE_STEP_DEG.to_radians();
+    let (range, p) = (r.range_m.unwrap_or(f64::NAN), r.world_from_sensor);
+    let usable = range.is_finite() && range > 0.0;
+    let (lo, hi) = if usable {
+        (
+            ((p.theta - half_cone_rad) / step).ceil() as i64,
+            ((p.theta + half_cone_rad) / step).floor() as i64,
+        )
+    } else {
+        (1, 0)
+    };
+    (lo..=hi).filter_map(move |k| {
+        let a = k as f64 * step;
+        let (s, c) = a.sin_cos();
+        let t = (p.x + range * c, p.y + range * s);
+        if (t.0 - centre.0).hypot(t.1 - centre.1) > SEARCH_RADIUS_M {
+            return None;
+        }
+        let mut offset = c * (t.0 - centre.0) + s * (t.1 - centre.1);
+        let mut normal = a.rem_euclid(std::f64::consts::TAU);
+        if normal >= std::f64::consts::PI {
+            normal -= std::f64::consts::PI;
+            offset = -offset;
+        }
+        Some((normal, offset, t))
+    })
+}
+
+/// Walls near `centre`, strongest first, from the readings' tangent lines.
+pub fn local_walls(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    centre: (f64, f64),
+) -> Vec<LocalWall> {
+    let n_angle = (180.0 / ANGLE_STEP_DEG).round() as usize;
+    // Cells symmetric about zero offset, so flipping a line's side flips its cell.
+    let n_dist = (2.0 * (SEARCH_RADIUS_M + DIST_STEP_M) / DIST_STEP_M).ceil() as usize;
+    let reach = 0.5 * n_dist as f64 * DIST_STEP_M;
+    let mut votes = vec![0u32; n_angle * n_dist];
+    let mut sum_offset = vec![0f64; n_angle * n_dist];
+    let step = ANGLE_STEP_DEG.to_radians();
+    let cell = |normal: f64, offset: f64| {
+        let ia = ((normal / step).round() as usize) % n_angle;
+        let id = (((offset + reach) / DIST_STEP_M) as usize).min(n_dist - 1);
+        ia * n_dist + id
+    };
+    let near = |r: &&PlacedReading| match r.range_m {
+        // The arc can only touch the search disc if the disc is within range + radius.
+        Some(range) => {
+            let p = r.world_from_sensor;
+            (p.x - centre.0).hypot(p.y - centre.1) <= range + SEARCH_RADIUS_M
+        }
+        None => false,
+    };
+    for r in readings.iter().filter(near) {
+        for (normal, offset, _) in tangents(r, half_cone_rad, centre) {
+            let i = cell(normal, offset);
+            votes[i] += 1;
+            sum_offset[i] += offset;
+        }
+    }
+    let mut walls: Vec<LocalWall> = Vec::new();
+    while walls.len() < MAX_WALLS {
+        let Some((best, &v)) = votes
+            .iter()
+            .enumerate()
+            .max_by_key(|(i, &v)| (v, usize::MAX - i))
+        else {
+            break;
+        };
+        if v < MIN_WALL_VOTES {
+            break;
+        }
+        // Angle and offset refined over the 3 x 3 neighbourhood.
+        let (ia, id) = ((best / n_dist) as i64, (best % n_dist) as i64);
+        let (mut w, mut sa, mut so) = (0.0, 0.0, 0.0);
+        for da in -1..=1i64 {
+            for dd in -1..=1i64 {
+                let d = id + dd;
+                if d < 0 || d >= n_dist as i64 {
+                    continue;
+                }
+                // Wrapping past 0 or 180 degrees flips the offset's sign.
+                let (a, flip) = match ia + da {
+                    a if a < 0 => (a + n_angle as i64, true),
+                    a if a >= n_angle as i64 => (a - n_angle as i64, true),
+                    a => (a, false),
+                };
+                let d = if flip { n_dist as i64 - 1 - d } else { d };
+                let j = a as usize * n_dist + d as usize;
+                if votes[j] == 0 {
+                    continue;
+                }
+                let off = sum_offset[j] / votes[j] as f64;
+                let vj = votes[j] as f64;
+                w += vj;
+                sa += vj * (ia + da) as f64 * step;
+                so += vj * if flip { -off } else { off };
+            }
+        }
+        let normal = (sa / w).rem_euclid(std::f64::consts::PI);
+        let offset = if (sa / w) < 0.0 || (sa / w) >= std::f64::consts::PI {
+            -so / w
+        } else {
+            so / w
+        };
+        walls.push(LocalWall {
+            normal_rad: normal,
+            offset_m: offset,
+            votes: v,
+        });
+        // Suppress the wall's neighbourhood (both representations near 0 / 180 degrees).
+        for (i, v) in votes.iter_mut().enumerate() {
+            let a = (i / n_dist) as f64 * step;
+            let o = -reach + ((i % n_dist) as f64 + 0.5) * DIST_STEP_M;
+            if same_wall(a, o, normal, offset) {
+                *v = 0;
+            }
+        }
+    }
+    walls
+}
+
+/// Whether the lines (normal `a`, offset `o`) and (`b`, `p`) agree within `angle_rad` and
+/// `dist_m`, either way round 0 / 180 degrees.
+fn close_lines(a: f64, o: f64, b: f64, p: f64, angle_rad: f64, dist_m: f64) -> bool {
+    let da = (a - b).abs();
+    (da <= angle_rad && (o - p).abs() <= dist_m)
+        || (std::f64::consts::PI - da <= angle_rad && (o + p).abs() <= dist_m)
+}
+
+/// Whether two lines are one wall, within the suppression bounds.
+fn same_wall(a: f64, o: f64, b: f64, p: f64) -> bool {
+    close_lines(a, o, b, p, SUPPRESS_ANGLE_DEG.to_radians(), SUPPRESS_DIST_M)
+}
+
+/// Crossing of two walls, in the frame of the centre they were found around.
+fn crossing(a: &LocalWall, b: &LocalWall) -> Option<(f64, f64)> {
+    let (s1, c1) = a.normal_rad.sin_cos();
+    let (s2, c2) = b.normal_rad.sin_cos();
+    let det = c1 * s2 - s1 * c2;
+    if det.abs() < 1e-9 {
+        return None;
+    }
+    Some((
+        (a.offset_m * s2 - b.offset_m * s1) / det,
+        (c1 * b.offset_m - c2 * a.offset_m) / det,
+    ))
+}
+
+/// Where a wall was seen: the tangent points of its voters, as distances along the wall
+/// (direction `(-sin a, cos a)`) from the foot of `point` on it, smallest and largest.
+fn seen_along(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    centre: (f64, f64),
+    wall: &LocalWall,
+    point: (f64, f64),
+) -> Option<(f64, f64)> {
+    let (s, c) = wall.normal_rad.sin_cos();
+    let mut span: Option<(f64, f64)> = None;
+    for r in readings {
+        for (normal, offset, t) in tangents(r, half_cone_rad, centre) {
+            if close_lines(
+                normal,
+                offset,
+                wall.normal_rad,
+                wall.offset_m,
+                ANGLE_STEP_DEG.to_radians(),
+                1.5 * DIST_STEP_M,
+            ) {
+                let u = -s * (t.0 - point.0) + c * (t.1 - point.1);
+                span = Some(span.map_or((u, u), |(lo, hi)| (lo.min(u), hi.max(u))));
+            }
+        }
+    }
+    span
+}
+
+/// Distance from `point` to the nearest place `wall` was seen.
+fn gap_to(span: Option<(f64, f64)>) -> f64 {
+    match span {
+        Some((lo, hi)) if lo <= 0.0 && hi >= 0.0 => 0.0,
+        Some((lo, hi)) => lo.abs().min(hi.abs()),
+        None => f64::INFINITY,
+    }
+}
+
+/// What the walls around a Hough peak say it is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PeakPlace {
+    /// Two walls cross near it: the corner where they meet.
+    Corner(f64, f64),
+    /// It lies on a wall that the grid shows going on to one side and free space to the other:
+    /// the wall's end (a door jamb), the peak moved onto the wall.
+    WallEnd(f64, f64),
+    /// It lies on a wall that the grid shows going on to both sides: not a feature.
+    MidWall,
+    /// No wall through it (a pillar, clutter, too few readings): the walls cannot tell.
+    Unknown,
+}
+
+/// A peak lies on a wall when it is this close to its line: 15 cm.
+const ON_WALL_M: f64 = 0.15;
+
+/// Places a Hough peak at `centre` among the walls around it. A corner is the crossing of two
+/// walls that meet at [`MIN_CORNER_ANGLE_DEG`] or more, within [`MAX_SNAP_M`] of the peak, each
+/// seen within [`MAX_WALL_GAP_M`] of the crossing and at least one ending there (within
+/// [`END_SLACK_M`]), with an occupied grid cell within one cell of the crossing.
+pub fn place_peak(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    centre: (f64, f64),
+    map: &OccupancyMap,
+) -> PeakPlace {
+    let walls = local_walls(readings, half_cone_rad, centre);
+    if let Some((x, y)) = corner(readings, half_cone_rad, centre, map, &walls) {
+        return PeakPlace::Corner(x, y);
+    }
+    let Some(wall) = walls
+        .iter()
+        .filter(|w| w.offset_m.abs() <= ON_WALL_M)
+        .max_by_key(|w| w.votes)
+    else {
+        return PeakPlace::Unknown;
+    };
+    let (s, c) = wall.normal_rad.sin_cos();
+    let foot = (centre.0 + wall.offset_m * c, centre.1 + wall.offset_m * s);
+    let sides = [1.0, -1.0].map(|sign| beyond(map, foot, (-s * sign, c * sign)));
+    match sides {
+        [Beyond::Wall, Beyond::Wall] => PeakPlace::MidWall,
+        [Beyond::Wall, Beyond::Free] | [Beyond::Free, Beyond::Wall] => {
+            PeakPlace::WallEnd(foot.0, foot.1)
+        }
+        _ => PeakPlace::Unknown,
+    }
+}
+
+/// What the grid shows along a wall beyond a point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Beyond {
+    /// The wall goes on.
+    Wall,
+    /// Free space: the wall ends.
+    Free,
+    /// Not known, or mixed.
+    Unknown,
+}
+
+/// Distances beyond a point at which [`beyond`] looks along a wall: 0.3, 0.45 and 0.6 m.
+const BEYOND_M: [f64; 3] = [0.3, 0.45, 0.6];
+
+/// What the grid shows along direction `dir` (a unit vector) from `point`: the wall goes on when
+/// at least two of the [`BEYOND_M`] points have an occupied cell within half a cell across the
+/// wall, it ends when at least two of them are known free.
+fn beyond(map: &OccupancyMap, point: (f64, f64), dir: (f64, f64)) -> Beyond {
+    let g = &map.geometry;
+    let (mut wall, mut free) = (0, 0);
+    let half = 0.5 * g.resolution_m;
+    for d in BEYOND_M {
+        let q = (point.0 + d * dir.0, point.1 + d * dir.1);
+        // The wall's cells may lie either side of its line: look half a cell across it.
+        let across = [-half, 0.0, half].map(|e| g.cell_of(q.0 - e * dir.1, q.1 + e * dir.0));
+        let cells = across.iter().flatten().map(|&(c, r)| r * g.width + c);
+        if cells.clone().any(|i| map.is_occupied(i)) {
+            wall += 1;
+        } else if let Some((c, r)) = g.cell_of(q.0, q.1) {
+            free += map.is_free(r * g.width + c) as usize;
+        }
+    }
+    if wall >= 2 {
+        Beyond::Wall
+    } else if free >= 2 {
+        Beyond::Free
+    } else {
+        Beyond::Unknown
+    }
+}
+
+/// The corner of [`place_peak`], if any: pairs of walls, the stronger with at least half the
+/// votes of the strongest wall around, tried in order of the product of their votes (a strong
+/// wall with a weak one ranks below two fair ones).
+fn corner(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    centre: (f64, f64),
+    map: &OccupancyMap,
+    walls: &[LocalWall],
+) -> Option<(f64, f64)> {
+    let strongest = walls.iter().map(|w| w.votes).max().unwrap_or(0);
+    let mut pairs = Vec::new();
+    for (i, a) in walls.iter().enumerate() {
+        for b in &walls[i + 1..] {
+            let angle = (a.normal_rad - b.normal_rad).abs();
+            let angle = angle.min(std::f64::consts::PI - angle);
+            // Two weak walls beside a strong one are the cone's edge echoes, not a corner.
+            let strong = 2 * a.votes.max(b.votes) >= strongest;
+            if angle >= MIN_CORNER_ANGLE_DEG.to_radians() && strong {
+                pairs.push((a.votes * b.votes, *a, *b));
+            }
+        }
+    }
+    pairs.sort_by_key(|p| std::cmp::Reverse(p.0));
+    pairs.into_iter().find_map(|(_, a, b)| {
+        let (dx, dy) = crossing(&a, &b)?;
+        if dx.hypot(dy) > MAX_SNAP_M {
+            return None;
+        }
+        let point = (centre.0 + dx, centre.1 + dy);
+        let spans = [a, b].map(|w| seen_along(readings, half_cone_rad, centre, &w, point));
+        // Both walls seen near the crossing, one at least only on one side of it (an L or a
+        // T; two walls that each run on past the crossing are a false pair).
+        let ends = |span: &Option<(f64, f64)>| {
+            span.is_some_and(|(lo, hi)| lo >= -END_SLACK_M || hi <= END_SLACK_M)
+        };
+        let walls_meet =
+            spans.iter().all(|s| gap_to(*s) <= MAX_WALL_GAP_M) && spans.iter().any(ends);
+        (walls_meet && occupied_near(map, point)).then_some(point)
+    })
+}
+
+/// Whether the grid has an occupied cell within one cell of `point` (which may lie just outside
+/// the grid: a wall on its edge).
+fn occupied_near(map: &OccupancyMap, point: (f64, f64)) -> bool {
+    let g = &map.geometry;
+    let c0 = ((point.0 - g.origin_m[0]) / g.resolution_m).floor() as i64;
+    let r0 = ((point.1 - g.origin_m[1]) / g.resolution_m).floor() as i64;
+    (-1..=1i64).any(|dr| {
+        (-1..=1i64).any(|dc| {
+            let (c, r) = (c0 + dc, r0 + dr);
+            c >= 0
+                && r >= 0
+                && c < g.width as i64
+                && r < g.height as i64
+                && map.is_occupied(r as usize * g.width + c as usize)
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+    use crate::grid::{CountingGrid, GridConfig, OccupancyGrid};
+
+    /// Readings of a wall `y = wall_y` taken from a robot driving along it at `standoff`.
+    fn along_wall(wall_y: f64, standoff: f64, xs: std::ops::Range<i32>) -> Vec<PlacedReading> {
+        xs.map(|k| {
+            let x = k as f64 * 0.05;
+            PlacedReading {
+                t_s: 0.0,
+                world_from_sensor: Pose2::new(
+                    x,
+                    wall_y - standoff,
+                    std::f64::consts::FRAC_PI_2 + 0.1,
+                ),
+                range_m: Some(standoff),
+            }
+        })
+        .collect()
+    }
+
+    /// Readings of wall `x = wall_x` from a robot driving along it at `standoff`.
+    fn along_wall_x(wall_x: f64, standoff: f64, ys: std::ops::Range<i32>) -> Vec<PlacedReading> {
+        ys.map(|k| PlacedReading {
+            t_s: 0.0,
+            world_from_sensor: Pose2::new(wall_x - standoff, k as f64 * 0.05, -0.1),
+            range_m: Some(standoff),
+        })
+        .collect()
+    }
+
+    #[test]
+    fn a_peak_beside_a_room_corner_moves_into_it() {
+        // The corner (2, 2): walls y = 2 (x < 2) and x = 2 (y < 2), each followed to 0.35 m of it.
+        let mut readings = along_wall(2.0, 0.5, 0..34);
+        readings.extend(along_wall_x(2.0, 0.5, 0..34));
+        let mut grid = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 5.0).unwrap();
+        grid.insert_all(&readings);
+        let map = grid.map();
+        let place = place_peak(&readings, 15f64.to_radians(), (1.45, 1.98), &map);
+        let PeakPlace::Corner(x, y) = place else {
+            panic!("{place:?}")
+        };
+        assert!((x - 2.0).hypot(y - 2.0) < 0.03, "({x}, {y})");
+        // A peak in the middle of the wall y = 2 is no feature.
+        let place = place_peak(&readings, 15f64.to_radians(), (0.6, 2.0), &map);
+        assert!(
+            matches!(place, PeakPlace::MidWall | PeakPlace::Unknown),
+            "{place:?}"
+        );
+    }
+
+    #[test]
+    fn a_wall_is_found_where_the_arcs_touch_it() {
+        let readings = along_wall(2.0, 0.6, 0..40);
+        let walls = local_walls(&readings, 15f64.to_radians(), (1.0, 1.8));
+        assert!(!walls.is_empty());
+        let w = walls[0];
+        assert!(
+            (w.normal_rad - std::f64::consts::FRAC_PI_2).abs() < 0.02,
+            "{w:?}"
+        );
+        assert!((w.offset_m - 0.2).abs() < 0.02, "{w:?}");
+    }
+}
