@@ -89,6 +89,14 @@ fn tangents(
     })
 }
 
+/// Whether a reading's arc can reach within [`SEARCH_RADIUS_M`] of `centre`.
+fn may_touch(r: &PlacedReading, centre: (f64, f64)) -> bool {
+    r.range_m.is_some_and(|range| {
+        let p = r.world_from_sensor;
+        (p.x - centre.0).hypot(p.y - centre.1) <= range + SEARCH_RADIUS_M
+    })
+}
+
 /// Walls near `centre`, strongest first, from the readings' tangent lines.
 pub fn local_walls(
     readings: &[PlacedReading],
@@ -107,15 +115,7 @@ pub fn local_walls(
         let id = (((offset + reach) / DIST_STEP_M) as usize).min(n_dist - 1);
         ia * n_dist + id
     };
-    let near = |r: &&PlacedReading| match r.range_m {
-        // The arc can only touch the search disc if the disc is within range + radius.
-        Some(range) => {
-            let p = r.world_from_sensor;
-            (p.x - centre.0).hypot(p.y - centre.1) <= range + SEARCH_RADIUS_M
-        }
-        None => false,
-    };
-    for r in readings.iter().filter(near) {
+    for r in readings.iter().filter(|r| may_touch(r, centre)) {
         for (normal, offset, _) in tangents(r, half_cone_rad, centre) {
             let i = cell(normal, offset);
             votes[i] += 1;
@@ -276,6 +276,12 @@ pub fn place_peak(
     centre: (f64, f64),
     map: &OccupancyMap,
 ) -> PeakPlace {
+    let near: Vec<PlacedReading> = readings
+        .iter()
+        .filter(|r| may_touch(r, centre))
+        .copied()
+        .collect();
+    let readings = near.as_slice();
     let walls = local_walls(readings, half_cone_rad, centre);
     if let Some((x, y)) = corner(readings, half_cone_rad, centre, map, &walls) {
         return PeakPlace::Corner(x, y);
