@@ -8,16 +8,19 @@
 //! reading that sees it, so its cell collects votes from many places; a flat wall only collects
 //! votes near the foot of each perpendicular.
 //!
-//! **Peak rule.** A cell is a feature when (1) its votes reach the threshold (70 in the paper's
-//! office, 50 in the museum), (2) it is the maximum of its (2r+1) x (2r+1) neighbourhood in the
-//! accumulator, and (3) its votes came from positions spread around it: the directions from the
-//! cell to the voting sensors, in 5 degree sectors, must span at least
-//! [`HoughConfig::min_spread_deg`] (30 degrees by default). A wall point is only voted from
-//! near its normal (the arc is tangent to the wall there), so rule 3 rejects most of it.
-//!
-//! (4) Finally the grid vetoes features in the middle of a straight wall ([`is_mid_wall`]):
-//! at the paper's following distances the arcs are short and curved, so a wall point voted from
-//! a stretch of travel gathers directions as wide as a corner's.
+//! **Peak rule.** A cell is a candidate when (1) its votes reach the threshold (70 in the paper's
+//! office, 50 in the museum) and (2) it is the maximum of its (2r+1) x (2r+1) neighbourhood in
+//! the accumulator. Around a room corner the strongest cells are on the walls 0.2-0.6 m from
+//! it (the robot rounds the corner close to both walls, and at 50 cm a sonar arc hugs a wall
+//! over +-26 degrees), so (3) each candidate is placed among the walls that the readings' arcs
+//! touch near it ([`crate::walls::place_peak`], a line Hough transform on the arcs' tangents):
+//! where two walls cross near it the feature moves to the crossing (a room corner, a T); on a
+//! wall that the grid shows ending beside it, onto the wall (a door jamb); in the middle of a
+//! wall, it is dropped. (4) A candidate with no wall through it (a pillar, clutter) is kept only
+//! when its votes came from positions spread around it (the directions from the cell to the
+//! voting sensors, in 5 degree sectors, span at least [`HoughConfig::min_spread_deg`], 30
+//! degrees by default) and the grid does not put it in the middle of a straight run of
+//! occupied cells ([`is_mid_wall`]).
 //!
 //! **Windows.** Online, votes are gathered over windows of 70 cm of travel or 70 degrees of turn
 //! (the paper's), each window starting half a window after the previous one so a corner on a
