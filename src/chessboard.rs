@@ -290,7 +290,7 @@ fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<
 ///    refined point nearest the prediction is kept if within a tenth of the tag's edge of it
 ///    (lens distortion bends the prediction; a square's width is three tenths).
 /// 2. **Edges**, from those corners: each of the tag's four border edges is fitted (a quadratic
-///    across its chord, [`fit_edge`]) together with the edges of the two gap squares that carry
+///    across its chord, `subpixel::fit_edge`) together with the edges of the two gap squares that carry
 ///    it on past its ends, and each corner is where two fitted edges cross. This uses every
 ///    pixel along the edges rather than a small window at the corner, and places the corner
 ///    inside the fitted stretch rather than at its end; it is kept when it lies within a tenth

@@ -701,7 +701,7 @@ impl TagDetector for AprilGridMultiScale {
 /// the black square are fitted from the image gradient along them, every pixel of a band inside
 /// the black border and the white quiet zone weighted by its gradient across the edge, each
 /// edge a quadratic across its chord (lens distortion bends it), and the corners are where
-/// adjacent edges cross ([`crate::subpixel`]). `border_cells` is the black square's width in
+/// adjacent edges cross (the crate's sub-pixel edge fit). `border_cells` is the black square's width in
 /// cells (its border is one cell wide). Returns `None` when the tag is too small, an edge shows
 /// no gradient, or a corner would move more than a tenth of the tag's edge (at least 1 px): the
 /// caller keeps the detector's corners.

@@ -267,9 +267,9 @@ pub enum PeakPlace {
 const ON_WALL_M: f64 = 0.15;
 
 /// Places a Hough peak at `centre` among the walls around it. A corner is the crossing of two
-/// walls that meet at [`MIN_CORNER_ANGLE_DEG`] or more, within [`MAX_SNAP_M`] of the peak, each
-/// seen within [`MAX_WALL_GAP_M`] of the crossing and at least one ending there (within
-/// [`END_SLACK_M`]), with an occupied grid cell within one cell of the crossing.
+/// walls that meet at 60 degrees or more, within 1 m of the peak, each seen within 1 m of the
+/// crossing and at least one ending there (seen no more than 15 cm past it), with an occupied
+/// grid cell within one cell of the crossing.
 pub fn place_peak(
     readings: &[PlacedReading],
     half_cone_rad: f64,
