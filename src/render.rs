@@ -461,12 +461,15 @@ impl RayTable {
     }
 }
 
+/// One camera's wedge seen from above: its apex (the camera) and the inward normals of its sides.
+type Wedge = ((f64, f64), [(f64, f64); 2]);
+
 /// The horizontal wedges that hold the cones of the cameras' rays, for culling what no camera
 /// can see.
 struct ViewWedges {
     /// Per view: the camera's position and the inward normals of the wedge's two sides; `None`
     /// when some cone takes in the vertical (a fisheye, a steep tilt) and nothing is culled.
-    wedges: Option<Vec<((f64, f64), [(f64, f64); 2])>>,
+    wedges: Option<Vec<Wedge>>,
 }
 
 impl ViewWedges {
