@@ -17,7 +17,7 @@
 use crate::grid::OccupancyMap;
 use crate::sonar::PlacedReading;
 
-/// Tangent points farther than this from the candidate are ignored: 1 m.
+/// Tangent points farther than this from the candidate are ignored: 1.5 m.
 const SEARCH_RADIUS_M: f64 = 1.5;
 /// Angular cell of the line accumulator: 1 degree.
 const ANGLE_STEP_DEG: f64 = 1.0;
@@ -32,10 +32,10 @@ const SUPPRESS_DIST_M: f64 = 0.15;
 /// Two walls make a corner when they meet at this angle or more: 60 degrees (the cone's edge
 /// echoes make weak false walls 10-35 degrees off the true ones).
 const MIN_CORNER_ANGLE_DEG: f64 = 60.0;
-/// A corner further than this from the candidate is not its corner: 0.8 m.
+/// A corner further than this from the candidate is not its corner: 1 m.
 const MAX_SNAP_M: f64 = 1.0;
-/// Each wall must have been seen this close to the crossing: 0.4 m (no corner where two
-/// walls' extensions meet in open space).
+/// Each wall must have been seen this close to the crossing: 1 m (the robot turns 0.5-0.9 m
+/// before a corner; no corner where two walls' extensions meet in open space).
 const MAX_WALL_GAP_M: f64 = 1.0;
 /// A wall ends at a crossing when it was seen no further than this past it: 15 cm.
 const END_SLACK_M: f64 = 0.15;
@@ -89,6 +89,33 @@ fn tangents(
     })
 }
 
+/// One reading's vote for a wall near the centre: the tangent line (normal in [0, pi), offset
+/// from the centre) and the point where it touches the reading's arc.
+#[derive(Debug, Clone, Copy)]
+struct Tangent {
+    normal: f64,
+    offset: f64,
+    point: (f64, f64),
+}
+
+/// The tangents of all readings within [`SEARCH_RADIUS_M`] of `centre`.
+fn tangents_near(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    centre: (f64, f64),
+) -> Vec<Tangent> {
+    readings
+        .iter()
+        .filter(|r| may_touch(r, centre))
+        .flat_map(|r| tangents(r, half_cone_rad, centre))
+        .map(|(normal, offset, point)| Tangent {
+            normal,
+            offset,
+            point,
+        })
+        .collect()
+}
+
 /// Whether a reading's arc can reach within [`SEARCH_RADIUS_M`] of `centre`.
 fn may_touch(r: &PlacedReading, centre: (f64, f64)) -> bool {
     r.range_m.is_some_and(|range| {
@@ -103,6 +130,11 @@ pub fn local_walls(
     half_cone_rad: f64,
     centre: (f64, f64),
 ) -> Vec<LocalWall> {
+    walls_from(&tangents_near(readings, half_cone_rad, centre))
+}
+
+/// Walls, strongest first, from tangents found around one centre.
+fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
     let n_angle = (180.0 / ANGLE_STEP_DEG).round() as usize;
     // Cells symmetric about zero offset, so flipping a line's side flips its cell.
     let n_dist = (2.0 * (SEARCH_RADIUS_M + DIST_STEP_M) / DIST_STEP_M).ceil() as usize;
@@ -110,17 +142,17 @@ pub fn local_walls(
     let mut votes = vec![0u32; n_angle * n_dist];
     let mut sum_offset = vec![0f64; n_angle * n_dist];
     let step = ANGLE_STEP_DEG.to_radians();
-    let cell = |normal: f64, offset: f64| {
-        let ia = ((normal / step).round() as usize) % n_angle;
+    for t in tangents {
+        let k = (t.normal / step).round() as usize;
+        // A normal that rounds to 180 degrees is the 0 degree cell, seen from the other side.
+        let (ia, offset) = if k >= n_angle {
+            (k - n_angle, -t.offset)
+        } else {
+            (k, t.offset)
+        };
         let id = (((offset + reach) / DIST_STEP_M) as usize).min(n_dist - 1);
-        ia * n_dist + id
-    };
-    for r in readings.iter().filter(|r| may_touch(r, centre)) {
-        for (normal, offset, _) in tangents(r, half_cone_rad, centre) {
-            let i = cell(normal, offset);
-            votes[i] += 1;
-            sum_offset[i] += offset;
-        }
+        votes[ia * n_dist + id] += 1;
+        sum_offset[ia * n_dist + id] += offset;
     }
     let mut walls: Vec<LocalWall> = Vec::new();
     while walls.len() < MAX_WALLS {
@@ -213,28 +245,20 @@ fn crossing(a: &LocalWall, b: &LocalWall) -> Option<(f64, f64)> {
 
 /// Where a wall was seen: the tangent points of its voters, as distances along the wall
 /// (direction `(-sin a, cos a)`) from the foot of `point` on it, smallest and largest.
-fn seen_along(
-    readings: &[PlacedReading],
-    half_cone_rad: f64,
-    centre: (f64, f64),
-    wall: &LocalWall,
-    point: (f64, f64),
-) -> Option<(f64, f64)> {
+fn seen_along(tangents: &[Tangent], wall: &LocalWall, point: (f64, f64)) -> Option<(f64, f64)> {
     let (s, c) = wall.normal_rad.sin_cos();
     let mut span: Option<(f64, f64)> = None;
-    for r in readings {
-        for (normal, offset, t) in tangents(r, half_cone_rad, centre) {
-            if close_lines(
-                normal,
-                offset,
-                wall.normal_rad,
-                wall.offset_m,
-                ANGLE_STEP_DEG.to_radians(),
-                1.5 * DIST_STEP_M,
-            ) {
-                let u = -s * (t.0 - point.0) + c * (t.1 - point.1);
-                span = Some(span.map_or((u, u), |(lo, hi)| (lo.min(u), hi.max(u))));
-            }
+    for t in tangents {
+        if close_lines(
+            t.normal,
+            t.offset,
+            wall.normal_rad,
+            wall.offset_m,
+            ANGLE_STEP_DEG.to_radians(),
+            1.5 * DIST_STEP_M,
+        ) {
+            let u = -s * (t.point.0 - point.0) + c * (t.point.1 - point.1);
+            span = Some(span.map_or((u, u), |(lo, hi)| (lo.min(u), hi.max(u))));
         }
     }
     span
@@ -276,14 +300,9 @@ pub fn place_peak(
     centre: (f64, f64),
     map: &OccupancyMap,
 ) -> PeakPlace {
-    let near: Vec<PlacedReading> = readings
-        .iter()
-        .filter(|r| may_touch(r, centre))
-        .copied()
-        .collect();
-    let readings = near.as_slice();
-    let walls = local_walls(readings, half_cone_rad, centre);
-    if let Some((x, y)) = corner(readings, half_cone_rad, centre, map, &walls) {
+    let tangents = tangents_near(readings, half_cone_rad, centre);
+    let walls = walls_from(&tangents);
+    if let Some((x, y)) = corner(&tangents, centre, map, &walls) {
         return PeakPlace::Corner(x, y);
     }
     let Some(wall) = walls
@@ -350,8 +369,7 @@ fn beyond(map: &OccupancyMap, point: (f64, f64), dir: (f64, f64)) -> Beyond {
 /// votes of the strongest wall around, tried in order of the product of their votes (a strong
 /// wall with a weak one ranks below two fair ones).
 fn corner(
-    readings: &[PlacedReading],
-    half_cone_rad: f64,
+    tangents: &[Tangent],
     centre: (f64, f64),
     map: &OccupancyMap,
     walls: &[LocalWall],
@@ -376,7 +394,7 @@ fn corner(
             return None;
         }
         let point = (centre.0 + dx, centre.1 + dy);
-        let spans = [a, b].map(|w| seen_along(readings, half_cone_rad, centre, &w, point));
+        let spans = [a, b].map(|w| seen_along(tangents, &w, point));
         // Both walls seen near the crossing, one at least only on one side of it (an L or a
         // T; two walls that each run on past the crossing are a false pair).
         let ends = |span: &Option<(f64, f64)>| {
