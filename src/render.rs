@@ -348,7 +348,8 @@ impl Scene<'_> {
     }
 }
 
-/// Textured surfaces shaded once per pixel and surface by [`Scene`]'s [`PixelTracer`].
+/// Surfaces of one pixel shaded once each by [`Scene`]'s [`PixelTracer`]; samples on any further
+/// surface (a pixel on many edges at once) are shaded one by one.
 const SHADED_PER_PIXEL: usize = 4;
 
 impl PixelTracer for Scene<'_> {
@@ -698,17 +699,11 @@ impl Renderer {
                 .collect(),
             None => vec![wl],
         };
+        let right = self.right_exposure(&exposure);
         let views: Vec<(Isometry3<f64>, f64)> = exposure
             .iter()
-            .flat_map(|p| {
-                [
-                    (*p, self.left.max_off_axis_rad),
-                    (
-                        p * rig.right_from_left.inverse(),
-                        self.right.max_off_axis_rad,
-                    ),
-                ]
-            })
+            .map(|p| (*p, self.left.max_off_axis_rad))
+            .chain(right.iter().map(|p| (*p, self.right.max_off_axis_rad)))
             .collect();
         let wedges = if cull {
             ViewWedges::new(&views)
@@ -737,7 +732,7 @@ impl Renderer {
             tags_in_view,
             ceiling_m: config.ceiling_m,
         };
-        let (left, right) = self.render_exposure(&scene, &exposure, config);
+        let (left, right) = self.render_exposure(&scene, &exposure, &right, config);
         let truth = truths(world, &scene.tags, rig, &wl, config);
         Ok(RenderedPair {
             left,
@@ -758,26 +753,30 @@ impl Renderer {
         world_from_left: &Isometry3<f64>,
         config: &RenderConfig,
     ) -> (GrayImage, GrayImage) {
-        self.render_exposure(trace, std::slice::from_ref(world_from_left), config)
+        let left = std::slice::from_ref(world_from_left);
+        self.render_exposure(trace, left, &self.right_exposure(left), config)
     }
 
-    /// Both images with the left camera moving through `exposure` (its poses during the
+    /// The right camera's poses through an exposure, from the left camera's.
+    fn right_exposure(&self, left: &[Isometry3<f64>]) -> Vec<Isometry3<f64>> {
+        let left_from_right = self.rig.right_from_left.inverse();
+        left.iter().map(|wl| wl * left_from_right).collect()
+    }
+
+    /// Both images with the cameras moving through `left` and `right` (their poses during the
     /// exposure, evenly spaced in time).
     fn render_exposure(
         &self,
         trace: &dyn PixelTracer,
-        exposure: &[Isometry3<f64>],
+        left: &[Isometry3<f64>],
+        right: &[Isometry3<f64>],
         config: &RenderConfig,
     ) -> (GrayImage, GrayImage) {
         let rig = &self.rig;
         let seed = config.seed.wrapping_mul(2);
-        let right: Vec<Isometry3<f64>> = exposure
-            .iter()
-            .map(|wl| wl * rig.right_from_left.inverse())
-            .collect();
         (
-            render_camera(trace, &rig.left, &self.left, exposure, config, seed),
-            render_camera(trace, &rig.right, &self.right, &right, config, seed + 1),
+            render_camera(trace, &rig.left, &self.left, left, config, seed),
+            render_camera(trace, &rig.right, &self.right, right, config, seed + 1),
         )
     }
 }
