@@ -41,6 +41,24 @@ fn visual(c: &mut Criterion) {
             ))
         })
     });
+    let mut fast = CDetector::new(DetectorConfig {
+        min_contrast: 30,
+        ..DetectorConfig::default()
+    })
+    .expect("C detector");
+    group.bench_function("stereotag_band_and_triangulate_min_contrast_30", |b| {
+        b.iter(|| {
+            let (l, r) = detect_pair(&mut fast, &pair.left, &pair.right).unwrap();
+            black_box(triangulate_tags(
+                &rig,
+                &rect,
+                &l,
+                &r,
+                Some(0.16),
+                &StereoConfig::default(),
+            ))
+        })
+    });
     group.finish();
 
     let mut group = c.benchmark_group("render");

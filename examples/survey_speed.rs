@@ -1,5 +1,5 @@
 //! Diagnostic: where a survey's detection time goes on a run: decoding the PNGs, detecting.
-//! Usage: cargo run --release --example survey_speed -- RUN_DIR [DECIMATE]
+//! Usage: cargo run --release --example survey_speed -- RUN_DIR [DECIMATE] [MIN_CONTRAST]
 use std::time::Instant;
 use stereotag::io;
 use stereotag::stereo::detect_pair;
@@ -8,6 +8,7 @@ use stereotag::tags::{CDetector, DetectorConfig};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: RUN_DIR")?);
     let decimate: u32 = std::env::args().nth(2).map_or(Ok(1), |s| s.parse())?;
+    let min_contrast: u8 = std::env::args().nth(3).map_or(Ok(5), |s| s.parse())?;
     let run = io::load_run(&dir)?;
     let t = Instant::now();
     let mut pairs = Vec::new();
@@ -20,15 +21,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let decode = t.elapsed().as_secs_f64();
     let mut det = CDetector::new(DetectorConfig {
         decimate,
+        min_contrast,
         ..DetectorConfig::default()
     })?;
     let t = Instant::now();
-    let mut found = 0;
+    let (mut found, mut found_right) = (0, 0);
     for (l, r) in &pairs {
-        let (a, _) = detect_pair(&mut det, l, r)?;
+        let (a, b) = detect_pair(&mut det, l, r)?;
         found += a.len();
+        found_right += b.len();
     }
     let detect = t.elapsed().as_secs_f64();
-    println!("{} pairs: decode {decode:.2} s, detect (decimate {decimate}) {detect:.2} s, {found} left detections (one thread)", pairs.len());
+    println!("{} pairs: decode {decode:.2} s, detect (decimate {decimate}, min contrast {min_contrast}) {detect:.2} s, {found} left and {found_right} right detections (one thread)", pairs.len());
     Ok(())
 }

@@ -144,3 +144,31 @@ fn motion_blur_smears_the_tag_around_its_mid_exposure_pose() {
     let strong = render_pair(&w.world, &rig, pose, &blurred(0.08)).unwrap();
     assert!(det.detect(&strong.left).unwrap().is_empty());
 }
+
+#[test]
+fn the_contrast_floor_skips_texture_and_keeps_tags() {
+    let w = load_world(&common::sample("office/world.yaml")).unwrap();
+    let rig = load_rig(&common::root().join("calibration/rigs/default.yaml")).unwrap();
+    let pair = render_pair(
+        &w.world,
+        &rig,
+        Pose2::new(1.0, 6.3, 2.35),
+        &RenderConfig::default(),
+    )
+    .unwrap();
+    let detect = |min_contrast: u8| {
+        let mut det = CDetector::new(DetectorConfig {
+            decimate: 1,
+            min_contrast,
+            ..DetectorConfig::default()
+        })
+        .unwrap();
+        det.detect(&pair.left).unwrap()
+    };
+    let library_default = detect(5);
+    assert_eq!(library_default.len(), 1);
+    // The survey's floor finds the same tag at the same corners.
+    assert_eq!(detect(30), library_default);
+    // A floor above the tag's own contrast finds nothing: the setting reaches the C library.
+    assert!(detect(255).is_empty());
+}

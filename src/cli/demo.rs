@@ -47,6 +47,7 @@ impl Demo {
                     backend: Backend::ApriltagC,
                     families: &[],
                     decimate: 1,
+                    min_contrast: super::survey::DEFAULT_MIN_CONTRAST,
                     tag_size_m: None,
                     quiet,
                 },

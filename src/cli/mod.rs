@@ -322,3 +322,91 @@ pub(crate) fn recorder(
     }
     Ok(None)
 }
+
+/// Values lent to parallel jobs and given back when a job ends, so that each is built about once
+/// per thread: rayon's `map_init` calls its init for every split of the work, and a tag detector
+/// builds its families' decoding tables when it is made.
+pub(crate) struct Pool<T> {
+    free: std::sync::Mutex<Vec<T>>,
+}
+
+impl<T> Pool<T> {
+    /// A pool holding `first`.
+    pub(crate) fn new(first: T) -> Self {
+        Self {
+            free: std::sync::Mutex::new(vec![first]),
+        }
+    }
+
+    /// A value from the pool, or a new one from `make` when every value is lent.
+    pub(crate) fn take<E>(&self, make: impl FnOnce() -> Result<T, E>) -> Result<Pooled<'_, T>, E> {
+        let free = self.free.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        let item = match free {
+            Some(item) => item,
+            None => make()?,
+        };
+        Ok(Pooled {
+            item: Some(item),
+            pool: self,
+        })
+    }
+}
+
+/// A value lent by a [`Pool`]; it goes back when dropped.
+pub(crate) struct Pooled<'p, T> {
+    item: Option<T>,
+    pool: &'p Pool<T>,
+}
+
+impl<T> std::ops::Deref for Pooled<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        self.item.as_ref().expect("lent until dropped")
+    }
+}
+
+impl<T> std::ops::DerefMut for Pooled<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        self.item.as_mut().expect("lent until dropped")
+    }
+}
+
+impl<T> Drop for Pooled<'_, T> {
+    fn drop(&mut self) {
+        if let Some(item) = self.item.take() {
+            self.pool
+                .free
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(item);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Pool;
+    use std::cell::Cell;
+
+    #[test]
+    fn a_pool_makes_a_value_only_when_every_value_is_lent() {
+        let made = Cell::new(0);
+        let make = || -> Result<u32, ()> {
+            made.set(made.get() + 1);
+            Ok(made.get())
+        };
+        let pool = Pool::new(0);
+        {
+            let a = pool.take(make).unwrap();
+            let b = pool.take(make).unwrap();
+            assert_eq!((*a, *b, made.get()), (0, 1, 1));
+        }
+        // Both went back: two more takes make nothing new.
+        let c = pool.take(make).unwrap();
+        let d = pool.take(make).unwrap();
+        assert_eq!(made.get(), 1);
+        assert_ne!(*c, *d);
+        drop((c, d));
+        assert!(pool.take(|| Err::<u32, &str>("unused")).is_ok());
+    }
+}
