@@ -243,6 +243,11 @@ pub struct StereoRig {
 }
 
 impl StereoRig {
+    /// The left camera's pose in the right camera's frame.
+    pub fn left_from_right(&self) -> Isometry3<f64> {
+        self.right_from_left.inverse()
+    }
+
     /// Checks both cameras.
     pub fn validate(&self) -> Result<(), CameraError> {
         self.left.validate()?;

@@ -759,7 +759,7 @@ impl Renderer {
 
     /// The right camera's poses through an exposure, from the left camera's.
     fn right_exposure(&self, left: &[Isometry3<f64>]) -> Vec<Isometry3<f64>> {
-        let left_from_right = self.rig.right_from_left.inverse();
+        let left_from_right = self.rig.left_from_right();
         left.iter().map(|wl| wl * left_from_right).collect()
     }
 
@@ -800,7 +800,7 @@ fn truths(
     wl: &Isometry3<f64>,
     config: &RenderConfig,
 ) -> Vec<TagTruth> {
-    let wr = wl * rig.right_from_left.inverse();
+    let wr = wl * rig.left_from_right();
     let mut truth = Vec::new();
     for (tag, paint) in world.tags.iter().zip(paints) {
         let corners = paint.corners(tag.size_m);

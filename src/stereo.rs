@@ -157,7 +157,7 @@ pub fn triangulate_point(
     let nl = rig.left.unproject(left_px)?;
     let nr = rig.right.unproject(right_px)?;
     let dl = Vector3::new(nl.x, nl.y, 1.0);
-    let left_from_right = rig.right_from_left.inverse();
+    let left_from_right = rig.left_from_right();
     let cr = left_from_right.translation.vector;
     let dr = left_from_right.rotation * Vector3::new(nr.x, nr.y, 1.0);
     // Minimise |s dl - (cr + u dr)|².
@@ -298,7 +298,7 @@ pub fn triangulate_tags(
         let views = [
             pnp_square(&rig.left, &l.corners_px, known_size_m.unwrap_or(size_m)),
             pnp_square(&rig.right, &r.corners_px, known_size_m.unwrap_or(size_m))
-                .map(|v| rig.right_from_left.inverse() * v),
+                .map(|v| rig.left_from_right() * v),
         ];
         tags.push(StereoTag {
             id: l.id,

@@ -43,7 +43,7 @@ impl Demo {
                 world: Some(&self.world),
                 config: None,
                 detect: DetectOptions {
-                    encode: None,
+                    keep_images: false,
                     backend: Backend::ApriltagC,
                     families: &[],
                     decimate: 1,

@@ -72,7 +72,7 @@ impl DetectArgs {
         quiet: bool,
     ) -> DetectOptions<'a> {
         DetectOptions {
-            encode: None,
+            keep_images: false,
             backend: self.backend,
             families: if self.family.is_empty() {
                 default_families
@@ -111,8 +111,8 @@ impl SurveyArgs {
 /// How tags are detected in a run's stereo pairs.
 #[derive(Clone)]
 pub(crate) struct DetectOptions<'a> {
-    /// Compresses each pair for the recording while it is loaded (None: not recording).
-    pub encode: Option<&'a EncodePair>,
+    /// Keep each decoded pair for the recording (which compresses them while the survey runs).
+    pub keep_images: bool,
     pub backend: Backend,
     pub families: &'a [String],
     pub decimate: u32,
@@ -121,15 +121,11 @@ pub(crate) struct DetectOptions<'a> {
     pub quiet: bool,
 }
 
-/// Compresses a stereo pair for the recording.
-pub(crate) type EncodePair =
-    dyn Fn(&image::GrayImage, &image::GrayImage) -> Option<(Vec<u8>, Vec<u8>)> + Sync;
+/// A decoded stereo pair (left, right).
+pub(crate) type GrayPair = (image::GrayImage, image::GrayImage);
 
-/// A stereo pair compressed for the recording (left, right).
-pub(crate) type JpegPair = (Vec<u8>, Vec<u8>);
-
-/// A run's sightings and, when recording, its pairs compressed.
-pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<JpegPair>>);
+/// A run's sightings and, when keeping them, its decoded pairs.
+pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<GrayPair>>);
 
 /// Everything `survey_run` needs.
 pub(crate) struct SurveyJob<'a> {
@@ -167,14 +163,8 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
 
     let rig = load_run_rig(job.run_dir, &run)?;
     let detect_start = std::time::Instant::now();
-    #[cfg(feature = "rerun")]
-    let encode: Option<&EncodePair> = recorder
-        .as_ref()
-        .map(|_| &stereotag::viz::jpeg_pair as &EncodePair);
-    #[cfg(not(feature = "rerun"))]
-    let encode: Option<&EncodePair> = None;
     let options = DetectOptions {
-        encode,
+        keep_images: recorder.is_some(),
         ..job.detect.clone()
     };
     let (sightings, images) = match &rig {
@@ -183,7 +173,13 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
     };
     let detect_s = detect_start.elapsed().as_secs_f64();
 
-    let result = survey(&run, &sightings, &mapping, &fuse)?;
+    // The pairs are compressed for the recording while the survey runs: it is mostly one thread
+    // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
+    let (images, result) = rayon::join(
+        || compress_pairs(images),
+        || survey(&run, &sightings, &mapping, &fuse),
+    );
+    let result = result?;
     let mut metrics = survey_metrics(&result, sightings.len());
     if let Some(w) = &world {
         metrics.extend(score_survey(&result, &run, w, &mapping)?);
@@ -224,6 +220,17 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
         survey: result,
         metrics,
     })
+}
+
+/// The decoded pairs compressed for the recording, in parallel, each freed once compressed.
+fn compress_pairs(images: Vec<Option<GrayPair>>) -> Vec<Option<(Vec<u8>, Vec<u8>)>> {
+    #[cfg(feature = "rerun")]
+    return images
+        .into_par_iter()
+        .map(|pair| pair.and_then(|(l, r)| stereotag::viz::jpeg_pair(&l, &r)))
+        .collect();
+    #[cfg(not(feature = "rerun"))]
+    return images.into_iter().map(|_| None).collect();
 }
 
 /// Fusion settings from a YAML file, or the defaults.
@@ -315,7 +322,7 @@ pub(crate) fn detect_run(
     };
     let stereo_config = StereoConfig::default();
     let bar = progress(run.stereo.len() as u64, "detect", job.quiet);
-    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<JpegPair>)>> = run
+    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<GrayPair>)>> = run
         .stereo
         .par_iter()
         .enumerate()
@@ -361,9 +368,9 @@ pub(crate) fn detect_run(
                         r.reason
                     );
                 }
-                let encoded = job.encode.and_then(|f| f(&left, &right));
+                let kept = job.keep_images.then_some((left, right));
                 bar.inc(1);
-                Ok((sightings, encoded))
+                Ok((sightings, kept))
             },
         )
         .collect();
