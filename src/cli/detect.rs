@@ -122,23 +122,9 @@ impl Detect {
             .into());
         };
         let rig = io::load_rig(rig_path)?;
-        for (img, cam, path) in [
-            (left, &rig.left, &self.images[0]),
-            (right, &rig.right, &self.images[1]),
-        ] {
-            if img.dimensions() != (cam.width, cam.height) {
-                return Err(UsageError(format!(
-                    "{}: image is {}x{} but the rig {} says {}x{}",
-                    path.display(),
-                    img.width(),
-                    img.height(),
-                    rig_path.display(),
-                    cam.width,
-                    cam.height
-                ))
-                .into());
-            }
-        }
+        let rig_name = format!("the rig {}", rig_path.display());
+        check_image_size(left, &rig.left, &self.images[0], &rig_name)?;
+        check_image_size(right, &rig.right, &self.images[1], &rig_name)?;
         let rect = rig.rectify();
         let config = StereoConfig {
             sigma_px: self.sigma_px,
@@ -155,4 +141,25 @@ impl Detect {
         );
         Ok(())
     }
+}
+
+/// An error naming the image when its size is not the camera's (`rig` says which rig, for the
+/// message).
+pub(crate) fn check_image_size(
+    img: &image::GrayImage,
+    cam: &stereotag::camera::Camera,
+    path: &std::path::Path,
+    rig: &str,
+) -> Result<(), UsageError> {
+    if img.dimensions() == (cam.width, cam.height) {
+        return Ok(());
+    }
+    Err(UsageError(format!(
+        "{}: image is {}x{} but {rig} says {}x{}",
+        path.display(),
+        img.width(),
+        img.height(),
+        cam.width,
+        cam.height
+    )))
 }

@@ -1,4 +1,4 @@
-use super::detect::Backend;
+use super::detect::{check_image_size, Backend};
 use super::{progress, Pool, UsageError};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -334,22 +334,8 @@ pub(crate) fn detect_run(
                 let right_path = run_dir.join(&entry.right);
                 let left = io::load_gray(&left_path)?;
                 let right = io::load_gray(&right_path)?;
-                for (img, cam, path) in [
-                    (&left, &rig.left, &left_path),
-                    (&right, &rig.right, &right_path),
-                ] {
-                    if img.dimensions() != (cam.width, cam.height) {
-                        return Err(UsageError(format!(
-                            "{}: image is {}x{} but the rig says {}x{}",
-                            path.display(),
-                            img.width(),
-                            img.height(),
-                            cam.width,
-                            cam.height
-                        ))
-                        .into());
-                    }
-                }
+                check_image_size(&left, &rig.left, &left_path, "the rig")?;
+                check_image_size(&right, &rig.right, &right_path, "the rig")?;
                 let (sightings, rejected) = sightings_from_pair(
                     detector.as_mut(),
                     rig,
