@@ -936,16 +936,19 @@ fn render_camera(
         let r2 = ((col as f64 - camera.cx).powi(2) + (row as f64 - camera.cy).powi(2)) / half_diag2;
         1.0 - config.vignetting * r2.min(1.0)
     };
-    let mut radiance = vec![0.0f64; w * h];
-    radiance
+    let noise = Normal::new(0.0, config.noise_sigma.max(0.0))
+        .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero sigma"));
+    let mut pixels = vec![0u8; w * h];
+    pixels
         .par_chunks_mut(w)
         .enumerate()
-        .for_each(|(row, out)| {
+        .for_each(|(row, pixel_row)| {
             let light = Light {
                 half_distance_m: config.light_half_distance_m,
             };
             let mut world_rays = Vec::with_capacity(table.per_pixel);
-            for (col, px) in out.iter_mut().enumerate() {
+            let mut radiance = vec![0.0f64; w];
+            for (col, px) in radiance.iter_mut().enumerate() {
                 let i = row * w + col;
                 if !table.valid[i] {
                     continue;
@@ -973,20 +976,11 @@ fn render_camera(
                 let sum = trace.radiance_sum(&world_rays, light);
                 *px = sum / table.per_pixel as f64 * vignette(col, row);
             }
-        });
-    let noise = Normal::new(0.0, config.noise_sigma.max(0.0))
-        .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero sigma"));
-    // One noise stream per row (seed, row): deterministic whatever the thread count.
-    let mut pixels = vec![0u8; w * h];
-    pixels
-        .par_chunks_mut(w)
-        .zip(radiance.par_chunks(w))
-        .enumerate()
-        .for_each(|(row, (out, rad))| {
+            // One noise stream per row (seed, row): deterministic whatever the thread count.
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
                 seed.wrapping_mul(1_000_003).wrapping_add(row as u64),
             );
-            for (o, r) in out.iter_mut().zip(rad) {
+            for (o, r) in pixel_row.iter_mut().zip(&radiance) {
                 // Rounded to nearest (no libm call: the value is clamped non-negative first).
                 *o = ((r * 255.0 + noise.sample(&mut rng)).clamp(0.0, 255.0) + 0.5) as u8;
             }
