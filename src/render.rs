@@ -1021,10 +1021,11 @@ impl Renderer {
 
     /// Traces every sample of every pixel. By default a pixel that no edge crosses (no wall's
     /// end, foot or top, no tag, no horizon; found by tracing every edge of the scene into the
-    /// image, a sample at least every half pixel) is traced with the one ray through its
-    /// centre: all its samples meet the same surface, which is shaded once per pixel anyway.
-    /// The images differ from these only by where in such a pixel its texture and light are
-    /// taken (at most a grey level or two); rendering takes about half the time.
+    /// image, a point at least every 1.5 px) is traced with one ray, its samples' mean: all its
+    /// samples meet the same surface, which is shaded once per pixel anyway. The images differ
+    /// from these only by where in such a pixel its texture and light are taken (office views:
+    /// at most one grey level); rendering takes about half the time. Motion-blurred exposures
+    /// and fisheyes always trace every sample.
     pub fn with_every_sample(mut self) -> Self {
         self.adaptive = false;
         self

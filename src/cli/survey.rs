@@ -124,8 +124,26 @@ pub(crate) struct DetectOptions<'a> {
 /// A decoded stereo pair (left, right).
 pub(crate) type GrayPair = (image::GrayImage, image::GrayImage);
 
-/// A run's sightings and, when keeping them, its decoded pairs.
-pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<GrayPair>>);
+/// A stereo pair kept for the recording.
+pub(crate) enum KeptPair {
+    /// Decoded, to be compressed while the survey's single-threaded stages run.
+    Decoded(GrayPair),
+    /// Already compressed (JPEG left, right): a run too long to hold decoded.
+    Jpeg(Vec<u8>, Vec<u8>),
+}
+
+/// Most memory the decoded pairs kept for the recording may take, bytes; a longer run's pairs
+/// are compressed as they are detected instead (slower: the encoder then competes with the
+/// detectors), so memory stays bounded whatever the run's length.
+const KEPT_DECODED_BYTES: usize = 1 << 30;
+
+/// Whether a run's pairs, `pairs` of `pixels` each image, are too many to keep decoded.
+fn compress_while_detecting(pairs: usize, pixels: usize) -> bool {
+    pairs.saturating_mul(2 * pixels) > KEPT_DECODED_BYTES
+}
+
+/// A run's sightings and, when keeping them, its pairs.
+pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<KeptPair>>);
 
 /// Everything `survey_run` needs.
 pub(crate) struct SurveyJob<'a> {
@@ -222,15 +240,26 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
     })
 }
 
-/// The decoded pairs compressed for the recording, in parallel, each freed once compressed.
-fn compress_pairs(images: Vec<Option<GrayPair>>) -> Vec<Option<(Vec<u8>, Vec<u8>)>> {
-    #[cfg(feature = "rerun")]
-    return images
+/// The kept pairs compressed for the recording, in parallel, each freed once compressed.
+fn compress_pairs(images: Vec<Option<KeptPair>>) -> Vec<Option<(Vec<u8>, Vec<u8>)>> {
+    images
         .into_par_iter()
-        .map(|pair| pair.and_then(|(l, r)| stereotag::viz::jpeg_pair(&l, &r)))
-        .collect();
+        .map(|pair| match pair? {
+            KeptPair::Decoded((l, r)) => jpeg_pair(&l, &r),
+            KeptPair::Jpeg(l, r) => Some((l, r)),
+        })
+        .collect()
+}
+
+/// A pair compressed for the recording (`None` in a build without it).
+fn jpeg_pair(left: &image::GrayImage, right: &image::GrayImage) -> Option<(Vec<u8>, Vec<u8>)> {
+    #[cfg(feature = "rerun")]
+    return stereotag::viz::jpeg_pair(left, right);
     #[cfg(not(feature = "rerun"))]
-    return images.into_iter().map(|_| None).collect();
+    return {
+        let _ = (left, right);
+        None
+    };
 }
 
 /// Fusion settings from a YAML file, or the defaults.
@@ -321,8 +350,18 @@ pub(crate) fn detect_run(
             .or(job.tag_size_m)
     };
     let stereo_config = StereoConfig::default();
+    let compress_now = compress_while_detecting(
+        run.stereo.len(),
+        (rig.left.width as usize) * (rig.left.height as usize),
+    );
+    if job.keep_images && compress_now {
+        tracing::info!(
+            "{} stereo pairs: compressing them for the recording as they are detected",
+            run.stereo.len()
+        );
+    }
     let bar = progress(run.stereo.len() as u64, "detect", job.quiet);
-    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<GrayPair>)>> = run
+    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<KeptPair>)>> = run
         .stereo
         .par_iter()
         .enumerate()
@@ -354,7 +393,11 @@ pub(crate) fn detect_run(
                         r.reason
                     );
                 }
-                let kept = job.keep_images.then_some((left, right));
+                let kept = match (job.keep_images, compress_now) {
+                    (false, _) => None,
+                    (true, false) => Some(KeptPair::Decoded((left, right))),
+                    (true, true) => jpeg_pair(&left, &right).map(|(l, r)| KeptPair::Jpeg(l, r)),
+                };
                 bar.inc(1);
                 Ok((sightings, kept))
             },
@@ -515,5 +558,21 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
     }
     if let Some(m) = get("landmarks.median_error_m") {
         tracing::info!("landmark position error: median {:.1} mm", m * 1e3);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The museum's 468 pairs of 640x480 (288 MB decoded) are kept decoded; a run of hours is
+    /// compressed as it is detected, so the recording never holds more than 1 GiB of pixels.
+    #[test]
+    fn a_long_run_is_compressed_as_it_is_detected() {
+        let vga = 640 * 480;
+        assert!(!compress_while_detecting(468, vga));
+        assert!(!compress_while_detecting(1700, vga));
+        assert!(compress_while_detecting(1800, vga));
+        assert!(compress_while_detecting(usize::MAX, vga));
     }
 }
