@@ -192,7 +192,7 @@ pub struct DetectorConfig {
     pub subpixel: bool,
     /// Smallest grey-level difference between the white and the black of a 4x4-pixel tile's
     /// neighbourhood for the tile to be segmented (the C library's `min_white_black_diff`,
-    /// default 5). Raising it skips low-contrast texture, which is most of what the C library
+    /// kornia's `min_white_black_difference`; default 5, both libraries'). Raising it skips low-contrast texture, which is most of what the C library
     /// spends its time on in indoor images; a tag's border is far above it.
     pub min_contrast: u8,
 }
@@ -334,6 +334,7 @@ impl TagDetector for KorniaDetector {
             cfg.refine_edges_enabled = self.config.refine_edges;
             cfg.decode_sharpening = self.config.sharpening as f32;
             cfg.threshold_split = KORNIA_THRESHOLD_SPLIT;
+            cfg.min_white_black_difference = self.config.min_contrast;
             let size = kornia_image::ImageSize {
                 width: w as usize,
                 height: h as usize,

@@ -156,19 +156,25 @@ fn the_contrast_floor_skips_texture_and_keeps_tags() {
         &RenderConfig::default(),
     )
     .unwrap();
-    let detect = |min_contrast: u8| {
-        let mut det = CDetector::new(DetectorConfig {
-            decimate: 1,
-            min_contrast,
-            ..DetectorConfig::default()
-        })
-        .unwrap();
-        det.detect(&pair.left).unwrap()
-    };
-    let library_default = detect(5);
-    assert_eq!(library_default.len(), 1);
-    // The survey's floor finds the same tag at the same corners.
-    assert_eq!(detect(30), library_default);
-    // A floor above the tag's own contrast finds nothing: the setting reaches the C library.
-    assert!(detect(255).is_empty());
+    for kornia in [false, true] {
+        let detect = |min_contrast: u8| {
+            let config = DetectorConfig {
+                decimate: 1,
+                min_contrast,
+                ..DetectorConfig::default()
+            };
+            let mut det: Box<dyn TagDetector> = if kornia {
+                Box::new(KorniaDetector::new(config).unwrap())
+            } else {
+                Box::new(CDetector::new(config).unwrap())
+            };
+            det.detect(&pair.left).unwrap()
+        };
+        let library_default = detect(5);
+        assert_eq!(library_default.len(), 1, "kornia: {kornia}");
+        // The survey's floor finds the same tag at the same corners.
+        assert_eq!(detect(30), library_default, "kornia: {kornia}");
+        // A floor above the tag's own contrast finds nothing: the setting reaches the library.
+        assert!(detect(255).is_empty(), "kornia: {kornia}");
+    }
 }

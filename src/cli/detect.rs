@@ -46,9 +46,9 @@ pub struct Detect {
     /// Sharpening of the decoded bits.
     #[arg(long, default_value_t = 0.25)]
     sharpening: f64,
-    /// Smallest white-to-black grey difference around a 4x4 tile for it to be searched (C
-    /// backend; the C library's default 5). 30 makes detection 5-10x faster on indoor images;
-    /// lower it for dim or low-contrast tags.
+    /// Smallest white-to-black grey difference around a 4x4 tile for it to be searched (both
+    /// backends; 5 is both libraries' default). 30 makes detection 5-10x faster on indoor
+    /// images; lower it for dim or low-contrast tags.
     #[arg(long, default_value_t = 5)]
     min_contrast: u8,
 }

@@ -52,8 +52,8 @@ pub struct DetectArgs {
     /// Edge length of the tags in metres when no world gives it (enables the size check).
     #[arg(long)]
     tag_size_m: Option<f64>,
-    /// Smallest white-to-black grey difference around a 4x4 tile for it to be searched (C
-    /// backend). The default skips wall texture and sensor noise, which is what most detection
+    /// Smallest white-to-black grey difference around a 4x4 tile for it to be searched (both
+    /// backends). The default skips wall texture and sensor noise, which is what most detection
     /// time goes to (museum run: 10x faster than the C library's 5, the same tags found); lower
     /// it for dim or low-contrast tags.
     #[arg(long, default_value_t = DEFAULT_MIN_CONTRAST)]
