@@ -219,9 +219,7 @@ impl TagPaint {
             if white { TAG_WHITE } else { TAG_BLACK },
         ))
     }
-}
 
-impl TagPaint {
     /// Whether a ray passes within `margin_rad` of the tag's drawn square (the margin is
     /// taken on the tag's plane, where it grows as the ray's incidence grazes).
     fn covers(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, margin_rad: f64) -> bool {
