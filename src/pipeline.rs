@@ -346,10 +346,19 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
     );
     m.insert("offline.keyframes".into(), survey.offline.keyframes as f64);
     m.insert("offline.factors".into(), survey.offline.factors as f64);
-    if let Some([a, c, s]) = survey.offline.odometry_calibration {
-        m.insert("offline.odometry_turn_scale_error".into(), a);
-        m.insert("offline.odometry_heading_drift_rad_per_m".into(), c);
-        m.insert("offline.odometry_distance_scale_error".into(), s);
+    if let Some(c) = survey.offline.odometry_calibration {
+        m.insert(
+            "offline.odometry_turn_scale_error".into(),
+            c.turn_scale_error,
+        );
+        m.insert(
+            "offline.odometry_heading_drift_rad_per_m".into(),
+            c.heading_drift_rad_per_m,
+        );
+        m.insert(
+            "offline.odometry_distance_scale_error".into(),
+            c.distance_scale_error,
+        );
     }
     m.insert(
         "offline.converged".into(),

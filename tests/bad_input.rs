@@ -458,6 +458,29 @@ fn localize_names_a_bad_landmarks_file() {
         "{err}"
     );
     assert!(!out.exists());
+
+    // An odometry calibration no robot has.
+    std::fs::write(
+        survey_dir.join("landmarks.json"),
+        "{\"landmarks\": [], \"odometry_calibration\": {\"turn_scale_error\": 3.0, \
+         \"heading_drift_rad_per_m\": 0.0, \"distance_scale_error\": 0.0}}",
+    )
+    .unwrap();
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        survey_dir.to_str().unwrap(),
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("landmarks.json") && err.contains("odometry_calibration.turn_scale_error"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }
 
 /// `stereotag calibrate` with image globs; returns the exit code and stderr, checks nothing was

@@ -256,6 +256,14 @@ fn a_later_run_localises_against_the_survey() {
         localised <= ONLINE_ATE_RATIO * odometry,
         "localised {localised} vs odometry {odometry}"
     );
+    // The survey's odometry calibration (the same simulated robot) was applied and helps on its
+    // own (office seed 2: 0.84 m -> 0.25 m).
+    assert_eq!(metric(&report, "odometry.calibrated"), 1.0);
+    let calibrated = metric(&report, "ate_m.odometry_calibrated");
+    assert!(
+        calibrated < 0.5 * odometry,
+        "calibrated odometry {calibrated} vs raw {odometry}"
+    );
     let growth = report["error_growth"].as_array().unwrap();
     assert!(growth.len() >= 2, "{growth:?}");
     // Right after a sighting the filter is surer than far from one.

@@ -24,6 +24,11 @@ pub struct Localize {
     config: Option<PathBuf>,
     #[command(flatten)]
     detect: super::survey::DetectArgs,
+    /// Track with the run's odometry as logged. By default, when the survey's landmarks.json
+    /// holds the odometry calibration its offline pass estimated (the same robot's wheel
+    /// errors), the run's odometry is corrected with it first.
+    #[arg(long)]
+    raw_odometry: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -32,8 +37,21 @@ pub struct Localize {
 impl Localize {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let file = io::load_landmarks(&self.survey.join("landmarks.json"))?;
+        let calibration = file.odometry_calibration.filter(|_| !self.raw_odometry);
         let landmarks: Vec<_> = file.landmarks.into_iter().map(|r| r.landmark).collect();
         let run = io::load_run(&self.run)?;
+        let odometry = match &calibration {
+            Some(c) => {
+                tracing::info!(
+                    "odometry corrected with the survey's calibration: turns {:+.2}%, drift {:+.4} rad/m, distances {:+.2}%",
+                    100.0 * c.turn_scale_error,
+                    c.heading_drift_rad_per_m,
+                    100.0 * c.distance_scale_error
+                );
+                c.apply(&run.odometry)
+            }
+            None => run.odometry.clone(),
+        };
         let config = load_fuse_config(self.config.as_deref())?;
         let world_path = super::world_of_run(self.world.as_deref(), &self.run, &run);
         let world = world_path
@@ -58,7 +76,7 @@ impl Localize {
             )?,
             None => (Vec::new(), Vec::new()),
         };
-        let result = localize(&run.odometry, &sightings, &landmarks, &config);
+        let result = localize(&odometry, &sightings, &landmarks, &config);
         let truth = run.ground_truth.as_deref();
         let growth = error_growth(&result, truth);
 
@@ -90,8 +108,18 @@ impl Localize {
         metrics.insert("sightings.fused".into(), result.accepted.len().into());
         metrics.insert("sightings.gated_out".into(), result.rejected.len().into());
         metrics.insert("sightings.unknown_tag".into(), result.unknown.len().into());
+        metrics.insert(
+            "odometry.calibrated".into(),
+            f64::from(u8::from(calibration.is_some())).into(),
+        );
         if let Some(t) = truth {
             metrics.insert("ate_m.odometry".into(), ate_m(&run.odometry, t).into());
+            if calibration.is_some() {
+                metrics.insert(
+                    "ate_m.odometry_calibrated".into(),
+                    ate_m(&odometry, t).into(),
+                );
+            }
             metrics.insert(
                 "ate_m.localized".into(),
                 ate_m(&result.trajectory, t).into(),

@@ -455,7 +455,10 @@ fn write_outputs(
         .collect();
     io::save_landmarks(
         &dir.path("landmarks.json"),
-        &LandmarksFile { landmarks: records },
+        &LandmarksFile {
+            landmarks: records,
+            odometry_calibration: s.offline.odometry_calibration,
+        },
     )?;
     io::save_wpilib_layout(&dir.path("layout.json"), &landmarks, 0.5)?;
     io::save_trajectory_csv(

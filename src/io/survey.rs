@@ -1,7 +1,7 @@
 //! Survey outputs: `landmarks.json`, the WPILib `layout.json` and `trajectory.csv` (DESIGN.md).
 
 use super::{read_text, write_file, IoError};
-use crate::fuse::Landmark;
+use crate::fuse::{Landmark, OdometryCalibration};
 use crate::run::{pose_at, StampedPose};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -23,7 +23,15 @@ pub struct LandmarkRecord {
 pub struct LandmarksFile {
     /// The landmarks, sorted by family and id.
     pub landmarks: Vec<LandmarkRecord>,
+    /// The robot's odometry calibration the survey's offline pass estimated (ours, beyond
+    /// DESIGN.md's keys; `localize` corrects a later run's odometry with it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometry_calibration: Option<OdometryCalibration>,
 }
+
+/// Largest magnitude of each odometry calibration term a file may give (50% scale errors, 0.5
+/// rad of drift per metre: far beyond any working robot's wheels).
+const CALIBRATION_LIMIT: f64 = 0.5;
 
 /// Writes `landmarks.json`.
 pub fn save_landmarks(path: &Path, file: &LandmarksFile) -> Result<(), IoError> {
@@ -56,6 +64,22 @@ pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
                     "landmarks[{i}] (tag {}): covariance_m2 has a negative variance",
                     l.id
                 ),
+            ));
+        }
+    }
+    if let Some(c) = &file.odometry_calibration {
+        let terms = [
+            ("turn_scale_error", c.turn_scale_error),
+            ("heading_drift_rad_per_m", c.heading_drift_rad_per_m),
+            ("distance_scale_error", c.distance_scale_error),
+        ];
+        if let Some((name, v)) = terms
+            .iter()
+            .find(|(_, v)| !v.is_finite() || v.abs() > CALIBRATION_LIMIT)
+        {
+            return Err(IoError::content(
+                path,
+                format!("odometry_calibration.{name} = {v}: expected a finite value within +-{CALIBRATION_LIMIT}"),
             ));
         }
     }
