@@ -437,50 +437,36 @@ fn localize_names_a_bad_landmarks_file() {
     good_run(&run);
     let survey_dir = tmp.path().join("survey");
     std::fs::create_dir_all(&survey_dir).unwrap();
-    std::fs::write(
-        survey_dir.join("landmarks.json"),
-        "{\"landmarks\": [{\"id\": 1, \"family\": \"tag36h11\"}]}",
-    )
-    .unwrap();
-    let out = tmp.path().join("loc");
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        survey_dir.to_str().unwrap(),
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("landmarks.json") && err.contains("size_m"),
-        "{err}"
-    );
-    assert!(!out.exists());
-
-    // An odometry calibration no robot has.
-    std::fs::write(
-        survey_dir.join("landmarks.json"),
-        "{\"landmarks\": [], \"odometry_calibration\": {\"turn_scale_error\": 3.0, \
-         \"heading_drift_rad_per_m\": 0.0, \"distance_scale_error\": 0.0}}",
-    )
-    .unwrap();
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        survey_dir.to_str().unwrap(),
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("landmarks.json") && err.contains("odometry_calibration.turn_scale_error"),
-        "{err}"
-    );
-    assert!(!out.exists());
+    for (landmarks, says) in [
+        (
+            "{\"landmarks\": [{\"id\": 1, \"family\": \"tag36h11\"}]}",
+            "size_m",
+        ),
+        // An odometry calibration no robot has.
+        (
+            "{\"landmarks\": [], \"odometry_calibration\": {\"turn_scale_error\": 3.0, \
+             \"heading_drift_rad_per_m\": 0.0, \"distance_scale_error\": 0.0}}",
+            "odometry_calibration.turn_scale_error",
+        ),
+    ] {
+        std::fs::write(survey_dir.join("landmarks.json"), landmarks).unwrap();
+        let out = tmp.path().join("loc");
+        let (code, err) = stereotag(&[
+            "localize",
+            "--survey",
+            survey_dir.to_str().unwrap(),
+            "--run",
+            run.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{err}");
+        assert!(
+            err.contains("landmarks.json") && err.contains(says),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
 }
 
 /// `stereotag calibrate` with image globs; returns the exit code and stderr, checks nothing was
