@@ -729,7 +729,7 @@ pub struct OfflineResult {
     pub factors: usize,
     /// Whether the solver returned a solution (else the online estimate is kept).
     pub converged: bool,
-    /// The odometry calibration found, when estimated.
+    /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
 }
 
@@ -1181,7 +1181,7 @@ pub fn run_offline(
         converged,
         odometry_calibration: values
             .get(CALIBRATION)
-            .filter(|_| config.calibrate_odometry)
+            .filter(|_| converged && config.calibrate_odometry)
             .map(|v| OdometryCalibration {
                 turn_scale_error: v[0],
                 heading_drift_rad_per_m: v[1],
