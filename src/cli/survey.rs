@@ -193,8 +193,11 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
 
     // The pairs are compressed for the recording while the survey runs: it is mostly one thread
     // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
-    let (images, result) = rayon::join(
-        || compress_pairs(images),
+    let ((images, compress_s), result) = rayon::join(
+        || {
+            let t = std::time::Instant::now();
+            (compress_pairs(images), t.elapsed().as_secs_f64())
+        },
         || survey(&run, &sightings, &mapping, &fuse),
     );
     let result = result?;
@@ -204,6 +207,10 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
     }
     let mut timings = result.timings_s.clone();
     timings.insert("detect".into(), detect_s);
+    if recorder.is_some() {
+        // Alongside the survey's stages above, which it slows down on a two-core machine.
+        timings.insert("record_compress".into(), compress_s);
+    }
 
     #[cfg(feature = "rerun")]
     if let Some(rec) = &recorder {
