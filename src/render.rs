@@ -1218,6 +1218,13 @@ fn truths(
     config: &RenderConfig,
 ) -> Vec<TagTruth> {
     let wr = wl * rig.left_from_right();
+    // Every wall, for what may hide a corner (the ceiling far above: only walls occlude).
+    let occluders = Scene {
+        walls: world.walls.iter().map(WallSpan::new).collect(),
+        tags: Vec::new(),
+        tags_in_view: Vec::new(),
+        ceiling_m: config.ceiling_m + 100.0,
+    };
     let mut truth = Vec::new();
     for (tag, paint) in world.tags.iter().zip(paints) {
         let corners = paint.corners(tag.size_m);
@@ -1239,13 +1246,7 @@ fn truths(
                 }
                 // Nothing nearer along the ray to the corner (pulled 1 cm towards the camera).
                 let d = c - eye;
-                let (t, _) = Scene {
-                    walls: world.walls.iter().map(WallSpan::new).collect(),
-                    tags: Vec::new(),
-                    tags_in_view: Vec::new(),
-                    ceiling_m: config.ceiling_m + 100.0,
-                }
-                .hit(&eye, &d.normalize());
+                let (t, _) = occluders.hit(&eye, &d.normalize());
                 if t < d.norm() - 0.01 {
                     return None;
                 }
