@@ -753,14 +753,17 @@ impl OdometryCalibration {
     /// `turn_rad`, corrected: the turn scaled and drift added, the translation turned by half the
     /// extra turn and scaled (the offline pass's own model of an interval).
     pub fn correct(&self, delta: Pose2, turn_rad: f64, path_m: f64) -> Pose2 {
-        let extra = self.turn_scale_error * turn_rad + self.heading_drift_rad_per_m * path_m;
-        let (s, c) = (0.5 * extra).sin_cos();
-        let scale = 1.0 + self.distance_scale_error;
-        Pose2::new(
-            (c * delta.x - s * delta.y) * scale,
-            (s * delta.x + c * delta.y) * scale,
-            delta.theta + extra,
-        )
+        let [x, y, theta] = corrected_increment(
+            [
+                self.turn_scale_error,
+                self.heading_drift_rad_per_m,
+                self.distance_scale_error,
+            ],
+            [delta.x, delta.y, delta.theta],
+            turn_rad,
+            path_m,
+        );
+        Pose2::new(x, y, theta)
     }
 
     /// A whole odometry log corrected increment by increment, from the same first pose.
@@ -822,32 +825,41 @@ fn constant<T: sna::RealField>(v: f64) -> T {
     T::from_f64(v).unwrap_or_else(T::zero)
 }
 
+/// The odometry calibration's model, for any scalar (the offline graph differentiates it): an
+/// increment `measured` (x, y, turn; in the frame of its start) over `path_m` with signed turn
+/// `turn_rad`, corrected by `[a, c, s]` (turn scale error, heading drift per metre, distance
+/// scale error): the turn scaled and the drift added, the translation turned by half that extra
+/// turn and scaled.
+fn corrected_increment<T: sna::RealField>(
+    [a, c, s]: [T; 3],
+    measured: [f64; 3],
+    turn_rad: f64,
+    path_m: f64,
+) -> [T; 3] {
+    let extra = a * constant::<T>(turn_rad) + c * constant::<T>(path_m);
+    let half = extra.clone() * constant::<T>(0.5);
+    let scale = T::one() + s;
+    let (hs, hc) = (half.clone().sin(), half.cos());
+    let (x, y) = (constant::<T>(measured[0]), constant::<T>(measured[1]));
+    [
+        (hc.clone() * x.clone() - hs.clone() * y.clone()) * scale.clone(),
+        (hs * x + hc * y) * scale,
+        constant::<T>(measured[2]) + extra,
+    ]
+}
+
 impl<T: sna::RealField> tiny_solver::factors::Factor<T> for BetweenFactor {
     fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
         let (a, b) = (&params[0], &params[1]);
         // The measured increment, corrected by the odometry calibration when there is one.
-        let (mx, my, mt) = match params.get(2) {
-            Some(k) => {
-                let extra = k[0].clone() * constant::<T>(self.turn_rad)
-                    + k[1].clone() * constant::<T>(self.path_m);
-                let half = extra.clone() * constant::<T>(0.5);
-                let scale = T::one() + k[2].clone();
-                let (hs, hc) = (half.clone().sin(), half.cos());
-                let (x, y) = (
-                    constant::<T>(self.measured[0]),
-                    constant::<T>(self.measured[1]),
-                );
-                (
-                    (hc.clone() * x.clone() - hs.clone() * y.clone()) * scale.clone(),
-                    (hs * x + hc * y) * scale,
-                    constant::<T>(self.measured[2]) + extra,
-                )
-            }
-            None => (
-                constant::<T>(self.measured[0]),
-                constant::<T>(self.measured[1]),
-                constant::<T>(self.measured[2]),
+        let [mx, my, mt] = match params.get(2) {
+            Some(k) => corrected_increment(
+                [k[0].clone(), k[1].clone(), k[2].clone()],
+                self.measured,
+                self.turn_rad,
+                self.path_m,
             ),
+            None => self.measured.map(constant::<T>),
         };
         let (s, c) = (a[2].clone().sin(), a[2].clone().cos());
         let dx = b[0].clone() - a[0].clone();
