@@ -192,8 +192,9 @@ pub struct DetectorConfig {
     pub subpixel: bool,
     /// Smallest grey-level difference between the white and the black of a 4x4-pixel tile's
     /// neighbourhood for the tile to be segmented (the C library's `min_white_black_diff`,
-    /// kornia's `min_white_black_difference`; default 5, both libraries'). Raising it skips low-contrast texture, which is most of what the C library
-    /// spends its time on in indoor images; a tag's border is far above it.
+    /// kornia's `min_white_black_difference`; default 5, both libraries'). Raising it skips
+    /// low-contrast texture, which is most of what the detectors spend their time on in indoor
+    /// images; a tag's border is far above it.
     pub min_contrast: u8,
 }
 

@@ -40,7 +40,7 @@ impl Localize {
         let calibration = file.odometry_calibration.filter(|_| !self.raw_odometry);
         let landmarks: Vec<_> = file.landmarks.into_iter().map(|r| r.landmark).collect();
         let run = io::load_run(&self.run)?;
-        let odometry = match &calibration {
+        let odometry: std::borrow::Cow<'_, [_]> = match &calibration {
             Some(c) => {
                 tracing::info!(
                     "odometry corrected with the survey's calibration: turns {:+.2}%, drift {:+.4} rad/m, distances {:+.2}%",
@@ -48,9 +48,9 @@ impl Localize {
                     c.heading_drift_rad_per_m,
                     100.0 * c.distance_scale_error
                 );
-                c.apply(&run.odometry)
+                c.apply(&run.odometry).into()
             }
-            None => run.odometry.clone(),
+            None => run.odometry.as_slice().into(),
         };
         let config = load_fuse_config(self.config.as_deref())?;
         let world_path = super::world_of_run(self.world.as_deref(), &self.run, &run);
