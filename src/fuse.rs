@@ -23,7 +23,9 @@
 use crate::geometry::{wrap_angle, Pose2};
 use crate::hough::Feature;
 use crate::run::{pose_at, StampedPose};
+use crate::sonar::{SonarLayout, SonarReading};
 use crate::stereo::StereoTag;
+use crate::wallmap::WallSegment;
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix2, Matrix3, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -77,6 +79,17 @@ pub struct FuseConfig {
     /// from unequal wheels, distance scale) in the offline graph and correct the whole run with
     /// them, also before the first sighting (ours: on).
     pub calibrate_odometry: bool,
+    /// Constant part of a sonar range's sigma when localising against surveyed walls, m (ours:
+    /// 1 cm, the simulated sonar's).
+    pub sonar_sigma_m: f64,
+    /// Part of a sonar range's sigma proportional to the range (ours: 1%, the simulated sonar's).
+    pub sonar_sigma_frac: f64,
+    /// How well a surveyed wall is placed, m (ours: 2 cm: the survey's own pose error). Added to
+    /// each range's noise; a range is not fused when the filter already knows its distance to the
+    /// wall better than this (the same wall's error is shared by every range off it).
+    pub wall_sigma_m: f64,
+    /// χ² gate of a sonar range against a surveyed wall, 1 dof (6.63: 99%).
+    pub sonar_gate_chi2: f64,
 }
 
 impl Default for FuseConfig {
@@ -99,6 +112,10 @@ impl Default for FuseConfig {
             corner_factors: false,
             max_iterations: 50,
             calibrate_odometry: true,
+            sonar_sigma_m: 0.01,
+            sonar_sigma_frac: 0.01,
+            wall_sigma_m: 0.02,
+            sonar_gate_chi2: 6.63,
         }
     }
 }
@@ -414,6 +431,25 @@ impl Ekf {
         let ikh = DMatrix::identity(n, n) - &k * jac;
         let rr = DMatrix::from_column_slice(3, 3, r.as_slice());
         self.p = &ikh * &self.p * ikh.transpose() + &k * rr * k.transpose();
+    }
+
+    /// Updates the pose with one scalar measurement: innovation `y`, Jacobian `h` over the pose,
+    /// noise variance `r`, after a χ² gate; returns whether it was fused.
+    fn update_scalar(&mut self, y: f64, h: &Vector3<f64>, r: f64, gate_chi2: f64) -> bool {
+        let p = self.p.fixed_view::<3, 3>(0, 0).into_owned();
+        let s = (h.transpose() * p * h)[0] + r;
+        if s.is_nan() || s <= 0.0 || y * y / s > gate_chi2 {
+            return false;
+        }
+        let n = self.x.len();
+        let ph = self.p.columns(0, 3) * h;
+        let k = &ph / s;
+        self.x += &k * y;
+        self.x[2] = wrap_angle(self.x[2]);
+        // Joseph form, written for one row: P - K h'P - P h K' + K (h'Ph + r) K'.
+        self.p = &self.p - &k * ph.transpose() - &ph * k.transpose() + &k * k.transpose() * s;
+        debug_assert_eq!(self.p.nrows(), n);
+        true
     }
 
     /// Adds a landmark at the sighting seen from the current pose; returns its slot.
@@ -1217,19 +1253,89 @@ pub struct LocalizeResult {
     pub rejected: Vec<usize>,
     /// Sightings of tags the survey does not hold.
     pub unknown: Vec<usize>,
+    /// Sonar ranges fused against a surveyed wall.
+    pub ranges_fused: usize,
+    /// Sonar ranges with a surveyed wall in the beam that failed the gate (a person, a moved
+    /// object, an echo off the cone's edge).
+    pub ranges_gated_out: usize,
+}
+
+/// A run's sonar and the surveyed walls its ranges are matched against when localising.
+#[derive(Debug, Clone, Copy)]
+pub struct SonarInput<'a> {
+    /// The run's readings.
+    pub readings: &'a [SonarReading],
+    /// Where the run's sonars sit.
+    pub layout: &'a SonarLayout,
+    /// The survey's walls (`walls_corrected.csv`).
+    pub walls: &'a [WallSegment],
+}
+
+/// A wall face is used only when its normal is this far inside the beam's half-cone: 2 degrees
+/// (outside the cone the echo comes off the cone's edge, longer than the perpendicular).
+const WALL_CONE_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// ... and the foot of the perpendicular this far inside the face's ends: 5 cm.
+const WALL_INSET_M: f64 = 0.05;
+
+/// Fuses one sonar range against the nearest surveyed wall face in the beam; `Some(fused)` when
+/// a face is in the beam, `None` when there is none (or the filter already knows its distance to
+/// it better than the wall is known).
+fn fuse_range(
+    ekf: &mut Ekf,
+    reading: &SonarReading,
+    sonar: &SonarInput<'_>,
+    config: &FuseConfig,
+) -> Option<bool> {
+    let range = reading.range_m?;
+    let sensor = sonar.layout.sensors.get(reading.sensor)?;
+    if range >= sonar.layout.max_range_m - 1e-6 {
+        return None;
+    }
+    let pose = ekf.pose();
+    let at = pose.compose(&sensor.robot_from_sensor());
+    let half = 0.5 * sonar.layout.cone_rad - WALL_CONE_MARGIN_RAD;
+    let (expected, wall) = sonar
+        .walls
+        .iter()
+        .filter_map(|w| {
+            w.expected_range([at.x, at.y], at.theta, half, WALL_INSET_M)
+                .map(|r| (r, w))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    // range = n . (p + R(theta) o) - offset.
+    let n = wall.normal();
+    let (st, ct) = pose.theta.sin_cos();
+    let (ox, oy) = (sensor.x_m, sensor.y_m);
+    let h = Vector3::new(
+        n[0],
+        n[1],
+        n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy),
+    );
+    let known = (h.transpose() * ekf.p.fixed_view::<3, 3>(0, 0) * h)[0];
+    if known < config.wall_sigma_m.powi(2) {
+        return None;
+    }
+    let r = (config.sonar_sigma_m + config.sonar_sigma_frac * range).powi(2)
+        + config.wall_sigma_m.powi(2);
+    Some(ekf.update_scalar(range - expected, &h, r, config.sonar_gate_chi2))
 }
 
 /// Tracks a run's pose against surveyed landmarks held fixed (their covariance is added to each
-/// sighting's): the method's long-term use. The run starts at its odometry's first pose in the
+/// sighting's) and, with `sonar`, its ranges against the surveyed walls (each range whose beam
+/// holds a wall face's normal measures the distance to it): the method's long-term use. The run starts at its odometry's first pose in the
 /// survey's frame (the robot leaves from the same place).
 pub fn localize(
     odometry: &[StampedPose],
     sightings: &[TagSighting],
     landmarks: &[Landmark],
+    sonar: Option<SonarInput<'_>>,
     config: &FuseConfig,
 ) -> LocalizeResult {
     let (mut ekf, start) = Ekf::at_start(odometry);
     let mut pending = time_order(sightings);
+    let mut ranges: Vec<&SonarReading> = sonar.map_or(Vec::new(), |s| s.readings.iter().collect());
+    ranges.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let mut ranges = ranges.into_iter().peekable();
     let mut out = LocalizeResult {
         trajectory: Vec::with_capacity(odometry.len()),
         sigma_m: Vec::with_capacity(odometry.len()),
@@ -1237,6 +1343,8 @@ pub fn localize(
         accepted: Vec::new(),
         rejected: Vec::new(),
         unknown: Vec::new(),
+        ranges_fused: 0,
+        ranges_gated_out: 0,
     };
     let mut last = start;
     let mut travelled = 0.0;
@@ -1295,6 +1403,14 @@ pub fn localize(
             travelled = 0.0;
         }
         travelled += ekf.advance(&mut last, sample.pose, config);
+        // The sonar sampled with this odometry pose (or before it).
+        while let Some(reading) = ranges.next_if(|r| r.t_s <= sample.t_s) {
+            match sonar.and_then(|s| fuse_range(&mut ekf, reading, &s, config)) {
+                Some(true) => out.ranges_fused += 1,
+                Some(false) => out.ranges_gated_out += 1,
+                None => {}
+            }
+        }
         out.trajectory.push(StampedPose {
             t_s: sample.t_s,
             pose: ekf.pose(),
@@ -1549,7 +1665,7 @@ mod tests {
         let online = run_online(&odom, &sightings, &[], &config);
         let survey = run_offline(&odom, &sightings, &online, &config);
         // A second run with the same drift, localised against the first run's landmarks.
-        let result = localize(&odom, &sightings, &survey.landmarks, &config);
+        let result = localize(&odom, &sightings, &survey.landmarks, None, &config);
         let ate = ate_m(&result.trajectory, &truth).unwrap();
         assert!(
             ate < 0.2 * ate_m(&odom, &truth).unwrap(),

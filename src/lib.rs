@@ -29,5 +29,6 @@ mod subpixel;
 pub mod tags;
 #[cfg(feature = "rerun")]
 pub mod viz;
+pub mod wallmap;
 pub mod walls;
 pub mod world;

@@ -16,6 +16,7 @@ use crate::run::{PoseSource, RunDataset, StampedPose};
 use crate::score::{score_features, score_map, FeatureScore, MapScore};
 use crate::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
 use crate::tags::{TagDetector, TagError};
+use crate::wallmap::{map_walls, WallSegment};
 use crate::world::World;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -44,6 +45,8 @@ pub struct SonarMap {
     pub features_offline: Vec<Feature>,
     /// The offline accumulator.
     pub accumulator: Accumulator,
+    /// The straight walls, fitted to the ranges (what a later run localises against).
+    pub walls: Vec<WallSegment>,
     /// Readings used (with an echo or not).
     pub readings: usize,
     /// Seconds per stage.
@@ -108,6 +111,10 @@ pub fn map_trajectory(
     let (mut offline, accumulator) = features_offline(&readings, half, &counting, &config.hough);
     classify_features(&mut offline, &counting);
     timings_s.insert("hough_offline".into(), t.elapsed().as_secs_f64());
+
+    let t = Instant::now();
+    let walls = map_walls(&readings, half, layout.max_range_m, &counting);
+    timings_s.insert("walls".into(), t.elapsed().as_secs_f64());
     timings_s.insert("total".into(), start.elapsed().as_secs_f64());
 
     Ok(SonarMap {
@@ -116,6 +123,7 @@ pub fn map_trajectory(
         features_online: online,
         features_offline: offline,
         accumulator,
+        walls,
         readings: readings.len(),
         timings_s,
     })

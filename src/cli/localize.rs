@@ -1,7 +1,7 @@
 use super::survey::{detect_run, load_fuse_config, load_run_rig};
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use stereotag::fuse::{ate_m, error_growth, localize};
+use stereotag::fuse::{ate_m, error_growth, localize, SonarInput};
 use stereotag::io::{self, OutputDir};
 
 /// Arguments of `stereotag localize`.
@@ -29,6 +29,10 @@ pub struct Localize {
     /// errors), the run's odometry is corrected with it first.
     #[arg(long)]
     raw_odometry: bool,
+    /// Track with the tags alone. By default the run's sonar ranges are matched against the
+    /// survey's walls (walls_corrected.csv) between sightings.
+    #[arg(long)]
+    no_walls: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -39,6 +43,18 @@ impl Localize {
         let file = io::load_landmarks(&self.survey.join("landmarks.json"))?;
         let calibration = file.odometry_calibration.filter(|_| !self.raw_odometry);
         let landmarks: Vec<_> = file.landmarks.into_iter().map(|r| r.landmark).collect();
+        let walls_path = self.survey.join("walls_corrected.csv");
+        let walls = if self.no_walls {
+            Vec::new()
+        } else if walls_path.exists() {
+            io::load_walls_csv(&walls_path)?
+        } else {
+            tracing::warn!(
+                "{} not found (a survey of an older version): tracking with the tags alone",
+                walls_path.display()
+            );
+            Vec::new()
+        };
         let run = io::load_run(&self.run)?;
         let odometry: std::borrow::Cow<'_, [_]> = match &calibration {
             Some(c) => {
@@ -76,7 +92,18 @@ impl Localize {
             )?,
             None => (Vec::new(), Vec::new()),
         };
-        let result = localize(&odometry, &sightings, &landmarks, &config);
+        let sonar = SonarInput {
+            readings: &run.sonar,
+            layout: &run.meta.robot.sonar,
+            walls: &walls,
+        };
+        let result = localize(
+            &odometry,
+            &sightings,
+            &landmarks,
+            (!walls.is_empty()).then_some(sonar),
+            &config,
+        );
         let truth = run.ground_truth.as_deref();
         let growth = error_growth(&result, truth);
 
@@ -108,6 +135,9 @@ impl Localize {
         metrics.insert("sightings.fused".into(), result.accepted.len().into());
         metrics.insert("sightings.gated_out".into(), result.rejected.len().into());
         metrics.insert("sightings.unknown_tag".into(), result.unknown.len().into());
+        metrics.insert("walls.surveyed".into(), walls.len().into());
+        metrics.insert("ranges.fused".into(), result.ranges_fused.into());
+        metrics.insert("ranges.gated_out".into(), result.ranges_gated_out.into());
         metrics.insert(
             "odometry.calibrated".into(),
             f64::from(u8::from(calibration.is_some())).into(),
@@ -137,6 +167,14 @@ impl Localize {
             result.rejected.len(),
             result.unknown.len()
         );
+        if !walls.is_empty() {
+            tracing::info!(
+                "{} sonar ranges fused against {} surveyed walls ({} gated out)",
+                result.ranges_fused,
+                walls.len(),
+                result.ranges_gated_out
+            );
+        }
         tracing::info!("error against distance since the last sighting:");
         for b in &growth {
             tracing::info!(

@@ -105,6 +105,7 @@ pub(crate) fn write_map_outputs(
     io::save_accumulator_png(&dir.path("hough.png"), &map.accumulator)?;
     io::save_features_csv(&dir.path("corners.csv"), &map.features_offline)?;
     io::save_features_csv(&dir.path("corners_online.csv"), &map.features_online)?;
+    io::save_walls_csv(&dir.path("walls.csv"), &map.walls)?;
     let finite: BTreeMap<_, _> = metrics
         .iter()
         .map(|(k, v)| (k.clone(), v.is_finite().then_some(*v)))

@@ -446,6 +446,7 @@ fn write_outputs(
         &dir.path("corners_corrected.csv"),
         &s.corrected.features_offline,
     )?;
+    io::save_walls_csv(&dir.path("walls_corrected.csv"), &s.corrected.walls)?;
     let planned = |l: &stereotag::fuse::Landmark| {
         world
             .and_then(|w| w.tags.iter().find(|t| t.id == l.id && t.family == l.family))

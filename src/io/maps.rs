@@ -1,9 +1,10 @@
 //! Maps on disk: ROS map_server pairs (PGM + YAML), the paper's inverse-grey PNG, the Hough
-//! accumulator image and `corners.csv`.
+//! accumulator image, `corners.csv` and `walls.csv`.
 
 use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
 use crate::grid::OccupancyMap;
 use crate::hough::{Accumulator, Feature};
+use crate::wallmap::WallSegment;
 use crate::world::Raster;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -276,4 +277,86 @@ pub fn load_features_csv(path: &Path) -> Result<Vec<Feature>, IoError> {
         });
     }
     Ok(features)
+}
+
+/// Header of `walls.csv`.
+const WALLS_HEADER: &str = "normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m";
+
+/// Writes `walls.csv`: one wall face per row (see [`WallSegment`]).
+pub fn save_walls_csv(path: &Path, walls: &[WallSegment]) -> Result<(), IoError> {
+    let mut s = format!("{WALLS_HEADER}\n");
+    for w in walls {
+        let _ = writeln!(
+            s,
+            "{:.6},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5}",
+            w.normal_rad,
+            w.offset_m,
+            w.from_m[0],
+            w.from_m[1],
+            w.to_m[0],
+            w.to_m[1],
+            w.readings,
+            w.rms_m
+        );
+    }
+    write_file(path, s.as_bytes())
+}
+
+/// Reads `walls.csv`, naming the line of the first bad row.
+pub fn load_walls_csv(path: &Path) -> Result<Vec<WallSegment>, IoError> {
+    let text = read_text(path)?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, header)) if header.trim() == WALLS_HEADER => {}
+        _ => {
+            return Err(IoError::line(
+                path,
+                1,
+                format!("expected the header `{WALLS_HEADER}`"),
+            ))
+        }
+    }
+    let names: Vec<&str> = WALLS_HEADER.split(',').collect();
+    let mut walls = Vec::new();
+    for (i, line) in lines {
+        let line_no = i as u64 + 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != names.len() {
+            return Err(IoError::line(
+                path,
+                line_no,
+                format!(
+                    "expected {} fields ({WALLS_HEADER}), found {}",
+                    names.len(),
+                    fields.len()
+                ),
+            ));
+        }
+        let mut v = [0.0; 8];
+        for (k, (field, name)) in fields.iter().zip(&names).enumerate() {
+            v[k] = field
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite() && (*name != "readings" || x.fract() == 0.0 && *x >= 0.0))
+                .ok_or_else(|| {
+                    IoError::line(
+                        path,
+                        line_no,
+                        format!("{name}: `{field}` is not a finite number"),
+                    )
+                })?;
+        }
+        walls.push(WallSegment {
+            normal_rad: v[0],
+            offset_m: v[1],
+            from_m: [v[2], v[3]],
+            to_m: [v[4], v[5]],
+            readings: v[6] as usize,
+            rms_m: v[7],
+        });
+    }
+    Ok(walls)
 }

@@ -14,8 +14,8 @@ mod world;
 
 pub use calib::{load_corner_csvs, load_target, Target};
 pub use maps::{
-    load_features_csv, load_ros_map, load_ros_occupancy, save_accumulator_png, save_features_csv,
-    save_map_png, save_ros_map, RosMapYaml,
+    load_features_csv, load_ros_map, load_ros_occupancy, load_walls_csv, save_accumulator_png,
+    save_features_csv, save_map_png, save_ros_map, save_walls_csv, RosMapYaml,
 };
 pub use output::OutputDir;
 pub use rig::{

@@ -1,0 +1,443 @@
+//! The straight walls of a whole map, as line segments fitted to the sonar ranges: what a later
+//! run's sonar is matched against when it localises in a survey.
+//!
+//! The occupancy grid says where echoes came from to within its cell (20 cm on the samples), too
+//! coarse to hold a robot to a few centimetres. A flat wall is known far better than that: a sonar
+//! echo off it comes from the foot of the perpendicular, so every reading whose cone holds the
+//! wall's normal has `range = n . sensor - offset` exactly, up to the range noise. The walls are
+//! found with the same tangent-line Hough transform as [`crate::walls`] (every direction inside a
+//! reading's cone votes for the line tangent to its arc there), over the whole map and with the
+//! side a wall was seen from kept, then each is split where the robot did not see it and refitted
+//! to its readings by least squares.
+
+use crate::grid::OccupancyMap;
+use crate::sonar::PlacedReading;
+use serde::Serialize;
+use std::f64::consts::TAU;
+
+/// Angular cell of the accumulator: 1 degree.
+const ANGLE_STEP_DEG: f64 = 1.0;
+/// Offset cell of the accumulator: 3 cm (range noise is 1-2 cm).
+const DIST_STEP_M: f64 = 0.03;
+/// A reading supports a wall when its tangent at the wall's angle (within one cell) is this close
+/// to the wall's line: 4.5 cm.
+const SUPPORT_M: f64 = 0.045;
+/// A wall needs this many supporting readings: 12.
+const MIN_READINGS: usize = 12;
+/// A wall is split where no echo came from it over this length: 0.5 m.
+const MAX_GAP_M: f64 = 0.5;
+/// The sensors that saw a wall must have been spread this far along it, so that its direction
+/// comes from the ranges and not from the 1 degree Hough cell (a robot turning on the spot sees a
+/// wall from one place): 0.5 m.
+const MIN_SPREAD_M: f64 = 0.5;
+/// A weaker face within this angle of a stronger one ... : 50 degrees.
+const SHADOW_ANGLE_DEG: f64 = 50.0;
+/// ... whose middle is this close to the stronger one's line ... : 0.3 m.
+const SHADOW_DIST_M: f64 = 0.3;
+/// ... and this close to its extent is dropped: 0.6 m (the robot turns 0.5-0.9 m before a
+/// corner, so the faces end short of it).
+const SHADOW_ALONG_M: f64 = 0.6;
+/// A face must lie on occupied grid cells for this part of its length: 0.8 (a concave corner's
+/// tip echoes like a 45 degree face across the corner, on free cells).
+const MIN_ON_GRID: f64 = 0.8;
+/// Walls searched at most.
+const MAX_WALLS: usize = 400;
+
+/// One face of a straight wall, seen from the side its normal points to: the points `q` with
+/// `n . q = offset_m`, `n = (cos normal_rad, sin normal_rad)`, between two ends. A sensor at `s`
+/// in front of it is `n . s - offset_m` away.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallSegment {
+    /// Direction the face looks, towards where it was seen from, radians in [0, 2 pi).
+    pub normal_rad: f64,
+    /// Signed distance of the line from the origin along the normal, metres.
+    pub offset_m: f64,
+    /// One end, metres (the first echo along the wall's direction `(-sin, cos)` of the normal).
+    pub from_m: [f64; 2],
+    /// The other end, metres.
+    pub to_m: [f64; 2],
+    /// Readings fitted.
+    pub readings: usize,
+    /// Root-mean-square range residual of the fit, metres.
+    pub rms_m: f64,
+}
+
+impl WallSegment {
+    /// The unit normal.
+    pub fn normal(&self) -> [f64; 2] {
+        let (s, c) = self.normal_rad.sin_cos();
+        [c, s]
+    }
+
+    /// Position along the wall's direction `(-sin, cos)` of the normal.
+    fn along(&self, p: [f64; 2]) -> f64 {
+        let (s, c) = self.normal_rad.sin_cos();
+        -s * p[0] + c * p[1]
+    }
+
+    /// The range a sonar at `sensor` (position, beam direction) measures off this face, when the
+    /// face is in front of it, its normal inside the beam's half-cone less `margin_rad`, and the
+    /// foot of the perpendicular on the segment (`inset_m` inside its ends): `None` otherwise.
+    pub fn expected_range(
+        &self,
+        sensor: [f64; 2],
+        beam_rad: f64,
+        half_cone_rad: f64,
+        inset_m: f64,
+    ) -> Option<f64> {
+        let n = self.normal();
+        let range = n[0] * sensor[0] + n[1] * sensor[1] - self.offset_m;
+        // The beam must look against the normal.
+        let off_axis =
+            crate::geometry::wrap_angle(beam_rad - self.normal_rad - std::f64::consts::PI);
+        if range <= 0.0 || off_axis.abs() > half_cone_rad {
+            return None;
+        }
+        let foot = self.along(sensor);
+        let (a, b) = (self.along(self.from_m), self.along(self.to_m));
+        (foot >= a.min(b) + inset_m && foot <= a.max(b) - inset_m).then_some(range)
+    }
+}
+
+/// A reading reduced to what the fit needs: sensor position, beam direction, range.
+#[derive(Debug, Clone, Copy)]
+struct Echo {
+    s: [f64; 2],
+    beam: f64,
+    range: f64,
+}
+
+/// The accumulator: normal angle (whole circle) by offset.
+struct Votes {
+    n_angle: usize,
+    n_dist: usize,
+    reach: f64,
+    counts: Vec<u32>,
+}
+
+impl Votes {
+    fn cells(&self, e: &Echo, half_cone_rad: f64) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let step = ANGLE_STEP_DEG.to_radians();
+        let lo = ((e.beam - half_cone_rad) / step).ceil() as i64;
+        let hi = ((e.beam + half_cone_rad) / step).floor() as i64;
+        let (s, range, n_angle) = (e.s, e.range, self.n_angle as i64);
+        (lo..=hi).filter_map(move |k| {
+            let (sin, cos) = (k as f64 * step).sin_cos();
+            // The tangent line at beam direction b has normal -u(b) and passes s + r u(b).
+            let offset = -(cos * s[0] + sin * s[1]) - range;
+            let ia = (k + n_angle / 2).rem_euclid(n_angle) as usize;
+            let id = ((offset + self.reach) / DIST_STEP_M).floor();
+            (id >= 0.0 && (id as usize) < self.n_dist).then_some((ia, id as usize))
+        })
+    }
+
+    fn add(&mut self, e: &Echo, half_cone_rad: f64, sign: i32) {
+        let cells: Vec<_> = self.cells(e, half_cone_rad).collect();
+        for (ia, id) in cells {
+            let c = &mut self.counts[ia * self.n_dist + id];
+            *c = c.saturating_add_signed(sign);
+        }
+    }
+}
+
+/// The walls of a map from its readings placed along a (corrected) trajectory, strongest first.
+/// Readings without an echo or at the sensor's maximum range are left out. A face must lie on
+/// occupied cells of `map` (the grid of the same readings) for [`MIN_ON_GRID`] of its length.
+pub fn map_walls(
+    readings: &[PlacedReading],
+    half_cone_rad: f64,
+    max_range_m: f64,
+    map: &OccupancyMap,
+) -> Vec<WallSegment> {
+    let echoes: Vec<Echo> = readings
+        .iter()
+        .filter_map(|r| {
+            let range = r
+                .range_m
+                .filter(|&x| x.is_finite() && x > 0.0 && x < max_range_m - 1e-6)?;
+            let p = r.world_from_sensor;
+            Some(Echo {
+                s: [p.x, p.y],
+                beam: p.theta,
+                range,
+            })
+        })
+        .collect();
+    let reach = echoes
+        .iter()
+        .map(|e| e.s[0].hypot(e.s[1]) + e.range)
+        .fold(0.0, f64::max)
+        + DIST_STEP_M;
+    let mut votes = Votes {
+        n_angle: (360.0 / ANGLE_STEP_DEG).round() as usize,
+        n_dist: (2.0 * reach / DIST_STEP_M).ceil() as usize + 1,
+        reach,
+        counts: Vec::new(),
+    };
+    votes.counts = vec![0; votes.n_angle * votes.n_dist];
+    for e in &echoes {
+        votes.add(e, half_cone_rad, 1);
+    }
+    let mut used = vec![false; echoes.len()];
+    let mut walls = Vec::new();
+    for _ in 0..MAX_WALLS {
+        let Some((best, &count)) = votes
+            .counts
+            .iter()
+            .enumerate()
+            .max_by_key(|(i, &v)| (v, usize::MAX - i))
+        else {
+            break;
+        };
+        if (count as usize) < MIN_READINGS {
+            break;
+        }
+        let step = ANGLE_STEP_DEG.to_radians();
+        let normal = (best / votes.n_dist) as f64 * step;
+        let offset = -reach + ((best % votes.n_dist) as f64 + 0.5) * DIST_STEP_M;
+        // Readings whose cone holds the normal (within a cell) and whose range fits the line.
+        let support: Vec<usize> = (0..echoes.len())
+            .filter(|&i| !used[i] && supports(&echoes[i], normal, offset, half_cone_rad + step))
+            .collect();
+        // Whatever the outcome, these readings have voted: take their votes back, and the cell's
+        // own count, so the search moves on.
+        for &i in &support {
+            votes.add(&echoes[i], half_cone_rad, -1);
+            used[i] = true;
+        }
+        votes.counts[best] = 0;
+        for piece in split(&echoes, &support, normal) {
+            if let Some(w) = fit(&echoes, &piece, normal, offset) {
+                walls.push(w);
+            }
+        }
+    }
+    // Strongest first; a weaker face along a stronger one is its cone-edge echoes or a corner's
+    // (a concave corner echoes from its tip, whose tangents line up at 45 degrees).
+    walls.sort_by_key(|w| std::cmp::Reverse(w.readings));
+    let mut kept: Vec<WallSegment> = Vec::new();
+    for w in walls {
+        if on_grid(&w, map) >= MIN_ON_GRID && !kept.iter().any(|k| shadows(k, &w)) {
+            kept.push(w);
+        }
+    }
+    kept
+}
+
+/// The part of a face's length that lies on occupied cells (within half a cell across it) or off
+/// the grid.
+fn on_grid(w: &WallSegment, map: &OccupancyMap) -> f64 {
+    let g = &map.geometry;
+    let length = (w.to_m[0] - w.from_m[0]).hypot(w.to_m[1] - w.from_m[1]);
+    let steps = (length / (0.25 * g.resolution_m)).ceil().max(1.0) as usize;
+    let n = w.normal();
+    let half = 0.5 * g.resolution_m;
+    let on = (0..=steps)
+        .filter(|&k| {
+            let f = k as f64 / steps as f64;
+            let p = [
+                w.from_m[0] + f * (w.to_m[0] - w.from_m[0]),
+                w.from_m[1] + f * (w.to_m[1] - w.from_m[1]),
+            ];
+            // Off the grid (a wall on its edge) the grid cannot tell.
+            [-half, 0.0, half].iter().any(|e| {
+                g.cell_of(p[0] + e * n[0], p[1] + e * n[1])
+                    .is_none_or(|(c, r)| map.is_occupied(r * g.width + c))
+            })
+        })
+        .count();
+    on as f64 / (steps + 1) as f64
+}
+
+/// Whether `weak` lies along `strong`: normals within [`SHADOW_ANGLE_DEG`], the middle of `weak`
+/// within [`SHADOW_DIST_M`] of `strong`'s line and [`SHADOW_ALONG_M`] of its extent.
+fn shadows(strong: &WallSegment, weak: &WallSegment) -> bool {
+    let angle = crate::geometry::wrap_angle(strong.normal_rad - weak.normal_rad).abs();
+    let mid = [
+        0.5 * (weak.from_m[0] + weak.to_m[0]),
+        0.5 * (weak.from_m[1] + weak.to_m[1]),
+    ];
+    let n = strong.normal();
+    let across = n[0] * mid[0] + n[1] * mid[1] - strong.offset_m;
+    let (a, b) = (strong.along(strong.from_m), strong.along(strong.to_m));
+    let u = strong.along(mid);
+    angle <= SHADOW_ANGLE_DEG.to_radians()
+        && across.abs() <= SHADOW_DIST_M
+        && u >= a.min(b) - SHADOW_ALONG_M
+        && u <= a.max(b) + SHADOW_ALONG_M
+}
+
+/// Whether an echo's tangent at the line's normal lies on the line.
+fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64) -> bool {
+    let off_axis = crate::geometry::wrap_angle(e.beam - normal - std::f64::consts::PI);
+    let (s, c) = normal.sin_cos();
+    off_axis.abs() <= half_cone_rad
+        && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= SUPPORT_M
+}
+
+/// The foot of an echo's perpendicular on the line, as a position along it.
+fn foot_along(e: &Echo, normal: f64) -> f64 {
+    let (s, c) = normal.sin_cos();
+    -s * e.s[0] + c * e.s[1]
+}
+
+/// The supporting readings in pieces along the line, split where no echo came over
+/// [`MAX_GAP_M`].
+fn split(echoes: &[Echo], support: &[usize], normal: f64) -> Vec<Vec<usize>> {
+    let mut sorted: Vec<(f64, usize)> = support
+        .iter()
+        .map(|&i| (foot_along(&echoes[i], normal), i))
+        .collect();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut pieces: Vec<Vec<usize>> = Vec::new();
+    let mut last = f64::NEG_INFINITY;
+    for (u, i) in sorted {
+        match pieces.last_mut() {
+            Some(p) if u - last <= MAX_GAP_M => p.push(i),
+            _ => pieces.push(vec![i]),
+        }
+        last = u;
+    }
+    pieces
+}
+
+/// Least-squares line of one piece: minimises `sum (n(a) . s_i - r_i - c)^2` over the normal `a`
+/// and offset `c` (Gauss-Newton from the Hough cell), then drops readings off by more than
+/// [`SUPPORT_M`] and fits again. `None` for too few readings or sensors too bunched along it.
+fn fit(echoes: &[Echo], piece: &[usize], normal: f64, offset: f64) -> Option<WallSegment> {
+    let mut members: Vec<usize> = piece.to_vec();
+    let (mut a, mut c) = (normal, offset);
+    for round in 0..2 {
+        if members.len() < MIN_READINGS {
+            return None;
+        }
+        let along: Vec<f64> = members.iter().map(|&i| foot_along(&echoes[i], a)).collect();
+        let spread = along.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - along.iter().copied().fold(f64::INFINITY, f64::min);
+        if spread < MIN_SPREAD_M {
+            return None;
+        }
+        for _ in 0..5 {
+            // Normal equations of the two parameters.
+            let (mut h00, mut h01, mut h11, mut g0, mut g1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            let (s, co) = a.sin_cos();
+            for &i in &members {
+                let e = &echoes[i];
+                let res = co * e.s[0] + s * e.s[1] - e.range - c;
+                let da = -s * e.s[0] + co * e.s[1];
+                h00 += da * da;
+                h01 -= da;
+                h11 += 1.0;
+                g0 += da * res;
+                g1 -= res;
+            }
+            let det = h00 * h11 - h01 * h01;
+            if det.abs() < 1e-12 {
+                return None;
+            }
+            let step_a = -(h11 * g0 - h01 * g1) / det;
+            let step_c = -(h00 * g1 - h01 * g0) / det;
+            a += step_a;
+            c += step_c;
+            if step_a.abs() < 1e-9 && step_c.abs() < 1e-9 {
+                break;
+            }
+        }
+        if round == 0 {
+            let (s, co) = a.sin_cos();
+            members.retain(|&i| {
+                let e = &echoes[i];
+                (co * e.s[0] + s * e.s[1] - e.range - c).abs() <= SUPPORT_M
+            });
+        }
+    }
+    let (s, co) = a.sin_cos();
+    let residual = |e: &Echo| co * e.s[0] + s * e.s[1] - e.range - c;
+    let rms = (members
+        .iter()
+        .map(|&i| residual(&echoes[i]).powi(2))
+        .sum::<f64>()
+        / members.len() as f64)
+        .sqrt();
+    let along: Vec<f64> = members.iter().map(|&i| foot_along(&echoes[i], a)).collect();
+    let lo = along.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = along.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    // The point of the line at position u along it: c n + u (-sin, cos).
+    let at = |u: f64| [c * co - u * s, c * s + u * co];
+    Some(WallSegment {
+        normal_rad: a.rem_euclid(TAU),
+        offset_m: c,
+        from_m: at(lo),
+        to_m: at(hi),
+        readings: members.len(),
+        rms_m: rms,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+    use crate::grid::{CountingGrid, GridConfig, OccupancyGrid};
+
+    /// Readings of the sensors of a robot driving along `y = 2` at 0.5 m, looking left and
+    /// forward-left, plus a turn on the spot at the start.
+    fn along_wall() -> Vec<PlacedReading> {
+        let mut out = Vec::new();
+        for k in 0..60 {
+            let x = 0.5 + k as f64 * 0.05;
+            for (bearing, range) in [(std::f64::consts::FRAC_PI_2 + 0.05, 0.5), (0.785, 0.72)] {
+                out.push(PlacedReading {
+                    t_s: k as f64,
+                    world_from_sensor: Pose2::new(x, 1.5, bearing),
+                    range_m: Some(range + 0.002 * ((k * 7 % 5) as f64 - 2.0)),
+                });
+            }
+        }
+        out
+    }
+
+    fn grid_of(readings: &[PlacedReading]) -> OccupancyMap {
+        let mut grid = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 2.1).unwrap();
+        grid.insert_all(readings);
+        grid.map()
+    }
+
+    #[test]
+    fn a_wall_followed_is_one_segment_on_its_line() {
+        let readings = along_wall();
+        let walls = map_walls(&readings, 15f64.to_radians(), 2.1, &grid_of(&readings));
+        let w = walls.first().expect("a wall");
+        // The face looks down (-y), towards the robot: normal -90 degrees, n . q = -2.
+        assert!(
+            (w.normal_rad - 1.5 * std::f64::consts::PI).abs() < 0.005,
+            "{w:?}"
+        );
+        assert!((w.offset_m + 2.0).abs() < 0.005, "{w:?}");
+        assert!(
+            w.from_m[0].min(w.to_m[0]) < 0.6 && w.from_m[0].max(w.to_m[0]) > 3.3,
+            "{w:?}"
+        );
+        // Seen from the robot's path, the wall is 0.5 m away, and not from behind it.
+        let r = w.expected_range([2.0, 1.5], std::f64::consts::FRAC_PI_2, 0.26, 0.05);
+        assert!((r.unwrap() - 0.5).abs() < 0.005);
+        assert!(w
+            .expected_range([2.0, 2.5], -std::f64::consts::FRAC_PI_2, 0.26, 0.05)
+            .is_none());
+        assert!(w.expected_range([2.0, 1.5], 0.0, 0.26, 0.05).is_none());
+    }
+
+    #[test]
+    fn a_robot_turning_on_the_spot_makes_no_wall() {
+        // One place, every direction: the ranges cannot tell a wall's direction.
+        let readings: Vec<PlacedReading> = (0..200)
+            .map(|k| PlacedReading {
+                t_s: k as f64,
+                world_from_sensor: Pose2::new(1.0, 1.0, k as f64 * 0.0314),
+                range_m: Some(1.0),
+            })
+            .collect();
+        assert!(map_walls(&readings, 15f64.to_radians(), 2.1, &grid_of(&readings)).is_empty());
+    }
+}
