@@ -467,6 +467,31 @@ fn localize_names_a_bad_landmarks_file() {
         );
         assert!(!out.exists());
     }
+    // A good landmarks file, a survey wall with a broken number on line 3.
+    std::fs::write(survey_dir.join("landmarks.json"), "{\"landmarks\": []}").unwrap();
+    std::fs::write(
+        survey_dir.join("walls_corrected.csv"),
+        "normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m\n\
+         0,1,1,0,1,2,20,0.01\n\
+         0,1,1,0,1,two,20,0.01\n",
+    )
+    .unwrap();
+    let out = tmp.path().join("loc");
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        survey_dir.to_str().unwrap(),
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("walls_corrected.csv") && err.contains('3') && err.contains("to_y_m"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }
 
 /// `stereotag calibrate` with image globs; returns the exit code and stderr, checks nothing was
