@@ -1258,6 +1258,9 @@ pub struct LocalizeResult {
     /// Sonar ranges with a surveyed wall in the beam that failed the gate (a person, a moved
     /// object, an echo off the cone's edge).
     pub ranges_gated_out: usize,
+    /// Each range matched with a wall: its index in the run's readings, and whether it was fused
+    /// (else gated out).
+    pub range_outcomes: Vec<(usize, bool)>,
 }
 
 /// A run's sonar and the surveyed walls its ranges are matched against when localising.
@@ -1333,8 +1336,9 @@ pub fn localize(
 ) -> LocalizeResult {
     let (mut ekf, start) = Ekf::at_start(odometry);
     let mut pending = time_order(sightings);
-    let mut ranges: Vec<&SonarReading> = sonar.map_or(Vec::new(), |s| s.readings.iter().collect());
-    ranges.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let mut ranges: Vec<(usize, &SonarReading)> =
+        sonar.map_or(Vec::new(), |s| s.readings.iter().enumerate().collect());
+    ranges.sort_by(|a, b| a.1.t_s.total_cmp(&b.1.t_s));
     let mut ranges = ranges.into_iter().peekable();
     let mut out = LocalizeResult {
         trajectory: Vec::with_capacity(odometry.len()),
@@ -1345,6 +1349,7 @@ pub fn localize(
         unknown: Vec::new(),
         ranges_fused: 0,
         ranges_gated_out: 0,
+        range_outcomes: Vec::new(),
     };
     let mut last = start;
     let mut travelled = 0.0;
@@ -1404,11 +1409,14 @@ pub fn localize(
         }
         travelled += ekf.advance(&mut last, sample.pose, config);
         // The sonar sampled with this odometry pose (or before it).
-        while let Some(reading) = ranges.next_if(|r| r.t_s <= sample.t_s) {
-            match sonar.and_then(|s| fuse_range(&mut ekf, reading, &s, config)) {
-                Some(true) => out.ranges_fused += 1,
-                Some(false) => out.ranges_gated_out += 1,
-                None => {}
+        while let Some((i, reading)) = ranges.next_if(|r| r.1.t_s <= sample.t_s) {
+            if let Some(fused) = sonar.and_then(|s| fuse_range(&mut ekf, reading, &s, config)) {
+                out.range_outcomes.push((i, fused));
+                if fused {
+                    out.ranges_fused += 1;
+                } else {
+                    out.ranges_gated_out += 1;
+                }
             }
         }
         out.trajectory.push(StampedPose {

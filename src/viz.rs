@@ -4,10 +4,11 @@
 //! mirror the stages (`world/walls`, `world/robot/left/image`, `world/sonar/beams`, `map/grid`,
 //! `map/hough`, `landmarks/tag_7`, `metrics/...`), and sends a default layout with the recording.
 
-use crate::fuse::TagSighting;
+use crate::fuse::{GrowthBin, Landmark, LocalizeResult, TagSighting};
 use crate::grid::{CountingGrid, OccupancyGrid, OccupancyMap};
 use crate::pipeline::Survey;
 use crate::run::{pose_at, RunDataset, StampedPose};
+use crate::wallmap::WallSegment;
 use crate::world::World;
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
 use rerun::blueprint as bp;
@@ -311,7 +312,7 @@ fn ellipsoid(cov: &[[f64; 3]; 3]) -> ([f32; 3], rerun::Quaternion) {
 pub fn log_survey(recorder: &Recorder, scene: &SurveyScene<'_>) -> Result<(), VizError> {
     let rec = recorder.stream();
     rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-    log_world(rec, scene)?;
+    log_world(rec, scene.world)?;
     log_trajectories(rec, scene)?;
     log_landmarks(rec, scene)?;
     log_sonar_and_grid(rec, scene)?;
@@ -321,8 +322,8 @@ pub fn log_survey(recorder: &Recorder, scene: &SurveyScene<'_>) -> Result<(), Vi
     Ok(())
 }
 
-fn log_world(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
-    let Some(world) = scene.world else {
+fn log_world(rec: &rerun::RecordingStream, world: Option<&World>) -> Result<(), VizError> {
+    let Some(world) = world else {
         return Ok(());
     };
     let walls: Vec<Vec<[f32; 3]>> = world
@@ -387,7 +388,13 @@ fn log_trajectories(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Re
                 .with_labels([*name]),
         )?;
     }
-    // The robot: a disc outline with a heading tick, moved by the online estimate.
+    // The robot moved by the online estimate.
+    log_robot(rec, &s.online.trajectory)
+}
+
+/// The robot, a disc outline with a heading tick, moved along `trajectory` on the `time`
+/// timeline.
+fn log_robot(rec: &rerun::RecordingStream, trajectory: &[StampedPose]) -> Result<(), VizError> {
     let mut outline: Vec<[f32; 3]> = (0..=24)
         .map(|k| {
             let a = k as f32 / 24.0 * std::f32::consts::TAU;
@@ -400,7 +407,7 @@ fn log_trajectories(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Re
         &rerun::LineStrips3D::new([outline]).with_colors([rerun::Color::from_rgb(255, 255, 255)]),
     )?;
     let mut next = f64::NEG_INFINITY;
-    for p in &s.online.trajectory {
+    for p in trajectory {
         if p.t_s < next {
             continue;
         }
@@ -408,26 +415,33 @@ fn log_trajectories(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Re
         rec.set_duration_secs("time", p.t_s);
         rec.log("world/robot", &planar_transform(&p.pose))?;
     }
+    rec.reset_time();
     Ok(())
+}
+
+/// A landmark as a point and its covariance ellipsoid under `landmarks/tag_ID`; returns the path.
+fn log_landmark(rec: &rerun::RecordingStream, l: &Landmark) -> Result<String, VizError> {
+    let path = format!("landmarks/tag_{}", l.id);
+    let (radii, q) = ellipsoid(&l.covariance_m2);
+    rec.log_static(
+        path.as_str(),
+        &rerun::Points3D::new([f32s(l.position_m)])
+            .with_labels([format!("tag {} ({} sightings)", l.id, l.observations)])
+            .with_colors([rerun::Color::from_rgb(40, 220, 120)])
+            .with_radii([0.04f32]),
+    )?;
+    rec.log_static(
+        format!("{path}/covariance"),
+        &rerun::Ellipsoids3D::from_centers_and_half_sizes([f32s(l.position_m)], [radii])
+            .with_quaternions([q])
+            .with_colors([rerun::Color::from_unmultiplied_rgba(40, 220, 120, 120)]),
+    )?;
+    Ok(path)
 }
 
 fn log_landmarks(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
     for l in &scene.survey.landmarks {
-        let path = format!("landmarks/tag_{}", l.id);
-        let (radii, q) = ellipsoid(&l.covariance_m2);
-        rec.log_static(
-            path.as_str(),
-            &rerun::Points3D::new([f32s(l.position_m)])
-                .with_labels([format!("tag {} ({} sightings)", l.id, l.observations)])
-                .with_colors([rerun::Color::from_rgb(40, 220, 120)])
-                .with_radii([0.04f32]),
-        )?;
-        rec.log_static(
-            format!("{path}/covariance"),
-            &rerun::Ellipsoids3D::from_centers_and_half_sizes([f32s(l.position_m)], [radii])
-                .with_quaternions([q])
-                .with_colors([rerun::Color::from_unmultiplied_rgba(40, 220, 120, 120)]),
-        )?;
+        let path = log_landmark(rec, l)?;
         if let Some(c) = l.matched_corner {
             rec.log_static(
                 format!("{path}/association"),
@@ -474,6 +488,54 @@ fn log_landmarks(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Resul
         )?;
     }
     rec.reset_time();
+    Ok(())
+}
+
+/// The surveyed walls (what `localize` holds a later run's sonar to): in the scene a low line
+/// along each face, and on `map` when given.
+fn log_surveyed_walls(
+    rec: &rerun::RecordingStream,
+    walls: &[WallSegment],
+    map: Option<&OccupancyMap>,
+) -> Result<(), VizError> {
+    let labels: Vec<String> = walls
+        .iter()
+        .map(|w| {
+            format!(
+                "wall {} readings, rms {:.1} cm",
+                w.readings,
+                100.0 * w.rms_m
+            )
+        })
+        .collect();
+    rec.log_static(
+        "world/walls_surveyed",
+        &rerun::LineStrips3D::new(walls.iter().map(|w| {
+            let (a, b) = (w.from_m, w.to_m);
+            [
+                [a[0] as f32, a[1] as f32, 0.1],
+                [b[0] as f32, b[1] as f32, 0.1],
+            ]
+        }))
+        .with_colors([rerun::Color::from_rgb(255, 140, 0)])
+        .with_radii([rerun::Radius::new_ui_points(2.5)])
+        .with_labels(labels.clone())
+        .with_show_labels(false),
+    )?;
+    if let Some(map) = map {
+        rec.log_static(
+            "map/corrected/walls",
+            &rerun::LineStrips2D::new(walls.iter().map(|w| {
+                [
+                    map_pixel(map, w.from_m[0], w.from_m[1]),
+                    map_pixel(map, w.to_m[0], w.to_m[1]),
+                ]
+            }))
+            .with_colors([rerun::Color::from_rgb(255, 140, 0)])
+            .with_labels(labels)
+            .with_show_labels(false),
+        )?;
+    }
     Ok(())
 }
 
@@ -564,6 +626,7 @@ fn log_sonar_and_grid(
         .with_radii([1.0f32]),
     )?;
     rec.log_static("map/corrected/grid", &map_image(&s.corrected.counting))?;
+    log_surveyed_walls(rec, &s.corrected.walls, Some(&s.corrected.counting))?;
 
     // The online grid (readings placed with the online poses) as it grows, and the sonar cones.
     let half = 0.5 * layout.cone_rad;
@@ -766,6 +829,214 @@ fn log_report(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
         md.push_str(&format!(
             "\n**tag {} {}**: landmark at ({:.2}, {:.2}) m, {} sightings at ({:.2}, {:.2}) m from t = {:.1} s\n",
             c.id, c.kind, c.landmark_m[0], c.landmark_m[1], c.sightings, c.seen_at_m[0], c.seen_at_m[1], c.first_t_s
+        ));
+    }
+    rec.log_static("report", &rerun::TextDocument::from_markdown(md))?;
+    Ok(())
+}
+
+/// The default layout of a localisation: the 3D scene (surveyed tags and walls, the trajectories,
+/// the robot with the sightings and the sonar ranges it fused), the error and sigma over time and
+/// the report.
+pub fn localization_blueprint() -> bp::Blueprint {
+    let scene = bp::Spatial3DView::new("Scene")
+        .with_origin("/world")
+        .with_contents(["+ /world/**", "+ /landmarks/**"]);
+    let errors = bp::Tabs::new([
+        bp::TimeSeriesView::new("Position error and sigma")
+            .with_origin("/metrics")
+            .with_contents(["+ /metrics/position_error_m/**", "+ /metrics/sigma_m"])
+            .into(),
+        bp::TimeSeriesView::new("Distance since a sighting")
+            .with_origin("/metrics/since_sighting_m")
+            .into(),
+    ]);
+    let report = bp::TextDocumentView::new("Report").with_origin("/report");
+    bp::Blueprint::new(
+        bp::Horizontal::new([
+            scene.into(),
+            bp::Vertical::new([errors.into(), report.into()]).into(),
+        ])
+        .with_column_shares([0.65, 0.35]),
+    )
+    .with_time_panel(
+        bp::TimePanel::new()
+            .with_timeline("time")
+            .with_play_state(bp::components::PlayState::Following),
+    )
+}
+
+/// What a localisation recording shows.
+pub struct LocalizeScene<'a> {
+    /// The run tracked.
+    pub run: &'a RunDataset,
+    /// The world, when known.
+    pub world: Option<&'a World>,
+    /// The odometry the filter ran on (corrected with the survey's calibration, or as logged).
+    pub odometry: &'a [StampedPose],
+    /// The surveyed landmarks.
+    pub landmarks: &'a [Landmark],
+    /// The surveyed walls.
+    pub walls: &'a [WallSegment],
+    /// The run's tag sightings.
+    pub sightings: &'a [TagSighting],
+    /// The filter's result.
+    pub result: &'a LocalizeResult,
+    /// Error growth with distance since the last sighting.
+    pub growth: &'a [GrowthBin],
+    /// The report's figures.
+    pub metrics: &'a BTreeMap<String, f64>,
+}
+
+/// Logs a localisation of a later run against a survey.
+pub fn log_localization(recorder: &Recorder, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let rec = recorder.stream();
+    let r = scene.result;
+    rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+    log_world(rec, scene.world)?;
+    log_surveyed_walls(rec, scene.walls, None)?;
+    for l in scene.landmarks {
+        log_landmark(rec, l)?;
+    }
+    let mut lines: Vec<(&str, &[StampedPose], [u8; 3])> = vec![
+        ("odometry", &scene.run.odometry, [230, 80, 60]),
+        ("localized", &r.trajectory, [60, 200, 90]),
+    ];
+    if !std::ptr::eq(scene.odometry, scene.run.odometry.as_slice()) {
+        lines.push(("odometry_calibrated", scene.odometry, [240, 180, 40]));
+    }
+    if let Some(gt) = &scene.run.ground_truth {
+        lines.push(("ground_truth", gt, [200, 200, 200]));
+    }
+    for (name, t, c) in &lines {
+        rec.log_static(
+            format!("world/trajectories/{name}"),
+            &rerun::LineStrips3D::new([strip(t, 0.02)])
+                .with_colors([rerun::Color::from_rgb(c[0], c[1], c[2])])
+                .with_radii([rerun::Radius::new_ui_points(1.5)])
+                .with_labels([*name]),
+        )?;
+    }
+    log_robot(rec, &r.trajectory)?;
+
+    // Sightings at their time, placed with the localised pose: fused green, gated out red, tags
+    // the survey does not hold grey.
+    for (k, s) in scene.sightings.iter().enumerate() {
+        let Some(pose) = pose_at(&r.trajectory, s.t_s) else {
+            continue;
+        };
+        let p = pose.transform_point(nalgebra::Point2::new(
+            s.position_in_robot_m[0],
+            s.position_in_robot_m[1],
+        ));
+        let (what, color) = if r.accepted.contains(&k) {
+            ("fused", rerun::Color::from_rgb(40, 220, 120))
+        } else if r.rejected.contains(&k) {
+            ("gated out", rerun::Color::from_rgb(255, 40, 40))
+        } else {
+            ("not surveyed", rerun::Color::from_rgb(150, 150, 150))
+        };
+        rec.set_duration_secs("time", s.t_s);
+        rec.log(
+            "world/sightings",
+            &rerun::Points3D::new([[p.x as f32, p.y as f32, s.position_in_robot_m[2] as f32]])
+                .with_labels([format!("tag {} {what}", s.id)])
+                .with_colors([color])
+                .with_radii([0.025f32]),
+        )?;
+    }
+
+    // The ranges matched with a surveyed wall, from the sensor along the beam axis, in batches
+    // of a second: fused cyan, gated out red.
+    let layout = &scene.run.meta.robot.sonar;
+    let mut batch: (Vec<[[f32; 3]; 2]>, Vec<rerun::Color>) = (Vec::new(), Vec::new());
+    let (mut batch_t, mut last_t) = (f64::NEG_INFINITY, 0.0);
+    let flush = |batch: &mut (Vec<[[f32; 3]; 2]>, Vec<rerun::Color>), t: f64| {
+        if batch.0.is_empty() {
+            return Ok::<(), VizError>(());
+        }
+        rec.set_duration_secs("time", t);
+        rec.log(
+            "world/sonar/ranges",
+            &rerun::LineStrips3D::new(std::mem::take(&mut batch.0))
+                .with_colors(std::mem::take(&mut batch.1)),
+        )?;
+        Ok(())
+    };
+    for &(i, fused) in &r.range_outcomes {
+        let Some(reading) = scene.run.sonar.get(i) else {
+            continue;
+        };
+        let (Some(range), Some(sensor), Some(pose)) = (
+            reading.range_m,
+            layout.sensors.get(reading.sensor),
+            pose_at(&r.trajectory, reading.t_s),
+        ) else {
+            continue;
+        };
+        if reading.t_s >= batch_t + 1.0 {
+            flush(&mut batch, last_t)?;
+            batch_t = reading.t_s;
+        }
+        last_t = reading.t_s;
+        let o = pose.compose(&sensor.robot_from_sensor());
+        let end = [o.x + range * o.theta.cos(), o.y + range * o.theta.sin()];
+        batch.0.push([
+            [o.x as f32, o.y as f32, 0.3],
+            [end[0] as f32, end[1] as f32, 0.3],
+        ]);
+        batch.1.push(if fused {
+            rerun::Color::from_rgb(0, 200, 255)
+        } else {
+            rerun::Color::from_rgb(255, 40, 40)
+        });
+    }
+    flush(&mut batch, last_t)?;
+
+    // Error against the truth (when known), the filter's sigma and the distance since the last
+    // sighting.
+    let truth = scene.run.ground_truth.as_deref();
+    let mut next = f64::NEG_INFINITY;
+    for (i, p) in r.trajectory.iter().enumerate() {
+        if p.t_s < next {
+            continue;
+        }
+        next = p.t_s + POSE_SAMPLE_S;
+        rec.set_duration_secs("time", p.t_s);
+        rec.log("metrics/sigma_m", &rerun::Scalars::single(r.sigma_m[i]))?;
+        rec.log(
+            "metrics/since_sighting_m",
+            &rerun::Scalars::single(r.since_sighting_m[i]),
+        )?;
+        let Some(gt) = truth.and_then(|t| pose_at(t, p.t_s)) else {
+            continue;
+        };
+        rec.log(
+            "metrics/position_error_m/localized",
+            &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
+        )?;
+        if let Some(o) = pose_at(scene.odometry, p.t_s) {
+            rec.log(
+                "metrics/position_error_m/odometry",
+                &rerun::Scalars::single((o.x - gt.x).hypot(o.y - gt.y)),
+            )?;
+        }
+    }
+    rec.reset_time();
+
+    let mut md = String::from("# stereotag localize\n\n| metric | value |\n|---|---|\n");
+    for (k, v) in scene.metrics {
+        md.push_str(&format!("| {k} | {v:.4} |\n"));
+    }
+    md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
+    for b in scene.growth {
+        md.push_str(&format!(
+            "| {:.1} | {:.1} | {} | {:.3} | {} |\n",
+            b.from_m,
+            b.to_m,
+            b.samples,
+            b.mean_sigma_m,
+            b.rms_error_m.map_or("-".into(), |e| format!("{e:.3}"))
         ));
     }
     rec.log_static("report", &rerun::TextDocument::from_markdown(md))?;

@@ -122,6 +122,7 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         "map_corrected.pgm",
         "map_corrected.yaml",
         "corners.csv",
+        "walls_corrected.csv",
     ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -158,6 +159,8 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         "/world/grid",
         "/map/online/grid",
         "/map/corrected/grid",
+        "/map/corrected/walls",
+        "/world/walls_surveyed",
         "/map/hough",
         "/landmarks/tag_0/covariance",
         "/metrics/position_error_m/offline",
@@ -265,11 +268,41 @@ fn a_later_run_localises_against_the_survey() {
     assert!(metric(&report, "walls.surveyed") >= 5.0);
     assert!(metric(&report, "ranges.fused") > 100.0);
     assert!(localised <= 0.05, "localised {localised}");
-    let tags_only = metric(&localize("loc_tags", &["--no-walls"]), "ate_m.localized");
+    let tags_only = metric(
+        &localize("loc_tags", &["--no-walls", "--no-rerun"]),
+        "ate_m.localized",
+    );
     assert!(
         localised < tags_only,
         "{localised} vs tags only {tags_only}"
     );
+    // The recording of the localisation, read back by the rerun CLI.
+    let rrd = dir.path().join("loc/localize.rrd");
+    let print = rerun()
+        .args(["rrd", "print", "-vvv"])
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    assert!(
+        print.status.success(),
+        "{}",
+        String::from_utf8_lossy(&print.stderr)
+    );
+    let text = String::from_utf8_lossy(&print.stdout);
+    for entity in [
+        "/world/trajectories/localized",
+        "/world/walls_surveyed",
+        "/world/sonar/ranges",
+        "/world/sightings",
+        "/landmarks/tag_0",
+        "/metrics/position_error_m/localized",
+        "/report",
+    ] {
+        assert!(
+            text.contains(&format!("- {entity} - ")),
+            "the localisation recording has no {entity}"
+        );
+    }
     // The survey's odometry calibration (the same simulated robot) was applied and helps on its
     // own (office seed 2: 0.84 m -> 0.25 m).
     assert_eq!(metric(&report, "odometry.calibrated"), 1.0);

@@ -36,6 +36,8 @@ pub struct Localize {
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    rerun: super::RerunArgs,
 }
 
 impl Localize {
@@ -76,6 +78,11 @@ impl Localize {
             .transpose()?
             .map(|w| w.world);
         let dir = OutputDir::create(&self.out, self.force)?;
+        let recorder = super::recorder(
+            &self.rerun,
+            super::Recording::Localization,
+            &dir.path("localize.rrd"),
+        )?;
         let families: Vec<String> = {
             let mut f: Vec<String> = landmarks.iter().map(|l| l.family.clone()).collect();
             f.sort();
@@ -159,6 +166,32 @@ impl Localize {
             &dir.path("report.json"),
             &serde_json::json!({ "metrics": metrics, "error_growth": growth }),
         )?;
+        #[cfg(feature = "rerun")]
+        if let Some(rec) = recorder {
+            let numbers: std::collections::BTreeMap<String, f64> = metrics
+                .iter()
+                .filter_map(|(k, v)| Some((k.clone(), v.as_f64()?)))
+                .collect();
+            stereotag::viz::log_localization(
+                &rec,
+                &stereotag::viz::LocalizeScene {
+                    run: &run,
+                    world: world.as_ref(),
+                    odometry: &odometry,
+                    landmarks: &landmarks,
+                    walls: &walls,
+                    sightings: &sightings,
+                    result: &result,
+                    growth: &growth,
+                    metrics: &numbers,
+                },
+            )
+            .map_err(|e| anyhow::anyhow!("recording the localisation: {e}"))?;
+            rec.finish()
+                .map_err(|e| anyhow::anyhow!("finishing the recording: {e}"))?;
+        }
+        #[cfg(not(feature = "rerun"))]
+        let _ = recorder;
         dir.commit()?;
         tracing::info!(
             "{} sightings of {} surveyed tags fused ({} gated out, {} of unknown tags)",

@@ -220,7 +220,8 @@ pub(crate) fn relative_path(to: &Path, from_dir: &Path) -> PathBuf {
 /// Where a command's Rerun recording goes.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct RerunArgs {
-    /// Write the recording to this .rrd file (default: the output directory's survey.rrd).
+    /// Write the recording to this .rrd file (default: the output directory's survey.rrd, or
+    /// localize.rrd for `localize`).
     #[arg(long, value_name = "FILE.rrd")]
     save: Option<PathBuf>,
     /// Stream the recording to a new Rerun viewer (the `rerun` executable on PATH).
@@ -260,6 +261,8 @@ pub(crate) enum Recording {
     Survey,
     /// A stereo calibration.
     Calibration,
+    /// A later run localised against a survey.
+    Localization,
 }
 
 /// Opens the recording the flags ask for; `default_file` is used unless `--save`, `--spawn` or
@@ -299,6 +302,10 @@ pub(crate) fn recorder(
         Recording::Calibration => (
             "stereotag calibration",
             stereotag::viz::calibration_blueprint(),
+        ),
+        Recording::Localization => (
+            "stereotag localize",
+            stereotag::viz::localization_blueprint(),
         ),
     };
     Ok(Some(stereotag::viz::Recorder::new(

@@ -97,7 +97,14 @@ pub(crate) fn simulate_world(
     );
     output.run.meta.mapping = Some(loaded.mapping.clone());
     if let Some(rig_path) = rig_path.filter(|_| !loaded.world.tags.is_empty()) {
-        take_pictures(&loaded.world, rig_path, &dir, &mut output, quiet)?;
+        take_pictures(
+            &loaded.world,
+            rig_path,
+            &dir,
+            &mut output,
+            config.seed,
+            quiet,
+        )?;
     }
     io::save_run(&dir.path(""), &output.run)?;
     dir.commit()?;
@@ -114,12 +121,22 @@ pub(crate) fn simulate_world(
     Ok(output)
 }
 
+/// The sensor-noise seed of picture `k` of a run simulated with `seed`: `(seed - 1) x 10^6 + k + 1`,
+/// so that runs of different seeds get independent noise even where their poses agree (a run with
+/// perfect odometry), and seed 1 keeps the images it always had.
+fn render_seed(seed: u64, k: usize) -> u64 {
+    seed.wrapping_sub(1)
+        .wrapping_mul(1_000_000)
+        .wrapping_add(k as u64 + 1)
+}
+
 /// Renders a stereo pair wherever a tag is in view and lists them in `stereo.csv`.
 fn take_pictures(
     world: &stereotag::world::World,
     rig_path: &Path,
     dir: &OutputDir,
     output: &mut SimOutput,
+    seed: u64,
     quiet: bool,
 ) -> anyhow::Result<()> {
     use stereotag::render::{plan_captures, CapturePolicy, RenderConfig, Renderer};
@@ -136,7 +153,7 @@ fn take_pictures(
             world,
             p.pose,
             &RenderConfig {
-                seed: k as u64 + 1,
+                seed: render_seed(seed, k),
                 ..config.clone()
             },
         )?;
@@ -161,4 +178,21 @@ fn take_pictures(
     io::save_rig(&dir.path("rig.yaml"), &rig)?;
     output.run.meta.robot.rig = Some("rig.yaml".into());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::render_seed;
+
+    #[test]
+    fn each_run_seed_gets_its_own_picture_noise() {
+        assert_eq!(render_seed(1, 0), 1);
+        assert_eq!(render_seed(1, 41), 42);
+        let mut seeds: Vec<u64> = (1..=5)
+            .flat_map(|s| (0..1000).map(move |k| render_seed(s, k)))
+            .collect();
+        seeds.sort_unstable();
+        seeds.dedup();
+        assert_eq!(seeds.len(), 5000);
+    }
 }
