@@ -1253,14 +1253,21 @@ pub struct LocalizeResult {
     pub rejected: Vec<usize>,
     /// Sightings of tags the survey does not hold.
     pub unknown: Vec<usize>,
-    /// Sonar ranges fused against a surveyed wall.
-    pub ranges_fused: usize,
-    /// Sonar ranges with a surveyed wall in the beam that failed the gate (a person, a moved
-    /// object, an echo off the cone's edge).
-    pub ranges_gated_out: usize,
-    /// Each range matched with a wall: its index in the run's readings, and whether it was fused
-    /// (else gated out).
+    /// Each sonar range matched with a surveyed wall: its index in the run's readings, and whether
+    /// it was fused (else gated out: a person, a moved object, an echo off the cone's edge).
     pub range_outcomes: Vec<(usize, bool)>,
+}
+
+impl LocalizeResult {
+    /// Sonar ranges fused against a surveyed wall.
+    pub fn ranges_fused(&self) -> usize {
+        self.range_outcomes.iter().filter(|r| r.1).count()
+    }
+
+    /// Sonar ranges matched with a surveyed wall that failed the gate.
+    pub fn ranges_gated_out(&self) -> usize {
+        self.range_outcomes.len() - self.ranges_fused()
+    }
 }
 
 /// A run's sonar and the surveyed walls its ranges are matched against when localising.
@@ -1325,8 +1332,9 @@ fn fuse_range(
 
 /// Tracks a run's pose against surveyed landmarks held fixed (their covariance is added to each
 /// sighting's) and, with `sonar`, its ranges against the surveyed walls (each range whose beam
-/// holds a wall face's normal measures the distance to it): the method's long-term use. The run starts at its odometry's first pose in the
-/// survey's frame (the robot leaves from the same place).
+/// holds a wall face's normal measures the distance to it): the method's long-term use. The run
+/// starts at its odometry's first pose in the survey's frame (the robot leaves from the same
+/// place).
 pub fn localize(
     odometry: &[StampedPose],
     sightings: &[TagSighting],
@@ -1347,8 +1355,6 @@ pub fn localize(
         accepted: Vec::new(),
         rejected: Vec::new(),
         unknown: Vec::new(),
-        ranges_fused: 0,
-        ranges_gated_out: 0,
         range_outcomes: Vec::new(),
     };
     let mut last = start;
@@ -1412,11 +1418,6 @@ pub fn localize(
         while let Some((i, reading)) = ranges.next_if(|r| r.1.t_s <= sample.t_s) {
             if let Some(fused) = sonar.and_then(|s| fuse_range(&mut ekf, reading, &s, config)) {
                 out.range_outcomes.push((i, fused));
-                if fused {
-                    out.ranges_fused += 1;
-                } else {
-                    out.ranges_gated_out += 1;
-                }
             }
         }
         out.trajectory.push(StampedPose {
@@ -1615,7 +1616,7 @@ mod tests {
         let end = |r: &LocalizeResult| r.trajectory.last().unwrap().pose.y;
         assert!(end(&without).abs() > 0.4, "{}", end(&without));
         assert!(end(&with).abs() < 0.03, "{}", end(&with));
-        assert!(with.ranges_fused > 10 && with.ranges_gated_out == 0);
+        assert!(with.ranges_fused() > 10 && with.ranges_gated_out() == 0);
         assert!(ate_m(&with.trajectory, &truth).unwrap() < 0.03);
     }
 

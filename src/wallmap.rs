@@ -76,9 +76,9 @@ impl WallSegment {
         -s * p[0] + c * p[1]
     }
 
-    /// The range a sonar at `sensor` (position, beam direction) measures off this face, when the
-    /// face is in front of it, its normal inside the beam's half-cone less `margin_rad`, and the
-    /// foot of the perpendicular on the segment (`inset_m` inside its ends): `None` otherwise.
+    /// The range a sonar at `sensor` looking along `beam_rad` measures off this face when the face
+    /// is in front of it, its normal within `half_cone_rad` of the beam's axis (reversed), and the
+    /// foot of the perpendicular on the segment, `inset_m` inside its ends: `None` otherwise.
     pub fn expected_range(
         &self,
         sensor: [f64; 2],

@@ -55,6 +55,25 @@ fn office_with_ground_truth_poses_maps_the_walls() {
         features.precision >= FEATURE_PRECISION_GT && features.recall >= FEATURE_RECALL_GT,
         "{features:?}"
     );
+    // The walls fitted to the ranges (what `localize` matches a later run against): every face
+    // along a wall of the world, its ends within 1.5 cm of its line and 15 cm of its ends (a door
+    // jamb's edge echoes a little past it); the office's 10 faces found.
+    assert!(gt.walls.len() >= 10, "{} faces", gt.walls.len());
+    for face in &gt.walls {
+        let on_a_wall = loaded.world.walls.iter().any(|w| {
+            let (a, b) = (w.segment.a, w.segment.b);
+            let d = b - a;
+            let len = d.norm();
+            [face.from_m, face.to_m].iter().all(|p| {
+                let q = nalgebra::Point2::new(p[0], p[1]) - a;
+                let across = (d.x * q.y - d.y * q.x) / len;
+                let along = (d.x * q.x + d.y * q.y) / len;
+                across.abs() < 0.015 && along > -0.15 && along < len + 0.15
+            })
+        });
+        assert!(on_a_wall, "{face:?} is on no wall of the office");
+    }
+
     // The paper's claim, measured: simple counting is at least as precise as log-odds here.
     assert!(gt_scores.counting.occupied_precision >= gt_scores.log_odds.occupied_precision - 0.02);
 

@@ -143,8 +143,8 @@ impl Localize {
         metrics.insert("sightings.gated_out".into(), result.rejected.len().into());
         metrics.insert("sightings.unknown_tag".into(), result.unknown.len().into());
         metrics.insert("walls.surveyed".into(), walls.len().into());
-        metrics.insert("ranges.fused".into(), result.ranges_fused.into());
-        metrics.insert("ranges.gated_out".into(), result.ranges_gated_out.into());
+        metrics.insert("ranges.fused".into(), result.ranges_fused().into());
+        metrics.insert("ranges.gated_out".into(), result.ranges_gated_out().into());
         metrics.insert(
             "odometry.calibrated".into(),
             f64::from(u8::from(calibration.is_some())).into(),
@@ -203,9 +203,9 @@ impl Localize {
         if !walls.is_empty() {
             tracing::info!(
                 "{} sonar ranges fused against {} surveyed walls ({} gated out)",
-                result.ranges_fused,
+                result.ranges_fused(),
                 walls.len(),
-                result.ranges_gated_out
+                result.ranges_gated_out()
             );
         }
         tracing::info!("error against distance since the last sighting:");
