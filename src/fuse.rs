@@ -90,6 +90,9 @@ pub struct FuseConfig {
     pub wall_sigma_m: f64,
     /// χ² gate of a sonar range against a surveyed wall, 1 dof (6.63: 99%).
     pub sonar_gate_chi2: f64,
+    /// Hold the survey's trajectory after its last sighting to the walls mapped before it
+    /// ([`hold_tail_to_walls`]; ours: on).
+    pub hold_tail_to_walls: bool,
 }
 
 impl Default for FuseConfig {
@@ -116,6 +119,7 @@ impl Default for FuseConfig {
             sonar_sigma_frac: 0.01,
             wall_sigma_m: 0.02,
             sonar_gate_chi2: 6.63,
+            hold_tail_to_walls: true,
         }
     }
 }
@@ -1430,6 +1434,54 @@ pub fn localize(
     out
 }
 
+/// Holds the end of a survey's offline trajectory, after its last fused sighting at `last_t_s`, to
+/// walls mapped from the readings before it: from the offline pose there, the filter of
+/// [`localize`] runs on the rest of the odometry (corrected with `calibration`) with the ranges
+/// taken after it. Until then the offline graph has nothing but odometry there. `sonar` holds the
+/// run's readings and the walls; the trajectory is returned whole.
+pub fn hold_tail_to_walls(
+    odometry: &[StampedPose],
+    offline: &[StampedPose],
+    last_t_s: f64,
+    calibration: Option<&OdometryCalibration>,
+    sonar: SonarInput<'_>,
+    config: &FuseConfig,
+) -> Vec<StampedPose> {
+    let start = odometry.partition_point(|p| p.t_s < last_t_s);
+    if start + 1 >= odometry.len() || start >= offline.len() || sonar.walls.is_empty() {
+        return offline.to_vec();
+    }
+    let tail = &odometry[start..];
+    let tail = calibration.map_or_else(|| tail.to_vec(), |c| c.apply(tail));
+    let anchor = offline[start].pose.compose(&tail[0].pose.inverse());
+    let tail: Vec<StampedPose> = tail
+        .iter()
+        .map(|p| StampedPose {
+            t_s: p.t_s,
+            pose: anchor.compose(&p.pose),
+        })
+        .collect();
+    let readings: Vec<SonarReading> = sonar
+        .readings
+        .iter()
+        .filter(|r| r.t_s > tail[0].t_s)
+        .copied()
+        .collect();
+    let held = localize(
+        &tail,
+        &[],
+        &[],
+        Some(SonarInput {
+            readings: &readings,
+            ..sonar
+        }),
+        config,
+    );
+    let mut out = offline[..start].to_vec();
+    out.extend(held.trajectory);
+    out
+}
+
 /// Error statistics of a localised run over one band of distance since the last sighting.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GrowthBin {
@@ -1565,11 +1617,15 @@ mod tests {
         assert!((ate_m(&none.apply(&run.odometry), truth).unwrap() - raw).abs() < 1e-9);
     }
 
-    /// A robot driving 10 m along a wall 0.5 m to its left, its odometry drifting 0.01 rad per
-    /// metre to the right: with the wall's ranges (left sonar 0.2 m off centre) the filter stays
-    /// on its line; without them it ends half a metre off.
-    #[test]
-    fn ranges_off_a_surveyed_wall_hold_the_robot_to_it() {
+    /// A robot driving 10 m along a wall 0.5 m to its left (odometry, truth, the left sonar's
+    /// ranges), its odometry drifting 0.01 rad per metre to the right, and the wall's face.
+    fn corridor() -> (
+        crate::sonar::SonarLayout,
+        WallSegment,
+        Vec<StampedPose>,
+        Vec<StampedPose>,
+        Vec<SonarReading>,
+    ) {
         let layout = crate::sonar::SonarLayout {
             name: "left".into(),
             cone_rad: 30f64.to_radians(),
@@ -1592,10 +1648,9 @@ mod tests {
         let mut odom = Pose2::new(0.0, 0.0, 0.0);
         for k in 0..=200 {
             let t_s = k as f64;
-            let x = 0.05 * k as f64;
             truth.push(StampedPose {
                 t_s,
-                pose: Pose2::new(x, 0.0, 0.0),
+                pose: Pose2::new(0.05 * k as f64, 0.0, 0.0),
             });
             odometry.push(StampedPose { t_s, pose: odom });
             odom = odom.compose(&Pose2::new(0.05, 0.0, -0.0005));
@@ -1605,6 +1660,14 @@ mod tests {
                 range_m: Some(0.3 + 0.004 * ((k * 7 % 5) as f64 - 2.0)),
             });
         }
+        (layout, wall, odometry, truth, readings)
+    }
+
+    /// Along the corridor, with the wall's ranges (left sonar 0.2 m off centre) the filter stays
+    /// on its line; without them it ends half a metre off.
+    #[test]
+    fn ranges_off_a_surveyed_wall_hold_the_robot_to_it() {
+        let (layout, wall, odometry, truth, readings) = corridor();
         let sonar = SonarInput {
             readings: &readings,
             layout: &layout,
@@ -1618,6 +1681,47 @@ mod tests {
         assert!(end(&with).abs() < 0.03, "{}", end(&with));
         assert!(with.ranges_fused() > 10 && with.ranges_gated_out() == 0);
         assert!(ate_m(&with.trajectory, &truth).unwrap() < 0.03);
+    }
+
+    /// A survey whose last sighting came 2 m into the corridor: its offline trajectory is right
+    /// until then and drifts after; held to the wall, the end stays on the line and the part
+    /// before the sighting is kept as it was.
+    #[test]
+    fn the_tail_after_the_last_sighting_is_held_to_the_walls() {
+        let (layout, wall, odometry, truth, readings) = corridor();
+        let last_t_s = 40.0;
+        let k = 40;
+        let anchor = truth[k].pose.compose(&odometry[k].pose.inverse());
+        let offline: Vec<StampedPose> = (0..odometry.len())
+            .map(|i| {
+                if i <= k {
+                    truth[i]
+                } else {
+                    StampedPose {
+                        t_s: odometry[i].t_s,
+                        pose: anchor.compose(&odometry[i].pose),
+                    }
+                }
+            })
+            .collect();
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: std::slice::from_ref(&wall),
+        };
+        let held = hold_tail_to_walls(
+            &odometry,
+            &offline,
+            last_t_s,
+            None,
+            sonar,
+            &FuseConfig::default(),
+        );
+        assert_eq!(held.len(), offline.len());
+        assert_eq!(&held[..k], &offline[..k]);
+        let end = |t: &[StampedPose]| t.last().unwrap().pose.y;
+        assert!(end(&offline).abs() > 0.3, "{}", end(&offline));
+        assert!(end(&held).abs() < 0.03, "{}", end(&held));
     }
 
     /// A square loop driven with a biased odometry, a tag at each corner seen from near it.

@@ -4,8 +4,8 @@
 
 use crate::camera::{Rectification, StereoRig};
 use crate::fuse::{
-    align_se2, associate, ate_m, run_offline, run_online, FuseConfig, Landmark, OfflineResult,
-    OnlineResult, TagSighting,
+    align_se2, associate, ate_m, hold_tail_to_walls, run_offline, run_online, FuseConfig, Landmark,
+    OfflineResult, OnlineResult, SonarInput, TagSighting,
 };
 use crate::geometry::Pose2;
 use crate::grid::{
@@ -201,8 +201,13 @@ pub fn survey(
     let online = run_online(&run.odometry, sightings, &raw.features_online, fuse);
     timings_s.insert("fuse_online".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
-    let offline = run_offline(&run.odometry, sightings, &online, fuse);
+    let mut offline = run_offline(&run.odometry, sightings, &online, fuse);
     timings_s.insert("fuse_offline".into(), t.elapsed().as_secs_f64());
+    if fuse.hold_tail_to_walls {
+        let t = Instant::now();
+        hold_tail(run, sightings, &online, &mut offline, mapping, fuse)?;
+        timings_s.insert("fuse_tail".into(), t.elapsed().as_secs_f64());
+    }
     let t = Instant::now();
     let corrected = map_trajectory(run, &offline.trajectory, mapping)?;
     timings_s.insert("map_corrected".into(), t.elapsed().as_secs_f64());
@@ -226,6 +231,53 @@ pub fn survey(
         landmarks,
         timings_s,
     })
+}
+
+/// [`hold_tail_to_walls`] on a survey's offline trajectory, with the walls of the readings placed
+/// along it up to the last fused sighting.
+fn hold_tail(
+    run: &RunDataset,
+    sightings: &[TagSighting],
+    online: &OnlineResult,
+    offline: &mut OfflineResult,
+    mapping: &MappingConfig,
+    fuse: &FuseConfig,
+) -> Result<(), PipelineError> {
+    let Some(last_t) = online
+        .accepted
+        .iter()
+        .map(|&k| sightings[k].t_s)
+        .max_by(f64::total_cmp)
+    else {
+        return Ok(());
+    };
+    let layout = &run.meta.robot.sonar;
+    let readings: Vec<_> = run
+        .placed_readings(&offline.trajectory)
+        .into_iter()
+        .filter(|r| r.t_s <= last_t)
+        .collect();
+    let mut grid = CountingGrid::new(mapping.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+    grid.insert_all(&readings);
+    let walls = map_walls(
+        &readings,
+        0.5 * layout.cone_rad,
+        layout.max_range_m,
+        &grid.map(),
+    );
+    offline.trajectory = hold_tail_to_walls(
+        &run.odometry,
+        &offline.trajectory,
+        last_t,
+        offline.odometry_calibration.as_ref(),
+        SonarInput {
+            readings: &run.sonar,
+            layout,
+            walls: &walls,
+        },
+        fuse,
+    );
+    Ok(())
 }
 
 /// Scores a survey against the world and the run's ground truth: the sonar scores of the raw map,
