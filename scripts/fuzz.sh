@@ -44,7 +44,8 @@ seed() {
               printf 'kind,x_m,y_m,theta_rad,rho_m\n'; nul
               printf 'image: occ.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n'; nul
               printf 'P5\n2 2\n255\n\x00\xff\x80\x10'; nul
-              printf 't_s,x_m,y_m,theta_rad\n0,1,1,0\n'; } > "$d/seed1" ;;
+              printf 't_s,x_m,y_m,theta_rad\n0,1,1,0\n'; nul
+              printf 'normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m\n0,1,1,0,1,2,20,0.01\n'; } > "$d/seed1" ;;
         image_detect)
             python3 - "$d" <<'PY' || true
 import sys, glob, os
