@@ -164,12 +164,15 @@ pub fn survey_blueprint() -> bp::Blueprint {
         ])
         .with_row_shares([0.6, 0.4]),
     )
-    // Opened on the end of the run (the finished map and trajectories); scrub back to replay it.
-    .with_time_panel(
-        bp::TimePanel::new()
-            .with_timeline("time")
-            .with_play_state(bp::components::PlayState::Following),
-    )
+    .with_time_panel(following_time_panel())
+}
+
+/// The time panel on the `time` timeline, following the end of the run (the finished map and
+/// trajectories); scrub back to replay it.
+fn following_time_panel() -> bp::TimePanel {
+    bp::TimePanel::new()
+        .with_timeline("time")
+        .with_play_state(bp::components::PlayState::Following)
 }
 
 /// What a survey recording shows.
@@ -379,7 +382,17 @@ fn log_trajectories(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Re
     if let Some(gt) = &scene.run.ground_truth {
         lines.push(("ground_truth", gt, [200, 200, 200]));
     }
-    for (name, t, c) in &lines {
+    log_trajectory_lines(rec, &lines)?;
+    // The robot moved by the online estimate.
+    log_robot(rec, &s.online.trajectory)
+}
+
+/// Each trajectory as a line under `world/trajectories/NAME`, in its colour.
+fn log_trajectory_lines(
+    rec: &rerun::RecordingStream,
+    lines: &[(&str, &[StampedPose], [u8; 3])],
+) -> Result<(), VizError> {
+    for (name, t, c) in lines {
         rec.log_static(
             format!("world/trajectories/{name}"),
             &rerun::LineStrips3D::new([strip(t, 0.02)])
@@ -388,8 +401,7 @@ fn log_trajectories(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Re
                 .with_labels([*name]),
         )?;
     }
-    // The robot moved by the online estimate.
-    log_robot(rec, &s.online.trajectory)
+    Ok(())
 }
 
 /// The robot, a disc outline with a heading tick, moved along `trajectory` on the `time`
@@ -859,11 +871,7 @@ pub fn localization_blueprint() -> bp::Blueprint {
         ])
         .with_column_shares([0.65, 0.35]),
     )
-    .with_time_panel(
-        bp::TimePanel::new()
-            .with_timeline("time")
-            .with_play_state(bp::components::PlayState::Following),
-    )
+    .with_time_panel(following_time_panel())
 }
 
 /// What a localisation recording shows.
@@ -908,15 +916,7 @@ pub fn log_localization(recorder: &Recorder, scene: &LocalizeScene<'_>) -> Resul
     if let Some(gt) = &scene.run.ground_truth {
         lines.push(("ground_truth", gt, [200, 200, 200]));
     }
-    for (name, t, c) in &lines {
-        rec.log_static(
-            format!("world/trajectories/{name}"),
-            &rerun::LineStrips3D::new([strip(t, 0.02)])
-                .with_colors([rerun::Color::from_rgb(c[0], c[1], c[2])])
-                .with_radii([rerun::Radius::new_ui_points(1.5)])
-                .with_labels([*name]),
-        )?;
-    }
+    log_trajectory_lines(rec, &lines)?;
     log_robot(rec, &r.trajectory)?;
 
     // Sightings at their time, placed with the localised pose: fused green, gated out red, tags

@@ -437,6 +437,18 @@ fn localize_names_a_bad_landmarks_file() {
     good_run(&run);
     let survey_dir = tmp.path().join("survey");
     std::fs::create_dir_all(&survey_dir).unwrap();
+    let out = tmp.path().join("loc");
+    let localize = || {
+        stereotag(&[
+            "localize",
+            "--survey",
+            survey_dir.to_str().unwrap(),
+            "--run",
+            run.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
     for (landmarks, says) in [
         (
             "{\"landmarks\": [{\"id\": 1, \"family\": \"tag36h11\"}]}",
@@ -450,16 +462,7 @@ fn localize_names_a_bad_landmarks_file() {
         ),
     ] {
         std::fs::write(survey_dir.join("landmarks.json"), landmarks).unwrap();
-        let out = tmp.path().join("loc");
-        let (code, err) = stereotag(&[
-            "localize",
-            "--survey",
-            survey_dir.to_str().unwrap(),
-            "--run",
-            run.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let (code, err) = localize();
         assert_eq!(code, 2, "{err}");
         assert!(
             err.contains("landmarks.json") && err.contains(says),
@@ -476,16 +479,7 @@ fn localize_names_a_bad_landmarks_file() {
          0,1,1,0,1,two,20,0.01\n",
     )
     .unwrap();
-    let out = tmp.path().join("loc");
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        survey_dir.to_str().unwrap(),
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, err) = localize();
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("walls_corrected.csv") && err.contains('3') && err.contains("to_y_m"),
