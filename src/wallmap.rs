@@ -150,7 +150,7 @@ pub fn map_walls(
     max_range_m: f64,
     map: &OccupancyMap,
 ) -> Vec<WallSegment> {
-    let echoes: Vec<Echo> = readings
+    let mut echoes: Vec<Echo> = readings
         .iter()
         .filter_map(|r| {
             let range = r
@@ -164,6 +164,16 @@ pub fn map_walls(
             })
         })
         .collect();
+    // The accumulator's offsets are taken about the sensors' mean position, so that its size
+    // follows the map's extent, wherever the map lies (a real robot's odometry may start far
+    // from the origin).
+    let n = echoes.len().max(1) as f64;
+    let centre = echoes
+        .iter()
+        .fold([0.0, 0.0], |c, e| [c[0] + e.s[0] / n, c[1] + e.s[1] / n]);
+    for e in &mut echoes {
+        e.s = [e.s[0] - centre[0], e.s[1] - centre[1]];
+    }
     let reach = echoes
         .iter()
         .map(|e| e.s[0].hypot(e.s[1]) + e.range)
@@ -217,7 +227,12 @@ pub fn map_walls(
     // (a concave corner echoes from its tip, whose tangents line up at 45 degrees).
     walls.sort_by_key(|w| std::cmp::Reverse(w.readings));
     let mut kept: Vec<WallSegment> = Vec::new();
-    for w in walls {
+    for mut w in walls {
+        let n = w.normal();
+        w.offset_m += n[0] * centre[0] + n[1] * centre[1];
+        for end in [&mut w.from_m, &mut w.to_m] {
+            *end = [end[0] + centre[0], end[1] + centre[1]];
+        }
         if on_grid(&w, map) >= MIN_ON_GRID && !kept.iter().any(|k| shadows(k, &w)) {
             kept.push(w);
         }
@@ -426,6 +441,37 @@ mod tests {
             .expected_range([2.0, 2.5], -std::f64::consts::FRAC_PI_2, 0.26, 0.05)
             .is_none());
         assert!(w.expected_range([2.0, 1.5], 0.0, 0.26, 0.05).is_none());
+    }
+
+    #[test]
+    fn a_map_far_from_the_origin_gives_the_same_walls_moved() {
+        let readings = along_wall();
+        let shift = [1000.0, -500.0];
+        let moved: Vec<PlacedReading> = readings
+            .iter()
+            .map(|r| PlacedReading {
+                world_from_sensor: Pose2::new(
+                    r.world_from_sensor.x + shift[0],
+                    r.world_from_sensor.y + shift[1],
+                    r.world_from_sensor.theta,
+                ),
+                ..*r
+            })
+            .collect();
+        let grid = grid_of(&readings);
+        let (a, b) = (
+            map_walls(&readings, 15f64.to_radians(), 2.1, &grid),
+            map_walls(&moved, 15f64.to_radians(), 2.1, &grid),
+        );
+        assert_eq!(a.len(), b.len());
+        for (a, b) in a.iter().zip(&b) {
+            let n = a.normal();
+            assert!((a.normal_rad - b.normal_rad).abs() < 1e-6, "{a:?} {b:?}");
+            let offset = a.offset_m + n[0] * shift[0] + n[1] * shift[1];
+            assert!((offset - b.offset_m).abs() < 1e-6, "{a:?} {b:?}");
+            assert!((a.from_m[0] + shift[0] - b.from_m[0]).abs() < 1e-6);
+            assert!((a.to_m[1] + shift[1] - b.to_m[1]).abs() < 1e-6);
+        }
     }
 
     #[test]
