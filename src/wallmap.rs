@@ -143,7 +143,7 @@ impl Votes {
 
 /// The walls of a map from its readings placed along a (corrected) trajectory, strongest first.
 /// Readings without an echo or at the sensor's maximum range are left out. A face must lie on
-/// occupied cells of `map` (the grid of the same readings) for [`MIN_ON_GRID`] of its length.
+/// occupied cells of `map` (the grid of the same readings) for 80% of its length.
 pub fn map_walls(
     readings: &[PlacedReading],
     half_cone_rad: f64,
