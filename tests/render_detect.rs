@@ -21,6 +21,30 @@ fn rendered_pairs_are_deterministic() {
     assert_eq!(a.tags.len(), 1);
 }
 
+/// Every sample world's tags face the room they are in: seen from 1.2 m in front of each (willow's
+/// three once faced into their walls, and no survey of it ever saw a tag).
+#[test]
+fn every_sample_tag_is_seen_from_in_front_of_it() {
+    let rig = load_rig(&common::root().join("calibration/rigs/default.yaml")).unwrap();
+    for name in ["office", "museum", "willow"] {
+        let w = load_world(&common::sample(&format!("{name}/world.yaml"))).unwrap();
+        for t in &w.world.tags {
+            let (s, c) = t.yaw_rad.sin_cos();
+            let pose = Pose2::new(
+                t.position_m[0] + 1.2 * c,
+                t.position_m[1] + 1.2 * s,
+                t.yaw_rad + std::f64::consts::PI,
+            );
+            let pair = render_pair(&w.world, &rig, pose, &RenderConfig::default()).unwrap();
+            assert!(
+                pair.tags.iter().any(|seen| seen.id == t.id),
+                "{name}: tag {} not seen from {pose:?}",
+                t.id
+            );
+        }
+    }
+}
+
 #[test]
 fn both_backends_find_rendered_tags_where_the_truth_says() {
     let w = load_world(&common::sample("office/world.yaml")).unwrap();

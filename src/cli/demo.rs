@@ -78,12 +78,20 @@ impl Demo {
             get("map_ground_truth.occupied_precision"),
             get("map_ground_truth.occupied_recall"),
         );
-        println!(
-            "  {} landmarks, median position error {:.1} mm; see {}/landmarks.json, map_corrected.png, survey.rrd",
-            output.survey.landmarks.len(),
-            get("landmarks.median_error_m") * 1e3,
-            self.out.display()
-        );
+        if output.survey.landmarks.is_empty() {
+            println!(
+                "  no landmarks: the robot saw no tag ({} sightings); see {}/map_corrected.png, survey.rrd",
+                get("sightings.total"),
+                self.out.display()
+            );
+        } else {
+            println!(
+                "  {} landmarks, median position error {:.1} mm; see {}/landmarks.json, map_corrected.png, survey.rrd",
+                output.survey.landmarks.len(),
+                get("landmarks.median_error_m") * 1e3,
+                self.out.display()
+            );
+        }
         Ok(())
     }
 }
