@@ -95,6 +95,71 @@ pub struct FuseConfig {
     pub hold_tail_to_walls: bool,
 }
 
+/// A fusion setting out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("fusion setting `{key}` = {value} is invalid: {reason}")]
+pub struct FuseConfigError {
+    /// The key.
+    pub key: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// What is expected.
+    pub reason: &'static str,
+}
+
+impl FuseConfig {
+    /// Checks the settings: sigmas, gates and spacings positive (the sighting floor, the
+    /// conflict distance and the sonar's proportional and wall sigmas may be zero), counts at
+    /// least one.
+    pub fn validate(&self) -> Result<(), FuseConfigError> {
+        let positive = [
+            (
+                "odometry_sigma_m_per_sqrt_m",
+                self.odometry_sigma_m_per_sqrt_m,
+            ),
+            (
+                "heading_sigma_per_sqrt_rad",
+                self.heading_sigma_per_sqrt_rad,
+            ),
+            ("heading_sigma_per_sqrt_m", self.heading_sigma_per_sqrt_m),
+            ("yaw_sigma_floor_rad", self.yaw_sigma_floor_rad),
+            ("corner_sigma_m", self.corner_sigma_m),
+            ("gate_chi2", self.gate_chi2),
+            ("association_chi2", self.association_chi2),
+            ("conflict_radius_m", self.conflict_radius_m),
+            ("keyframe_spacing_m", self.keyframe_spacing_m),
+            ("keyframe_turn_rad", self.keyframe_turn_rad),
+            ("huber_sigma", self.huber_sigma),
+            ("sonar_sigma_m", self.sonar_sigma_m),
+            ("sonar_gate_chi2", self.sonar_gate_chi2),
+        ];
+        let non_negative = [
+            ("sighting_sigma_floor_m", self.sighting_sigma_floor_m),
+            ("conflict_min_distance_m", self.conflict_min_distance_m),
+            ("sonar_sigma_frac", self.sonar_sigma_frac),
+            ("wall_sigma_m", self.wall_sigma_m),
+        ];
+        let counts = [
+            ("conflict_min_sightings", self.conflict_min_sightings),
+            ("max_iterations", self.max_iterations),
+        ];
+        let bad = |key, value, reason| Err(FuseConfigError { key, value, reason });
+        if let Some(&(key, value)) = positive.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+            return bad(key, value, "must be a positive number");
+        }
+        if let Some(&(key, value)) = non_negative
+            .iter()
+            .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+        {
+            return bad(key, value, "must be zero or a positive number");
+        }
+        if let Some(&(key, value)) = counts.iter().find(|(_, v)| *v == 0) {
+            return bad(key, value as f64, "must be at least 1");
+        }
+        Ok(())
+    }
+}
+
 impl Default for FuseConfig {
     fn default() -> Self {
         Self {
@@ -1581,6 +1646,21 @@ pub fn ate_m(estimate: &[StampedPose], truth: &[StampedPose]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_default_settings_are_valid_and_bad_ones_are_named() {
+        assert_eq!(FuseConfig::default().validate(), Ok(()));
+        let bad = FuseConfig {
+            wall_sigma_m: f64::NAN,
+            ..FuseConfig::default()
+        };
+        assert_eq!(bad.validate().unwrap_err().key, "wall_sigma_m");
+        let bad = FuseConfig {
+            max_iterations: 0,
+            ..FuseConfig::default()
+        };
+        assert_eq!(bad.validate().unwrap_err().key, "max_iterations");
+    }
 
     /// The calibration model matches the wheels: the office simulated with the default wheel
     /// errors and no random noise (wheel base 1% long: turns scaled by 1.01; wheels -0.1% and

@@ -486,6 +486,27 @@ fn localize_names_a_bad_landmarks_file() {
         "{err}"
     );
     assert!(!out.exists());
+    // Fusion settings out of range: named with the file and the key.
+    std::fs::remove_file(survey_dir.join("walls_corrected.csv")).unwrap();
+    let config = tmp.path().join("fuse.yaml");
+    std::fs::write(&config, "sonar_sigma_m: -0.01\n").unwrap();
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        survey_dir.to_str().unwrap(),
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("fuse.yaml") && err.contains("sonar_sigma_m"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }
 
 /// `stereotag calibrate` with image globs; returns the exit code and stderr, checks nothing was

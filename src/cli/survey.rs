@@ -271,13 +271,17 @@ fn jpeg_pair(left: &image::GrayImage, right: &image::GrayImage) -> Option<(Vec<u
 
 /// Fusion settings from a YAML file, or the defaults.
 pub(crate) fn load_fuse_config(path: Option<&Path>) -> anyhow::Result<FuseConfig> {
-    Ok(match path {
-        Some(p) => io::parse_yaml(
-            p,
-            &std::fs::read_to_string(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?,
-        )?,
-        None => FuseConfig::default(),
-    })
+    let Some(p) = path else {
+        return Ok(FuseConfig::default());
+    };
+    let config: FuseConfig = io::parse_yaml(
+        p,
+        &std::fs::read_to_string(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?,
+    )?;
+    config
+        .validate()
+        .map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
+    Ok(config)
 }
 
 /// The run's stereo rig with run.yaml's mounting, or `None` when the run has no pictures.
