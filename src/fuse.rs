@@ -505,19 +505,16 @@ impl Ekf {
     /// Updates the pose with one scalar measurement: innovation `y`, Jacobian `h` over the pose,
     /// noise variance `r`, after a χ² gate; returns whether it was fused.
     fn update_scalar(&mut self, y: f64, h: &Vector3<f64>, r: f64, gate_chi2: f64) -> bool {
-        let p = self.p.fixed_view::<3, 3>(0, 0).into_owned();
-        let s = (h.transpose() * p * h)[0] + r;
+        let ph = self.p.columns(0, 3) * h;
+        let s = h.dot(&ph.rows(0, 3)) + r;
         if s.is_nan() || s <= 0.0 || y * y / s > gate_chi2 {
             return false;
         }
-        let n = self.x.len();
-        let ph = self.p.columns(0, 3) * h;
         let k = &ph / s;
         self.x += &k * y;
         self.x[2] = wrap_angle(self.x[2]);
         // Joseph form, written for one row: P - K h'P - P h K' + K (h'Ph + r) K'.
         self.p = &self.p - &k * ph.transpose() - &ph * k.transpose() + &k * k.transpose() * s;
-        debug_assert_eq!(self.p.nrows(), n);
         true
     }
 

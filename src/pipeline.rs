@@ -251,6 +251,9 @@ fn hold_tail(
     else {
         return Ok(());
     };
+    if run.odometry.last().is_none_or(|p| p.t_s <= last_t) {
+        return Ok(()); // the run ends at its last sighting: no tail to hold
+    }
     let layout = &run.meta.robot.sonar;
     let readings: Vec<_> = run
         .placed_readings(&offline.trajectory)

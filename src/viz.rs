@@ -880,8 +880,9 @@ pub struct LocalizeScene<'a> {
     pub run: &'a RunDataset,
     /// The world, when known.
     pub world: Option<&'a World>,
-    /// The odometry the filter ran on (corrected with the survey's calibration, or as logged).
-    pub odometry: &'a [StampedPose],
+    /// The run's odometry corrected with the survey's calibration, when the filter ran on that
+    /// (else on the run's odometry as logged).
+    pub calibrated_odometry: Option<&'a [StampedPose]>,
     /// The surveyed landmarks.
     pub landmarks: &'a [Landmark],
     /// The surveyed walls.
@@ -910,8 +911,8 @@ pub fn log_localization(recorder: &Recorder, scene: &LocalizeScene<'_>) -> Resul
         ("odometry", &scene.run.odometry, [230, 80, 60]),
         ("localized", &r.trajectory, [60, 200, 90]),
     ];
-    if !std::ptr::eq(scene.odometry, scene.run.odometry.as_slice()) {
-        lines.push(("odometry_calibrated", scene.odometry, [240, 180, 40]));
+    if let Some(calibrated) = scene.calibrated_odometry {
+        lines.push(("odometry_calibrated", calibrated, [240, 180, 40]));
     }
     if let Some(gt) = &scene.run.ground_truth {
         lines.push(("ground_truth", gt, [200, 200, 200]));
@@ -1015,7 +1016,8 @@ pub fn log_localization(recorder: &Recorder, scene: &LocalizeScene<'_>) -> Resul
             "metrics/position_error_m/localized",
             &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
         )?;
-        if let Some(o) = pose_at(scene.odometry, p.t_s) {
+        let tracked = scene.calibrated_odometry.unwrap_or(&scene.run.odometry);
+        if let Some(o) = pose_at(tracked, p.t_s) {
             rec.log(
                 "metrics/position_error_m/odometry",
                 &rerun::Scalars::single((o.x - gt.x).hypot(o.y - gt.y)),

@@ -177,7 +177,7 @@ impl Localize {
                 &stereotag::viz::LocalizeScene {
                     run: &run,
                     world: world.as_ref(),
-                    odometry: &odometry,
+                    calibrated_odometry: calibration.is_some().then_some(&*odometry),
                     landmarks: &landmarks,
                     walls: &walls,
                     sightings: &sightings,

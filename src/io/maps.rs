@@ -337,16 +337,18 @@ pub fn load_walls_csv(path: &Path) -> Result<Vec<WallSegment>, IoError> {
         }
         let mut v = [0.0; 8];
         for (k, (field, name)) in fields.iter().zip(&names).enumerate() {
+            let count = *name == "readings";
             v[k] = field
                 .parse::<f64>()
                 .ok()
-                .filter(|x| x.is_finite() && (*name != "readings" || x.fract() == 0.0 && *x >= 0.0))
+                .filter(|x| x.is_finite() && (!count || x.fract() == 0.0 && *x >= 0.0))
                 .ok_or_else(|| {
-                    IoError::line(
-                        path,
-                        line_no,
-                        format!("{name}: `{field}` is not a finite number"),
-                    )
+                    let what = if count {
+                        "a whole number"
+                    } else {
+                        "a finite number"
+                    };
+                    IoError::line(path, line_no, format!("{name}: `{field}` is not {what}"))
                 })?;
         }
         walls.push(WallSegment {
