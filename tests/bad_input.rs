@@ -438,8 +438,8 @@ fn localize_names_a_bad_landmarks_file() {
     let survey_dir = tmp.path().join("survey");
     std::fs::create_dir_all(&survey_dir).unwrap();
     let out = tmp.path().join("loc");
-    let localize = || {
-        stereotag(&[
+    let localize_with = |extra: &[&str]| {
+        let mut args = vec![
             "localize",
             "--survey",
             survey_dir.to_str().unwrap(),
@@ -447,8 +447,11 @@ fn localize_names_a_bad_landmarks_file() {
             run.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
-        ])
+        ];
+        args.extend_from_slice(extra);
+        stereotag(&args)
     };
+    let localize = || localize_with(&[]);
     for (landmarks, says) in [
         (
             "{\"landmarks\": [{\"id\": 1, \"family\": \"tag36h11\"}]}",
@@ -490,17 +493,7 @@ fn localize_names_a_bad_landmarks_file() {
     std::fs::remove_file(survey_dir.join("walls_corrected.csv")).unwrap();
     let config = tmp.path().join("fuse.yaml");
     std::fs::write(&config, "sonar_sigma_m: -0.01\n").unwrap();
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        survey_dir.to_str().unwrap(),
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-    ]);
+    let (code, err) = localize_with(&["--config", config.to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("fuse.yaml") && err.contains("sonar_sigma_m"),
