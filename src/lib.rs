@@ -27,6 +27,7 @@ pub mod sonar;
 pub mod stereo;
 mod subpixel;
 pub mod tags;
+mod tagquads;
 #[cfg(feature = "rerun")]
 pub mod viz;
 pub mod wallmap;
