@@ -8,7 +8,7 @@ use std::path::Path;
 use stereotag::geometry::Pose2;
 use stereotag::render::{render_pair, RenderConfig, Renderer};
 use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
-use stereotag::tags::{CDetector, DetectorConfig, TagDetector};
+use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
 
 fn visual(c: &mut Criterion) {
     let world =
@@ -51,7 +51,23 @@ fn visual(c: &mut Criterion) {
             })
         });
     }
+    let mut kornia = KorniaDetector::new(DetectorConfig::default()).expect("kornia detector");
+    group.bench_function("stereotag_band_and_triangulate_kornia", |b| {
+        b.iter(|| {
+            let (l, r) = detect_pair(&mut kornia, &pair.left, &pair.right).unwrap();
+            black_box(triangulate_tags(
+                &rig,
+                &rect,
+                &l,
+                &r,
+                Some(0.16),
+                &StereoConfig::default(),
+            ))
+        })
+    });
     group.finish();
+
+    test_photos(c);
 
     let mut group = c.benchmark_group("render");
     group.sample_size(10);
@@ -70,6 +86,57 @@ fn visual(c: &mut Criterion) {
                         .render(&world.world, pose, &RenderConfig::default())
                         .unwrap(),
                 )
+            })
+        });
+    }
+    group.finish();
+}
+
+/// The C library's own test photos at its regression settings (decimate 1, no edge
+/// refinement): the C library, kornia-apriltag's own pipeline, and kornia's segmentation with
+/// our quad stage, all three photos per iteration.
+fn test_photos(c: &mut Criterion) {
+    let dir = Path::new("../shared/data/apriltag_test");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        eprintln!("skipping the test-photo group: {} not found", dir.display());
+        return;
+    };
+    let mut paths: Vec<_> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
+        .collect();
+    paths.sort();
+    let photos: Vec<_> = paths
+        .iter()
+        .map(|p| stereotag::io::load_gray(p).expect("test photo"))
+        .collect();
+    let settings = DetectorConfig {
+        decimate: 1,
+        refine_edges: false,
+        subpixel: false,
+        ..DetectorConfig::default()
+    };
+    let mut group = c.benchmark_group("apriltag_test_photos");
+    let detectors: [(&str, Box<dyn TagDetector>); 3] = [
+        (
+            "apriltag_c (reference)",
+            Box::new(CDetector::new(settings.clone()).expect("C detector")),
+        ),
+        (
+            "kornia_library",
+            Box::new(KorniaDetector::library(settings.clone()).expect("kornia")),
+        ),
+        (
+            "kornia_with_our_quad_stage",
+            Box::new(KorniaDetector::new(settings).expect("kornia")),
+        ),
+    ];
+    for (name, mut detector) in detectors {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                for photo in &photos {
+                    black_box(detector.detect(photo).unwrap());
+                }
             })
         });
     }

@@ -26,8 +26,8 @@ pub mod sim;
 pub mod sonar;
 pub mod stereo;
 mod subpixel;
-pub mod tags;
 mod tagquads;
+pub mod tags;
 #[cfg(feature = "rerun")]
 pub mod viz;
 pub mod wallmap;

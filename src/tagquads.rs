@@ -20,7 +20,7 @@ use image::GrayImage;
 use kornia_apriltag::family::TagFamily as Family;
 use kornia_apriltag::utils::Pixel;
 use rayon::prelude::*;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 /// The C library's quad-fit settings (`apriltag_detector_create`'s defaults).
 const MAX_NMAXIMA: usize = 10;
@@ -96,8 +96,8 @@ pub(crate) fn detect(
     };
     let src = kornia_image::Image::<u8, 1>::from_size_slice(size, small.as_raw())
         .map_err(|e| e.to_string())?;
-    let mut bin =
-        kornia_image::Image::<Pixel, 1>::from_size_val(size, Pixel::Skip).map_err(|e| e.to_string())?;
+    let mut bin = kornia_image::Image::<Pixel, 1>::from_size_val(size, Pixel::Skip)
+        .map_err(|e| e.to_string())?;
     let mut tiles = kornia_apriltag::threshold::TileMinMax::new(size, 4);
     kornia_apriltag::threshold::adaptive_threshold_with_split(
         &src,
@@ -113,7 +113,11 @@ pub(crate) fn detect(
     let levels: Vec<u8> = bin.as_slice().iter().map(|&p| p as u8).collect();
     let clusters = gradient_clusters(&levels, w, h, &mut uf);
 
-    let mut tag_width = families.iter().map(|f| f.width_at_border).min().unwrap_or(3) as i32;
+    let mut tag_width = families
+        .iter()
+        .map(|f| f.width_at_border)
+        .min()
+        .unwrap_or(3) as i32;
     if decimate > 1 {
         tag_width /= decimate as i32;
     }
@@ -124,9 +128,7 @@ pub(crate) fn detect(
     let mut quads: Vec<Quad> = clusters
         .into_par_iter()
         .filter(|c| c.len() >= MIN_CLUSTER_PIXELS && c.len() <= max_cluster)
-        .filter_map(|mut c| {
-            fit_quad(&small, &mut c, tag_width, normal_border, reversed_border)
-        })
+        .filter_map(|mut c| fit_quad(&small, &mut c, tag_width, normal_border, reversed_border))
         .collect();
     if decimate > 1 {
         for q in &mut quads {
@@ -162,64 +164,122 @@ fn decimate_image(image: &GrayImage, factor: usize) -> GrayImage {
     GrayImage::from_raw(sw as u32, sh as u32, out).unwrap_or_default()
 }
 
+/// A pixel that takes part in no cluster (skipped, or in a component under [`MIN_COMPONENT`]).
+const NO_COMPONENT: u32 = u32::MAX;
+
 /// Boundary points between every pair of adjacent black and white components of at least
-/// [`MIN_COMPONENT`] pixels, grouped by the pair (`do_gradient_clusters`), in scan order.
+/// [`MIN_COMPONENT`] pixels, grouped by the pair (`do_gradient_clusters`), each cluster's
+/// points in scan order; row strips in parallel, joined in row order.
 fn gradient_clusters(
     bin: &[u8],
     w: usize,
     h: usize,
     uf: &mut kornia_apriltag::union_find::UnionFind,
 ) -> Vec<Vec<Pt>> {
-    let mut map: HashMap<u64, Vec<Pt>> = HashMap::new();
-    for y in 1..h.saturating_sub(1) {
-        let mut connected_last = false;
-        for x in 1..w - 1 {
-            let v0 = bin[y * w + x];
-            if v0 == 127 {
-                connected_last = false;
-                continue;
+    let comps: Vec<u32> = (0..w * h)
+        .map(|i| {
+            if bin[i] == 127 {
+                return NO_COMPONENT;
             }
-            let rep0 = uf.get_representative(y * w + x);
-            if uf.get_set_size(rep0) < MIN_COMPONENT {
-                connected_last = false;
-                continue;
+            let rep = uf.get_representative(i);
+            if uf.get_set_size(rep) < MIN_COMPONENT {
+                NO_COMPONENT
+            } else {
+                rep as u32
             }
-            let mut conn = |dx: i32, dy: i32, uf: &mut kornia_apriltag::union_find::UnionFind| {
-                let i1 = ((y as i32 + dy) as usize) * w + (x as i32 + dx) as usize;
-                let v1 = bin[i1];
-                if v0 as u32 + v1 as u32 != 255 {
-                    return false;
+        })
+        .collect();
+    let rows: Vec<usize> = (1..h.saturating_sub(1)).collect();
+    let strips: Vec<StripClusters> = rows
+        .par_chunks(32)
+        .map(|ys| {
+            let mut strip = StripClusters::default();
+            for &y in ys {
+                strip.scan_row(bin, &comps, w, y);
+            }
+            strip
+        })
+        .collect();
+    let mut index: FxHashMap<u64, usize> = FxHashMap::default();
+    let mut clusters: Vec<(u64, Vec<Pt>)> = Vec::new();
+    for strip in strips {
+        for (id, pts) in strip.clusters {
+            match index.get(&id) {
+                Some(&k) => clusters[k].1.extend_from_slice(&pts),
+                None => {
+                    index.insert(id, clusters.len());
+                    clusters.push((id, pts));
                 }
-                let rep1 = uf.get_representative(i1);
-                if uf.get_set_size(rep1) < MIN_COMPONENT {
-                    return false;
-                }
-                let id = if rep0 < rep1 {
-                    ((rep1 as u64) << 32) + rep0 as u64
-                } else {
-                    ((rep0 as u64) << 32) + rep1 as u64
-                };
-                let g = v1 as i16 - v0 as i16;
-                map.entry(id).or_default().push(Pt {
-                    x: (2 * x as i32 + dx) as u16,
-                    y: (2 * y as i32 + dy) as u16,
-                    gx: dx as i16 * g,
-                    gy: dy as i16 * g,
-                    slope: 0.0,
-                });
-                true
-            };
-            conn(1, 0, uf);
-            conn(0, 1, uf);
-            if !connected_last {
-                conn(-1, 1, uf);
             }
-            connected_last = conn(1, 1, uf);
         }
     }
-    let mut clusters: Vec<(u64, Vec<Pt>)> = map.into_iter().collect();
     clusters.sort_unstable_by_key(|(id, _)| *id);
     clusters.into_iter().map(|(_, c)| c).collect()
+}
+
+/// The clusters of a strip of rows.
+#[derive(Default)]
+struct StripClusters {
+    index: FxHashMap<u64, usize>,
+    clusters: Vec<(u64, Vec<Pt>)>,
+    /// The last cluster added to (most points follow the previous one's).
+    last: Option<(u64, usize)>,
+}
+
+impl StripClusters {
+    fn scan_row(&mut self, bin: &[u8], comps: &[u32], w: usize, y: usize) {
+        let mut connected_last = false;
+        for x in 1..w - 1 {
+            let c0 = comps[y * w + x];
+            if c0 == NO_COMPONENT {
+                connected_last = false;
+                continue;
+            }
+            let v0 = bin[y * w + x];
+            let mut conn = |dx: i32, dy: i32| {
+                let i1 = (y as i32 + dy) as usize * w + (x as i32 + dx) as usize;
+                let v1 = bin[i1];
+                let c1 = comps[i1];
+                if v0 as u32 + v1 as u32 != 255 || c1 == NO_COMPONENT {
+                    return false;
+                }
+                let (lo, hi) = if c0 < c1 { (c0, c1) } else { (c1, c0) };
+                let g = v1 as i16 - v0 as i16;
+                self.push(
+                    ((hi as u64) << 32) + lo as u64,
+                    Pt {
+                        x: (2 * x as i32 + dx) as u16,
+                        y: (2 * y as i32 + dy) as u16,
+                        gx: dx as i16 * g,
+                        gy: dy as i16 * g,
+                        slope: 0.0,
+                    },
+                );
+                true
+            };
+            conn(1, 0);
+            conn(0, 1);
+            if !connected_last {
+                conn(-1, 1);
+            }
+            connected_last = conn(1, 1);
+        }
+    }
+
+    fn push(&mut self, id: u64, p: Pt) {
+        let k = match self.last {
+            Some((last, k)) if last == id => k,
+            _ => {
+                let k = *self.index.entry(id).or_insert_with(|| {
+                    self.clusters.push((id, Vec::new()));
+                    self.clusters.len() - 1
+                });
+                self.last = Some((id, k));
+                k
+            }
+        };
+        self.clusters[k].1.push(p);
+    }
 }
 
 /// Cumulative weighted moments of the points, for line fits over any run of them.
@@ -317,7 +377,7 @@ fn fit_line(m: &[Moments], i0: usize, i1: usize) -> ([f64; 4], f64, f64) {
 
 /// The C library's angle sort (`ptsort`): its sorting networks and merge, so points of equal
 /// angle keep the order the C library gives them.
-fn ptsort(pts: &mut [Pt]) {
+fn ptsort(pts: &mut [Pt], scratch: &mut [Pt]) {
     let before = |a: &Pt, b: &Pt| a.slope - b.slope;
     let maybe_swap = |p: &mut [Pt], a: usize, b: usize| {
         if before(&p[a], &p[b]) > 0.0 {
@@ -344,17 +404,30 @@ fn ptsort(pts: &mut [Pt]) {
             return;
         }
         5 => {
-            for (a, b) in [(0, 1), (3, 4), (1, 2), (0, 1), (0, 3), (2, 4), (1, 2), (2, 3), (1, 2)] {
+            for (a, b) in [
+                (0, 1),
+                (3, 4),
+                (1, 2),
+                (0, 1),
+                (0, 3),
+                (2, 4),
+                (1, 2),
+                (2, 3),
+                (1, 2),
+            ] {
                 maybe_swap(pts, a, b);
             }
             return;
         }
         _ => {}
     }
-    let mut tmp = pts.to_vec();
+    // The C library merges from a copy of the two sorted halves; `scratch` holds the copy
+    // (and, past it, the halves' own scratch): twice `pts`' length and a little more.
+    let (tmp, rest) = scratch.split_at_mut(sz);
+    tmp.copy_from_slice(pts);
     let (a, b) = tmp.split_at_mut(sz / 2);
-    ptsort(a);
-    ptsort(b);
+    ptsort(a, rest);
+    ptsort(b, rest);
     let (mut i, mut j, mut out) = (0, 0, 0);
     while i < a.len() && j < b.len() {
         if before(&a[i], &b[j]) < 0.0 {
@@ -522,7 +595,8 @@ fn fit_quad(
     if (reversed && !reversed_border) || (!reversed && !normal_border) {
         return None;
     }
-    ptsort(cluster);
+    let mut scratch = vec![cluster[0]; 2 * cluster.len() + 64];
+    ptsort(cluster, &mut scratch);
     let m = line_fit_moments(cluster, im);
     let idx = segment_maxima(&m)?;
     let mut lines = [[0.0; 4]; 4];
@@ -553,7 +627,8 @@ fn fit_quad(
         let (a, b, c) = (p[i], p[(i + 1) & 3], p[(i + 2) & 3]);
         let (dx1, dy1) = (b[0] - a[0], b[1] - a[1]);
         let (dx2, dy2) = (c[0] - b[0], c[1] - b[1]);
-        let cos = (dx1 * dx2 + dy1 * dy2) / ((dx1 * dx1 + dy1 * dy1) * (dx2 * dx2 + dy2 * dy2)).sqrt();
+        let cos =
+            (dx1 * dx2 + dy1 * dy2) / ((dx1 * dx1 + dy1 * dy1) * (dx2 * dx2 + dy2 * dy2)).sqrt();
         if cos > cos_critical || cos < -cos_critical || dx1 * dy2 < dy1 * dx2 {
             return None;
         }
@@ -633,10 +708,12 @@ fn refine_edges(im: &GrayImage, quad: &mut Quad, decimate: f64) {
             let max_steps = 2 * steps_per_unit * range as i64 + 1;
             for step in 0..max_steps {
                 let nn = -range + step_length * step as f64;
-                let Some(g1) = sample(x0 + (nn + 1.0) * nx - 0.5, y0 + (nn + 1.0) * ny - 0.5) else {
+                let Some(g1) = sample(x0 + (nn + 1.0) * nx - 0.5, y0 + (nn + 1.0) * ny - 0.5)
+                else {
                     continue;
                 };
-                let Some(g2) = sample(x0 + (nn - 1.0) * nx - 0.5, y0 + (nn - 1.0) * ny - 0.5) else {
+                let Some(g2) = sample(x0 + (nn - 1.0) * nx - 0.5, y0 + (nn - 1.0) * ny - 0.5)
+                else {
                     continue;
                 };
                 if g1 < g2 {
@@ -835,7 +912,12 @@ fn decode_quad(im: &GrayImage, quad: &Quad, families: &[Family], sharpening: f64
 }
 
 /// Reads the code inside the quad (`quad_decode`): (id, bits corrected, rotation, margin).
-fn decode(im: &GrayImage, family: &Family, h: &[f64; 9], sharpening: f64) -> Option<(u32, u32, u32, f64)> {
+fn decode(
+    im: &GrayImage,
+    family: &Family,
+    h: &[f64; 9],
+    sharpening: f64,
+) -> Option<(u32, u32, u32, f64)> {
     let wb = family.width_at_border as f64;
     let patterns: [(f64, f64, f64, f64, bool); 8] = [
         (-0.5, 0.5, 0.0, 1.0, true),
@@ -881,7 +963,8 @@ fn decode(im: &GrayImage, family: &Family, h: &[f64; 9], sharpening: f64) -> Opt
     }
     let tw = family.total_width;
     let min_coord = (family.width_at_border as i64 - tw as i64) / 2;
-    let cell = |bx: i8, by: i8| ((by as i64 - min_coord) * tw as i64 + bx as i64 - min_coord) as usize;
+    let cell =
+        |bx: i8, by: i8| ((by as i64 - min_coord) * tw as i64 + bx as i64 - min_coord) as usize;
     let mut values = vec![0.0f64; tw * tw];
     for i in 0..family.nbits {
         let (bx, by) = (family.bit_x[i], family.bit_y[i]);
@@ -994,10 +1077,11 @@ fn quads_overlap(a: &[[f64; 2]; 4], b: &[[f64; 2]; 4]) -> bool {
             let (p, q) = (poly[i], poly[(i + 1) % 4]);
             let n = [q[1] - p[1], p[0] - q[0]];
             let proj = |s: &[[f64; 2]; 4]| {
-                s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                    let d = n[0] * v[0] + n[1] * v[1];
-                    (lo.min(d), hi.max(d))
-                })
+                s.iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                        let d = n[0] * v[0] + n[1] * v[1];
+                        (lo.min(d), hi.max(d))
+                    })
             };
             let (alo, ahi) = proj(a);
             let (blo, bhi) = proj(b);
@@ -1035,7 +1119,10 @@ mod tests {
                 slope: ((i * 7919) % 37) as f32,
             })
             .collect();
-        ptsort(&mut pts);
+        let mut scratch = pts.clone();
+        scratch.extend_from_slice(&pts);
+        scratch.extend_from_slice(&pts[..10]);
+        ptsort(&mut pts, &mut scratch);
         assert!(pts.windows(2).all(|w| w[0].slope <= w[1].slope));
     }
 
@@ -1043,7 +1130,10 @@ mod tests {
     fn homography_maps_the_tag_square_onto_the_quad() {
         let p = [[10.0, 20.0], [50.0, 22.0], [48.0, 60.0], [12.0, 58.0]];
         let h = homography(&p).unwrap();
-        for (t, q) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].iter().zip(p) {
+        for (t, q) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .iter()
+            .zip(p)
+        {
             let r = project(&h, t.0, t.1);
             assert!(dist(r, q) < 1e-9, "{r:?} vs {q:?}");
         }
@@ -1058,4 +1148,3 @@ mod tests {
         assert!(!quads_overlap(&a, &c));
     }
 }
-

@@ -146,8 +146,11 @@ impl TagFamily {
             .map(|i| {
                 let (x, y) = (i % tw, i / tw);
                 if family.reversed_border {
-                    // Reversed-border families: the outer ring is black, white inside it.
-                    !(x == 0 || y == 0 || x == tw - 1 || y == tw - 1)
+                    // Reversed-border families: black but for a one-cell white ring around the
+                    // corner square (`apriltag_to_image`); the code bits lie inside and outside
+                    // it.
+                    let ring = |v: i64| v == border || v == tw - 1 - border;
+                    (ring(x) && inside(y)) || (ring(y) && inside(x))
                 } else {
                     !(inside(x) && inside(y))
                 }
@@ -310,7 +313,7 @@ enum KorniaStages {
     /// Our port of the C library's quad fit and decoding, with kornia's family tables.
     OwnQuads(Vec<kornia_apriltag::family::TagFamily>),
     /// kornia-apriltag's decoder end to end; built on the first image (sized by it).
-    Library(Option<(u32, u32, kornia_apriltag::AprilTagDecoder)>),
+    Library(Option<(u32, u32, Box<kornia_apriltag::AprilTagDecoder>)>),
 }
 
 impl KorniaDetector {
@@ -400,7 +403,7 @@ impl KorniaDetector {
             };
             let dec = kornia_apriltag::AprilTagDecoder::new(cfg, size)
                 .map_err(|e| TagError::Kornia(e.to_string()))?;
-            *decoder = Some((w, h, dec));
+            *decoder = Some((w, h, Box::new(dec)));
         }
         let Some((_, _, dec)) = decoder.as_mut() else {
             return Ok(Vec::new());
@@ -829,3 +832,77 @@ fn refine_on(
 
 /// Smallest cell, pixels, for [`refine_corners`] (the border must hold the fitting band).
 const MIN_CELL_PX: f64 = 1.5;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Tags of `family` drawn 9 px per cell on a grey page, slightly sheared so no edge is
+    /// axis-aligned, with their ids.
+    fn page(family: TagFamily, ids: &[u32]) -> GrayImage {
+        let cell = 9.0;
+        let mut img = GrayImage::from_pixel(640, 200, image::Luma([170]));
+        for (k, &id) in ids.iter().enumerate() {
+            let t = family.code_image(id).unwrap();
+            let n = t.total_cells as f64;
+            let (ox, oy) = (30.0 + 200.0 * k as f64, 40.0);
+            for y in 0..200u32 {
+                for x in 0..640u32 {
+                    // Inverse of a small shear and rotation about the tag's origin.
+                    let (dx, dy) = (x as f64 + 0.5 - ox, y as f64 + 0.5 - oy);
+                    let (u, v) = (dx + 0.08 * dy, dy - 0.05 * dx);
+                    let (cx, cy) = ((u / cell).floor(), (v / cell).floor());
+                    if cx >= 0.0 && cy >= 0.0 && cx < n && cy < n {
+                        let white = t.white[cy as usize * t.total_cells + cx as usize];
+                        img.put_pixel(x, y, image::Luma([if white { 235 } else { 25 }]));
+                    }
+                }
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn both_backends_read_every_family_alike() {
+        let config = |family| DetectorConfig {
+            families: vec![family],
+            decimate: 1,
+            subpixel: false,
+            ..DetectorConfig::default()
+        };
+        for family in [
+            TagFamily::Tag36h11,
+            TagFamily::Tag25h9,
+            TagFamily::Tag16h5,
+            TagFamily::TagStandard41h12,
+        ] {
+            let last = family.code_count() as u32 - 1;
+            let ids = [0, 7, last];
+            let img = page(family, &ids);
+            let c = CDetector::new(config(family))
+                .unwrap()
+                .detect(&img)
+                .unwrap();
+            let k = KorniaDetector::new(config(family))
+                .unwrap()
+                .detect(&img)
+                .unwrap();
+            let found: Vec<u32> = k.iter().map(|d| d.id).collect();
+            assert_eq!(found, ids, "{}: kornia found {found:?}", family.name());
+            assert_eq!(c.len(), k.len(), "{}", family.name());
+            for (a, b) in c.iter().zip(&k) {
+                assert_eq!((a.id, a.hamming), (b.id, b.hamming));
+                for i in 0..4 {
+                    let e = (a.corners_px[i][0] - b.corners_px[i][0])
+                        .hypot(a.corners_px[i][1] - b.corners_px[i][1]);
+                    assert!(
+                        e < 1e-3,
+                        "{} tag {}: corner {i} {e} px apart",
+                        family.name(),
+                        a.id
+                    );
+                }
+            }
+        }
+    }
+}

@@ -10,27 +10,38 @@ use stereotag::geometry::Pose2;
 use stereotag::io::{load_rig, load_world};
 use stereotag::render::{visible_tags, RenderConfig, Renderer};
 use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
-use stereotag::tags::{CDetector, DetectorConfig};
+use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
 
 fn percentile(v: &mut [f64], q: f64) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
+/// Decimate 1, and our sub-pixel edge fit on top (the default); NO_SUBPIXEL=1 measures the
+/// backend's corners alone.
+fn settings() -> DetectorConfig {
+    DetectorConfig {
+        decimate: 1,
+        subpixel: std::env::var("NO_SUBPIXEL").is_err(),
+        ..DetectorConfig::default()
+    }
+}
+
 #[test]
 fn two_hundred_rendered_pairs() {
+    measure(&mut CDetector::new(settings()).unwrap());
+}
+
+#[test]
+fn two_hundred_rendered_pairs_kornia_backend() {
+    measure(&mut KorniaDetector::new(settings()).unwrap());
+}
+
+fn measure(det: &mut dyn TagDetector) {
     let w = load_world(&common::sample("office/world.yaml")).unwrap();
     let rig = load_rig(&common::root().join("calibration/rigs/default.yaml")).unwrap();
     let rect = rig.rectify();
     let renderer = Renderer::new(&rig);
-    let mut det = CDetector::new(DetectorConfig {
-        decimate: 1,
-        // Our sub-pixel edge fit on top (the default); NO_SUBPIXEL=1 measures the C library's
-        // corners alone.
-        subpixel: std::env::var("NO_SUBPIXEL").is_err(),
-        ..DetectorConfig::default()
-    })
-    .unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2026);
     let (mut pairs, mut found, mut wrong_ids) = (0, 0, 0);
     let (mut corner_err, mut rel_err, mut nees, mut disp_err, mut depth_err) =
@@ -96,7 +107,7 @@ fn two_hundred_rendered_pairs() {
         } else {
             (pair.left.clone(), pair.right.clone())
         };
-        let (l, r) = detect_pair(&mut det, &bl, &br).unwrap();
+        let (l, r) = detect_pair(det, &bl, &br).unwrap();
         let visible: Vec<u32> = pair.tags.iter().map(|t| t.id).collect();
         wrong_ids += l
             .iter()
@@ -167,9 +178,10 @@ fn two_hundred_rendered_pairs() {
     );
     let med_rel = percentile(&mut rel_err, 0.5);
     eprintln!(
-        "{pairs} pairs: recall {recall:.3}, wrong ids {wrong_ids}, corner error median {med_c:.3} px p95 {p95_c:.3} px, \
+        "{}: {pairs} pairs: recall {recall:.3}, wrong ids {wrong_ids}, corner error median {med_c:.3} px p95 {p95_c:.3} px, \
          3D error median {:.3}% of range, sigma_d {sigma_d:.3} px, centre depth error / stereo bound \
          (RMS) {bound_ratio:.2}, mean NEES {mean_nees:.2}",
+        det.name(),
         100.0 * med_rel
     );
     let (n_s, n_p) = (stereo_normal_err.len(), pnp_normal_err.len());

@@ -7,8 +7,11 @@ use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, Ta
 /// Which detector.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 pub enum Backend {
-    /// kornia-apriltag (pure Rust).
+    /// kornia-apriltag's segmentation and tag families with our port of the C library's quad
+    /// fit and decoding (pure Rust).
     Kornia,
+    /// kornia-apriltag's own pipeline end to end (for comparison: it finds fewer tags).
+    KorniaLibrary,
     /// The AprilRobotics C library.
     ApriltagC,
 }
@@ -80,6 +83,7 @@ impl Detect {
         };
         let mut detector: Box<dyn TagDetector> = match self.backend {
             Backend::Kornia => Box::new(KorniaDetector::new(config)?),
+            Backend::KorniaLibrary => Box::new(KorniaDetector::library(config)?),
             Backend::ApriltagC => Box::new(CDetector::new(config)?),
         };
         // Read every image first, so a bad file fails before anything is printed.

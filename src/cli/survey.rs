@@ -350,6 +350,7 @@ pub(crate) fn detect_run(
     let make = || -> Result<Box<dyn TagDetector + Send>, stereotag::tags::TagError> {
         Ok(match job.backend {
             Backend::Kornia => Box::new(KorniaDetector::new(config.clone())?),
+            Backend::KorniaLibrary => Box::new(KorniaDetector::library(config.clone())?),
             Backend::ApriltagC => Box::new(CDetector::new(config.clone())?),
         })
     };
