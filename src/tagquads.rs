@@ -90,6 +90,12 @@ pub(crate) fn detect(
     if w < 4 || h < 4 || families.is_empty() {
         return Ok(Vec::new());
     }
+    // Boundary points are kept at twice the resolution in 16 bits, as the C library's.
+    if w >= 32768 || h >= 32768 {
+        return Err(format!(
+            "a {w} x {h} image (after decimation) is too large: at most 32767 px either way"
+        ));
+    }
     let size = kornia_image::ImageSize {
         width: w,
         height: h,
@@ -143,6 +149,9 @@ pub(crate) fn detect(
         .flat_map_iter(|mut quad| {
             if settings.refine_edges {
                 refine_edges(image, &mut quad, decimate as f64);
+            }
+            if !quad.p.iter().flatten().all(|v| v.is_finite()) {
+                return Vec::new();
             }
             decode_quad(image, &quad, families, settings.sharpening)
         })
@@ -1136,6 +1145,32 @@ mod tests {
         {
             let r = project(&h, t.0, t.1);
             assert!(dist(r, q) < 1e-9, "{r:?} vs {q:?}");
+        }
+    }
+
+    #[test]
+    fn tiny_flat_and_noisy_images_give_no_tags_and_no_panic() {
+        let families = [kornia_apriltag::family::TagFamily::tag36_h11().unwrap()];
+        let mut seed = 12345u32;
+        for (w, h) in [(1, 1), (3, 3), (4, 4), (5, 700), (700, 5), (64, 48)] {
+            for decimate in [1, 2, 3] {
+                for refine_edges in [false, true] {
+                    let settings = QuadSettings {
+                        decimate,
+                        refine_edges,
+                        sharpening: 0.25,
+                        min_contrast: 5,
+                    };
+                    let noisy = GrayImage::from_fn(w, h, |_, _| {
+                        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                        image::Luma([(seed >> 16) as u8])
+                    });
+                    for img in [GrayImage::new(w, h), noisy] {
+                        let found = detect(&img, &families, &settings).unwrap();
+                        assert!(found.is_empty(), "{w} x {h}");
+                    }
+                }
+            }
         }
     }
 

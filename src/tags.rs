@@ -1,5 +1,8 @@
-//! AprilTag detection behind one trait, with two real backends: kornia-apriltag (pure Rust) and
-//! the AprilRobotics C library (through the `apriltag` crate, built from the source it ships).
+//! AprilTag detection behind one trait, with two real backends: kornia-apriltag (pure Rust: its
+//! threshold, connected components and tag families, with our Rust port of the C library's quad
+//! fit and decoding on top, `tagquads`; [`KorniaDetector::library`] runs kornia-apriltag's own
+//! pipeline) and the AprilRobotics C library (through the `apriltag` crate, built from the
+//! source in `vendor/`).
 //!
 //! **Pixel convention.** Both libraries report positions with the top-left pixel's *corner* at
 //! (0, 0) (its centre at (0.5, 0.5)): on rendered tags seen head-on, kornia's corners sit
@@ -10,8 +13,9 @@
 //! Both return corners in the C library's order: counter-clockwise around the tag in the image
 //! as the tag is drawn (tag frame corners (-1, 1), (1, 1), (1, -1), (-1, -1) with y up; in the
 //! image the first corner is the tag's bottom-left), pixel centres at integer coordinates.
-//! kornia-apriltag lists its quad corners in image order; [`KorniaDetector`] projects the tag
-//! corners through kornia's (rotation-aware) homography to get the C order (checked against the C library's own test photos in `tests/detect_real.rs`).
+//! kornia-apriltag's own pipeline lists its quad corners in image order; there we project the
+//! tag corners through its (rotation-aware) homography to get the C order (checked against the
+//! C library's own test photos in `tests/detect_real.rs`).
 
 use image::GrayImage;
 use serde::Serialize;

@@ -1,6 +1,7 @@
-//! Any image file through every detector: the AprilTag C library, kornia-apriltag, the AprilGrid
-//! detector with its corner refinement, and the chessboard detector. Images are read as the
-//! commands read them (`io::load_gray`); big ones are skipped to keep runs fast.
+//! Any image file through every detector: the AprilTag C library, the kornia backend (our quad
+//! stage) and kornia-apriltag's own pipeline, the AprilGrid detector with its corner refinement,
+//! and the chessboard detector. Images are read as the commands read them (`io::load_gray`); big
+//! ones are skipped to keep runs fast.
 #![no_main]
 mod common;
 
@@ -18,6 +19,16 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
         let _ = c.detect(&image);
     }
     if let Ok(mut k) = KorniaDetector::new(DetectorConfig::default()) {
+        let _ = k.detect(&image);
+    }
+    let decimate_1 = DetectorConfig {
+        decimate: 1,
+        ..DetectorConfig::default()
+    };
+    if let Ok(mut k) = KorniaDetector::new(decimate_1.clone()) {
+        let _ = k.detect(&image);
+    }
+    if let Ok(mut k) = KorniaDetector::library(decimate_1) {
         let _ = k.detect(&image);
     }
     if let Ok(mut grid) = AprilGridMultiScale::new() {
