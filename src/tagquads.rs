@@ -81,6 +81,9 @@ pub(crate) fn detect(
     settings: &QuadSettings,
 ) -> Result<Vec<Decoded>, String> {
     let decimate = settings.decimate.max(1) as usize;
+    if image.width() < 4 || image.height() < 4 {
+        return Ok(Vec::new());
+    }
     let small = if decimate > 1 {
         decimate_image(image, decimate)
     } else {
@@ -1152,7 +1155,17 @@ mod tests {
     fn tiny_flat_and_noisy_images_give_no_tags_and_no_panic() {
         let families = [kornia_apriltag::family::TagFamily::tag36_h11().unwrap()];
         let mut seed = 12345u32;
-        for (w, h) in [(1, 1), (3, 3), (4, 4), (5, 700), (700, 5), (64, 48)] {
+        for (w, h) in [
+            (0, 0),
+            (0, 9),
+            (9, 0),
+            (1, 1),
+            (3, 3),
+            (4, 4),
+            (5, 700),
+            (700, 5),
+            (64, 48),
+        ] {
             for decimate in [1, 2, 3] {
                 for refine_edges in [false, true] {
                     let settings = QuadSettings {

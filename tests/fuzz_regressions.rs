@@ -48,3 +48,24 @@ fn a_huge_tag_id_in_a_corner_csv_is_a_located_error() {
         "{err}"
     );
 }
+
+/// image_detect: a PBM header saying 0 x 4 decoded to an empty image, and the kornia backend's
+/// decimation (`1 + (w - 1) / f`) underflowed. Images under 4 px either way now find nothing.
+#[test]
+fn an_empty_image_finds_no_tag() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("image.bin");
+    std::fs::write(&path, b"\x50\x34\x30\x0c\x34\x0c\x42\x73\x73\x73\x73\x0e\x80\x00\x00\x00\x00\x00\x00\x73\x00\x00\x00\x00\x73\xff\xff\xd8\xff\xd0\x31").unwrap();
+    let image = stereotag::io::load_gray(&path).unwrap();
+    assert_eq!(image.width() * image.height(), 0);
+    for decimate in [1, 2] {
+        let config = DetectorConfig {
+            decimate,
+            ..DetectorConfig::default()
+        };
+        let mut k = KorniaDetector::new(config.clone()).unwrap();
+        assert!(k.detect(&image).unwrap().is_empty());
+        let mut c = CDetector::new(config).unwrap();
+        assert!(c.detect(&image).unwrap().is_empty());
+    }
+}
