@@ -14,6 +14,7 @@ use crate::grid::{
 use crate::hough::{classify_features, features_offline, features_online, Accumulator, Feature};
 use crate::run::{PoseSource, RunDataset, StampedPose};
 use crate::score::{score_features, score_map, FeatureScore, MapScore};
+use crate::sonar::PlacedReading;
 use crate::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
 use crate::tags::{TagDetector, TagError};
 use crate::wallmap::{map_walls, WallSegment};
@@ -175,6 +176,8 @@ pub struct Survey {
     pub raw: SonarMap,
     /// The online filter.
     pub online: OnlineResult,
+    /// The counting grid with the online filter's poses: the map the robot had while it ran.
+    pub online_map: OccupancyMap,
     /// The offline pose graph.
     pub offline: OfflineResult,
     /// The grid and features rebuilt from the offline trajectory.
@@ -201,6 +204,9 @@ pub fn survey(
     let online = run_online(&run.odometry, sightings, &raw.features_online, fuse);
     timings_s.insert("fuse_online".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
+    let online_map = counting_map(run, &run.placed_readings(&online.trajectory), mapping)?;
+    timings_s.insert("map_online".into(), t.elapsed().as_secs_f64());
+    let t = Instant::now();
     let mut offline = run_offline(&run.odometry, sightings, &online, fuse);
     timings_s.insert("fuse_offline".into(), t.elapsed().as_secs_f64());
     if fuse.hold_tail_to_walls {
@@ -226,11 +232,24 @@ pub fn survey(
     Ok(Survey {
         raw,
         online,
+        online_map,
         offline,
         corrected,
         landmarks,
         timings_s,
     })
+}
+
+/// The counting grid of sonar readings of the run, placed.
+fn counting_map(
+    run: &RunDataset,
+    readings: &[PlacedReading],
+    mapping: &MappingConfig,
+) -> Result<OccupancyMap, PipelineError> {
+    let layout = &run.meta.robot.sonar;
+    let mut grid = CountingGrid::new(mapping.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+    grid.insert_all(readings);
+    Ok(grid.map())
 }
 
 /// [`hold_tail_to_walls`] on a survey's offline trajectory, with the walls of the readings placed
@@ -260,14 +279,8 @@ fn hold_tail(
         .into_iter()
         .filter(|r| r.t_s <= last_t)
         .collect();
-    let mut grid = CountingGrid::new(mapping.grid.clone(), layout.cone_rad, layout.max_range_m)?;
-    grid.insert_all(&readings);
-    let walls = map_walls(
-        &readings,
-        0.5 * layout.cone_rad,
-        layout.max_range_m,
-        &grid.map(),
-    );
+    let grid = counting_map(run, &readings, mapping)?;
+    let walls = map_walls(&readings, 0.5 * layout.cone_rad, layout.max_range_m, &grid);
     offline.trajectory = hold_tail_to_walls(
         &run.odometry,
         &offline.trajectory,
@@ -293,6 +306,12 @@ pub fn score_survey(
     mapping: &MappingConfig,
 ) -> Result<BTreeMap<String, f64>, PipelineError> {
     let mut m = score_sonar_map(&survey.raw, run, world).metrics();
+    let online = score_map(&survey.online_map, world);
+    m.insert(
+        "map_online.occupied_precision".into(),
+        online.occupied_precision,
+    );
+    m.insert("map_online.occupied_recall".into(), online.occupied_recall);
     let corrected = score_map(&survey.corrected.counting, world);
     m.insert(
         "map_corrected.occupied_precision".into(),

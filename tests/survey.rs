@@ -119,6 +119,8 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
     for f in [
         "map.pgm",
         "map.yaml",
+        "map_online.pgm",
+        "map_online.yaml",
         "map_corrected.pgm",
         "map_corrected.yaml",
         "corners.csv",

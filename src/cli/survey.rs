@@ -444,6 +444,8 @@ fn write_outputs(
     io::save_map_png(&dir.path("map.png"), &s.raw.counting)?;
     io::save_accumulator_png(&dir.path("hough.png"), &s.raw.accumulator)?;
     io::save_features_csv(&dir.path("corners.csv"), &s.raw.features_offline)?;
+    io::save_ros_map(&dir.path(""), "map_online", &s.online_map)?;
+    io::save_map_png(&dir.path("map_online.png"), &s.online_map)?;
     io::save_ros_map(&dir.path(""), "map_corrected", &s.corrected.counting)?;
     io::save_map_png(&dir.path("map_corrected.png"), &s.corrected.counting)?;
     io::save_accumulator_png(&dir.path("hough_corrected.png"), &s.corrected.accumulator)?;
@@ -561,8 +563,15 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
         get("map_corrected.occupied_precision"),
         get("map_corrected.occupied_recall"),
     ) {
+        let online = match (
+            get("map_online.occupied_precision"),
+            get("map_online.occupied_recall"),
+        ) {
+            (Some(p), Some(r)) => format!(", online {p:.3}/{r:.3}"),
+            _ => String::new(),
+        };
         tracing::info!(
-            "map occupied precision/recall: raw {p0:.3}/{r0:.3}, corrected {p1:.3}/{r1:.3}{}",
+            "map occupied precision/recall: raw {p0:.3}/{r0:.3}{online}, corrected {p1:.3}/{r1:.3}{}",
             match (
                 get("map_ground_truth.occupied_precision"),
                 get("map_ground_truth.occupied_recall")
