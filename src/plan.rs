@@ -8,12 +8,17 @@
 //! [`PlanConfig::min_separation_m`] from the ones chosen, until the covered share reaches
 //! [`PlanConfig::target_coverage`] or [`PlanConfig::max_tags`] are chosen. The predicted error at a
 //! free cell is the sighting error plus the odometry drift over the way to the nearest covered
-//! cell and back (breadth-first distance over free cells).
+//! cell and back (the shortest way over free cells). Where the map's straight walls (`walls.csv`
+//! from `stereotag map`) are within sonar range, `localize` holds the robot to them between
+//! sightings, and the drift there is [`PlanConfig::wall_drift_m_per_m`] instead of
+//! [`PlanConfig::drift_m_per_m`].
 
 use crate::grid::OccupancyMap;
 use crate::hough::{Feature, FeatureKind};
+use crate::wallmap::WallSegment;
 use serde::Serialize;
-use std::collections::VecDeque;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
 
 /// Settings of the planner. Defaults say where they come from.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -28,11 +33,21 @@ pub struct PlanConfig {
     /// Smallest distance between two chosen tags, metres (ours: 1.5 m; two tags in one corner
     /// add little).
     pub min_separation_m: f64,
-    /// Position error right after a sighting, metres (ours: 2 cm, the surveyed landmark error).
+    /// Position error right after a sighting, metres (ours: 3 cm: `localize` on office runs
+    /// against a survey whose landmarks are 4 cm off, in the first half metre after a sighting,
+    /// 3.0-4.1 cm RMS).
     pub sighting_error_m: f64,
-    /// Odometry drift per metre travelled, metres (ours: 3 cm/m, about what the office runs show
-    /// for the simulated wheel errors between sightings).
+    /// Drift per metre travelled between sightings, metres, with the odometry corrected by the
+    /// survey's calibration as `localize` does (ours: 0.7 cm/m: `localize --no-walls` on office
+    /// runs, 4 cm RMS up to 4 m after a sighting, 6.7 cm at 4-8 m, 10-13 cm at 8-16 m).
     pub drift_m_per_m: f64,
+    /// Drift per metre where a mapped wall is within [`Self::wall_range_m`] (ours: 0.15 cm/m:
+    /// `localize` against the office walls, 3.0-3.7 cm RMS up to 8 m after a sighting, 4.5-5.5
+    /// cm at 8-16 m).
+    pub wall_drift_m_per_m: f64,
+    /// A wall holds the robot when it is at most this far in front of the wall's face, metres
+    /// (ours: 1.5 m, inside the sonars' 2.1 m).
+    pub wall_range_m: f64,
     /// Cells this close to a corner do not block its view, metres (its own walls).
     pub corner_clearance_m: f64,
 }
@@ -44,8 +59,10 @@ impl Default for PlanConfig {
             target_coverage: 0.9,
             max_tags: 12,
             min_separation_m: 1.5,
-            sighting_error_m: 0.02,
-            drift_m_per_m: 0.03,
+            sighting_error_m: 0.03,
+            drift_m_per_m: 0.007,
+            wall_drift_m_per_m: 0.0015,
+            wall_range_m: 1.5,
             corner_clearance_m: 0.3,
         }
     }
@@ -79,14 +96,127 @@ pub struct Plan {
     pub predicted_error_mean_m: f64,
     /// Predicted position error, worst free cell, metres.
     pub predicted_error_max_m: f64,
+    /// Share of the free cells a mapped wall holds (0 without walls).
+    pub wall_held: f64,
+    /// Free cells with no way over free cells to a covered one (left out of the mean and worst).
+    pub unreachable_cells: usize,
+    /// Predicted error at each cell of the map (row-major), metres; `None` where the cell is not
+    /// free or no covered cell can be reached.
+    #[serde(skip)]
+    pub cell_errors_m: Vec<Option<f64>>,
 }
 
-/// Plans tag positions over a map's corners.
-pub fn plan_tags(map: &OccupancyMap, corners: &[Feature], config: &PlanConfig) -> Plan {
+/// The predicted localisation error with a set of tags.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Prediction {
+    /// Share of the free cells that see at least one tag.
+    pub coverage: f64,
+    /// Free cells of the map.
+    pub free_cells: usize,
+    /// Predicted position error, mean over free cells, metres.
+    pub predicted_error_mean_m: f64,
+    /// Predicted position error, worst free cell, metres.
+    pub predicted_error_max_m: f64,
+    /// Share of the free cells a mapped wall holds (0 without walls).
+    pub wall_held: f64,
+    /// Free cells with no way over free cells to a covered one (left out of the mean and worst).
+    pub unreachable_cells: usize,
+    /// Predicted error at each cell of the map (row-major), metres; `None` where the cell is not
+    /// free or no covered cell can be reached.
+    #[serde(skip)]
+    pub cell_errors_m: Vec<Option<f64>>,
+}
+
+/// Predicts the localisation error with tags at `tags` (x, y in metres), the map's `walls`
+/// holding the robot where they are in range (none: tags only).
+pub fn predict(
+    map: &OccupancyMap,
+    tags: &[[f64; 2]],
+    walls: &[WallSegment],
+    config: &PlanConfig,
+) -> Prediction {
     let g = &map.geometry;
-    let free: Vec<usize> = (0..g.width * g.height)
+    let free = free_cells(map);
+    let mut seen = vec![false; g.width * g.height];
+    for t in tags {
+        let tag = Feature {
+            x_m: t[0],
+            y_m: t[1],
+            votes: 0,
+            sightings: 0,
+            spread_deg: 0.0,
+            kind: FeatureKind::Corner,
+        };
+        for i in covered(map, &tag, &free, config) {
+            seen[i] = true;
+        }
+    }
+    let n_seen = free.iter().filter(|&&i| seen[i]).count();
+    let held = wall_held(map, &free, walls, config);
+    let field = predicted_error(map, &free, &seen, &held, config);
+    Prediction {
+        coverage: share(n_seen, free.len()),
+        free_cells: free.len(),
+        predicted_error_mean_m: field.mean_m,
+        predicted_error_max_m: field.max_m,
+        wall_held: share(held.iter().filter(|&&h| h).count(), free.len()),
+        unreachable_cells: field.unreachable,
+        cell_errors_m: field.cells_m,
+    }
+}
+
+fn share(n: usize, of: usize) -> f64 {
+    if of == 0 {
+        0.0
+    } else {
+        n as f64 / of as f64
+    }
+}
+
+fn free_cells(map: &OccupancyMap) -> Vec<usize> {
+    let g = &map.geometry;
+    (0..g.width * g.height)
         .filter(|&i| map.is_free(i))
-        .collect();
+        .collect()
+}
+
+/// Whether each cell (indexed like the map) lies in front of a wall's face, within
+/// [`PlanConfig::wall_range_m`] of it and between its ends.
+fn wall_held(
+    map: &OccupancyMap,
+    free: &[usize],
+    walls: &[WallSegment],
+    config: &PlanConfig,
+) -> Vec<bool> {
+    let g = &map.geometry;
+    let mut held = vec![false; g.width * g.height];
+    for &i in free {
+        let (x, y) = g.centre(i % g.width, i / g.width);
+        held[i] = walls.iter().any(|w| {
+            let n = w.normal();
+            let d = n[0] * x + n[1] * y - w.offset_m;
+            let along = [-n[1], n[0]];
+            let s = along[0] * x + along[1] * y;
+            let (a, b) = (
+                along[0] * w.from_m[0] + along[1] * w.from_m[1],
+                along[0] * w.to_m[0] + along[1] * w.to_m[1],
+            );
+            d > 0.0 && d <= config.wall_range_m && s >= a.min(b) && s <= a.max(b)
+        });
+    }
+    held
+}
+
+/// Plans tag positions over a map's corners; the map's `walls` (may be empty) enter the
+/// predicted error.
+pub fn plan_tags(
+    map: &OccupancyMap,
+    corners: &[Feature],
+    walls: &[WallSegment],
+    config: &PlanConfig,
+) -> Plan {
+    let g = &map.geometry;
+    let free = free_cells(map);
     let covers: Vec<Vec<usize>> = corners
         .iter()
         .map(|c| covered(map, c, &free, config))
@@ -122,17 +252,17 @@ pub fn plan_tags(map: &OccupancyMap, corners: &[Feature], config: &PlanConfig) -
             new_cells: n,
         });
     }
-    let (mean, max) = predicted_error(map, &free, &seen, config);
+    let held = wall_held(map, &free, walls, config);
+    let field = predicted_error(map, &free, &seen, &held, config);
     Plan {
         tags: chosen,
-        coverage: if free.is_empty() {
-            0.0
-        } else {
-            covered_count as f64 / free.len() as f64
-        },
+        coverage: share(covered_count, free.len()),
         free_cells: free.len(),
-        predicted_error_mean_m: mean,
-        predicted_error_max_m: max,
+        predicted_error_mean_m: field.mean_m,
+        predicted_error_max_m: field.max_m,
+        wall_held: share(held.iter().filter(|&&h| h).count(), free.len()),
+        unreachable_cells: field.unreachable,
+        cell_errors_m: field.cells_m,
     }
 }
 
@@ -169,23 +299,50 @@ fn line_of_sight(
     })
 }
 
-/// Mean and worst predicted error over the free cells: breadth-first distance to a covered cell.
+/// The predicted error over a map.
+struct ErrorField {
+    /// Per cell, metres (`None`: not free, or no covered cell reachable).
+    cells_m: Vec<Option<f64>>,
+    /// Mean over the reachable free cells.
+    mean_m: f64,
+    /// Worst reachable free cell.
+    max_m: f64,
+    /// Free cells from which no covered cell can be reached.
+    unreachable: usize,
+}
+
+/// The predicted error at each free cell: the sighting error plus the drift over the shortest way
+/// from a covered cell, there and back (Dijkstra over free cells, each step costing its length
+/// times the drift where it lands).
 fn predicted_error(
     map: &OccupancyMap,
     free: &[usize],
     seen: &[bool],
+    held: &[bool],
     config: &PlanConfig,
-) -> (f64, f64) {
+) -> ErrorField {
     let g = &map.geometry;
-    let mut dist = vec![usize::MAX; seen.len()];
-    let mut queue = VecDeque::new();
+    // Drift in micrometres, so the heap orders integers.
+    let mut drift = vec![u64::MAX; seen.len()];
+    let mut heap = BinaryHeap::new();
     for &i in free {
         if seen[i] {
-            dist[i] = 0;
-            queue.push_back(i);
+            drift[i] = 0;
+            heap.push(Reverse((0u64, i)));
         }
     }
-    while let Some(i) = queue.pop_front() {
+    let step_um = |j: usize| {
+        let rate = if held[j] {
+            config.wall_drift_m_per_m
+        } else {
+            config.drift_m_per_m
+        };
+        (rate * g.resolution_m * 1e6).round() as u64
+    };
+    while let Some(Reverse((d, i))) = heap.pop() {
+        if d > drift[i] {
+            continue;
+        }
         let (col, row) = (i % g.width, i / g.width);
         let neighbours = [
             (col > 0).then(|| i - 1),
@@ -194,30 +351,39 @@ fn predicted_error(
             (row + 1 < g.height).then(|| i + g.width),
         ];
         for j in neighbours.into_iter().flatten() {
-            if dist[j] == usize::MAX && map.is_free(j) {
-                dist[j] = dist[i] + 1;
-                queue.push_back(j);
+            if map.is_free(j) {
+                let dj = d + step_um(j);
+                if dj < drift[j] {
+                    drift[j] = dj;
+                    heap.push(Reverse((dj, j)));
+                }
             }
         }
     }
-    if free.is_empty() {
-        return (f64::NAN, f64::NAN);
+    let mut cells_m = vec![None; seen.len()];
+    let mut unreachable = 0;
+    for &i in free {
+        if drift[i] == u64::MAX {
+            unreachable += 1;
+        } else {
+            cells_m[i] = Some(config.sighting_error_m + 2.0 * drift[i] as f64 * 1e-6);
+        }
     }
-    let errors: Vec<f64> = free
-        .iter()
-        .map(|&i| {
-            // A cell no tag can be reached from: the whole map's extent as the distance.
-            let cells = if dist[i] == usize::MAX {
-                g.width + g.height
-            } else {
-                dist[i]
-            };
-            config.sighting_error_m + config.drift_m_per_m * 2.0 * cells as f64 * g.resolution_m
-        })
-        .collect();
-    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-    let max = errors.iter().copied().fold(0.0, f64::max);
-    (mean, max)
+    let errors: Vec<f64> = cells_m.iter().flatten().copied().collect();
+    let (mean_m, max_m) = if errors.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        (
+            errors.iter().sum::<f64>() / errors.len() as f64,
+            errors.iter().copied().fold(0.0, f64::max),
+        )
+    };
+    ErrorField {
+        cells_m,
+        mean_m,
+        max_m,
+        unreachable,
+    }
 }
 
 #[cfg(test)]
@@ -273,6 +439,7 @@ mod tests {
         let plan = plan_tags(
             &map,
             &corners,
+            &[],
             &PlanConfig {
                 capture_range_m: 6.0,
                 ..PlanConfig::default()
@@ -286,12 +453,82 @@ mod tests {
         assert!(plan.predicted_error_max_m < 0.1);
     }
 
+    /// The inner faces of the two rooms' outer walls.
+    fn room_walls() -> Vec<WallSegment> {
+        let face = |normal_rad: f64, offset_m: f64, from_m: [f64; 2], to_m: [f64; 2]| WallSegment {
+            normal_rad,
+            offset_m,
+            from_m,
+            to_m,
+            readings: 50,
+            rms_m: 0.01,
+        };
+        use std::f64::consts::{FRAC_PI_2, PI};
+        vec![
+            // Bottom (y = 0.1, seen from above), top (y = 4.1), left (x = 0.1), right (x = 8.1).
+            face(FRAC_PI_2, 0.1, [0.1, 0.1], [8.1, 0.1]),
+            face(3.0 * FRAC_PI_2, -4.1, [8.1, 4.1], [0.1, 4.1]),
+            face(0.0, 0.1, [0.1, 4.1], [0.1, 0.1]),
+            face(PI, -8.1, [8.1, 0.1], [8.1, 4.1]),
+        ]
+    }
+
+    #[test]
+    fn walls_in_range_hold_the_robot_and_lower_the_predicted_error() {
+        let (map, _) = two_rooms();
+        let config = PlanConfig {
+            capture_range_m: 1.5,
+            ..PlanConfig::default()
+        };
+        let tags = [[0.15, 0.15]];
+        let bare = predict(&map, &tags, &[], &config);
+        let walled = predict(&map, &tags, &room_walls(), &config);
+        assert_eq!(bare.wall_held, 0.0);
+        // Everything within 1.5 m of an outer wall: the rooms but for a band through the middle.
+        assert!(walled.wall_held > 0.7, "{}", walled.wall_held);
+        assert_eq!(walled.coverage, bare.coverage);
+        // The drift part (above the sighting error) at least halves.
+        let drift = |p: &Prediction| p.predicted_error_mean_m - config.sighting_error_m;
+        assert!(
+            drift(&walled) < 0.5 * drift(&bare),
+            "{} vs {}",
+            walled.predicted_error_mean_m,
+            bare.predicted_error_mean_m
+        );
+        // Seen cells keep the sighting error; the far room is reached through the door.
+        assert_eq!(bare.unreachable_cells, 0);
+        let far = map.geometry.cell_of(7.5, 3.5).unwrap();
+        let far = bare.cell_errors_m[far.1 * map.geometry.width + far.0].unwrap();
+        let near = map.geometry.cell_of(0.5, 0.5).unwrap();
+        let near = bare.cell_errors_m[near.1 * map.geometry.width + near.0].unwrap();
+        assert_eq!(near, config.sighting_error_m);
+        assert!(far > near + 2.0 * config.drift_m_per_m * 7.0, "{far}");
+    }
+
+    #[test]
+    fn a_pocket_no_tag_can_reach_is_counted_apart() {
+        let (mut map, _) = two_rooms();
+        // Wall off a 4 x 6-cell pocket in the right room's top corner.
+        let w = map.geometry.width;
+        let pocket_walls = (34..41)
+            .map(|row| (76, row))
+            .chain((77..81).map(|col| (col, 34)));
+        for (col, row) in pocket_walls {
+            map.occupancy[row * w + col] = Some(1.0);
+        }
+        let config = PlanConfig::default();
+        let p = predict(&map, &[[0.15, 0.15]], &[], &config);
+        assert_eq!(p.unreachable_cells, 4 * 6);
+        assert!(p.predicted_error_max_m.is_finite() && p.predicted_error_max_m < 1.0);
+    }
+
     #[test]
     fn a_short_range_leaves_cells_uncovered_and_predicts_more_error() {
         let (map, corners) = two_rooms();
         let wide = plan_tags(
             &map,
             &corners,
+            &[],
             &PlanConfig {
                 capture_range_m: 6.0,
                 ..PlanConfig::default()
@@ -300,6 +537,7 @@ mod tests {
         let short = plan_tags(
             &map,
             &corners,
+            &[],
             &PlanConfig {
                 capture_range_m: 2.0,
                 ..PlanConfig::default()
