@@ -229,3 +229,46 @@ fn kornia_library_pipeline_uses_the_c_corner_order() {
         );
     }
 }
+
+/// The kornia backend (kornia-apriltag's segmentation, our port of the C library's quad stage)
+/// finds what the C library finds, corner for corner, at every decimation and edge setting.
+#[test]
+fn kornia_backend_matches_the_c_library_at_every_setting() {
+    let Some(dir) = common::shared("apriltag_test") else {
+        return;
+    };
+    let mut photos: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
+        .collect();
+    photos.sort();
+    for decimate in [1, 2, 3] {
+        for refine_edges in [false, true] {
+            let config = DetectorConfig {
+                decimate,
+                refine_edges,
+                subpixel: false,
+                ..DetectorConfig::default()
+            };
+            let mut c = CDetector::new(config.clone()).unwrap();
+            let mut k = KorniaDetector::new(config).unwrap();
+            for photo in &photos {
+                let image = stereotag::io::load_gray(photo).unwrap();
+                let (cd, kd) = (c.detect(&image).unwrap(), k.detect(&image).unwrap());
+                assert_eq!(cd.len(), kd.len(), "{photo:?} decimate {decimate}");
+                for (a, b) in cd.iter().zip(&kd) {
+                    assert_eq!((a.id, a.hamming), (b.id, b.hamming));
+                    for i in 0..4 {
+                        let e = (a.corners_px[i][0] - b.corners_px[i][0])
+                            .hypot(a.corners_px[i][1] - b.corners_px[i][1]);
+                        assert!(
+                            e < 0.01,
+                            "{photo:?} decimate {decimate} refine {refine_edges}: corner {i} {e} px apart"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
