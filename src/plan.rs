@@ -88,22 +88,9 @@ pub struct ProposedTag {
 pub struct Plan {
     /// Proposed tags, in the order chosen.
     pub tags: Vec<ProposedTag>,
-    /// Share of the free cells that see at least one proposed tag.
-    pub coverage: f64,
-    /// Free cells of the map.
-    pub free_cells: usize,
-    /// Predicted position error, mean over free cells, metres.
-    pub predicted_error_mean_m: f64,
-    /// Predicted position error, worst free cell, metres.
-    pub predicted_error_max_m: f64,
-    /// Share of the free cells a mapped wall holds (0 without walls).
-    pub wall_held: f64,
-    /// Free cells with no way over free cells to a covered one (left out of the mean and worst).
-    pub unreachable_cells: usize,
-    /// Predicted error at each cell of the map (row-major), metres; `None` where the cell is not
-    /// free or no covered cell can be reached.
-    #[serde(skip)]
-    pub cell_errors_m: Vec<Option<f64>>,
+    /// Coverage and predicted error with them.
+    #[serde(flatten)]
+    pub prediction: Prediction,
 }
 
 /// The predicted localisation error with a set of tags.
@@ -151,9 +138,20 @@ pub fn predict(
             seen[i] = true;
         }
     }
+    prediction(map, &free, &seen, walls, config)
+}
+
+/// Coverage and predicted error, given which cells see a tag.
+fn prediction(
+    map: &OccupancyMap,
+    free: &[usize],
+    seen: &[bool],
+    walls: &[WallSegment],
+    config: &PlanConfig,
+) -> Prediction {
     let n_seen = free.iter().filter(|&&i| seen[i]).count();
-    let held = wall_held(map, &free, walls, config);
-    let field = predicted_error(map, &free, &seen, &held, config);
+    let held = wall_held(map, free, walls, config);
+    let field = predicted_error(map, free, seen, &held, config);
     Prediction {
         coverage: share(n_seen, free.len()),
         free_cells: free.len(),
@@ -252,17 +250,9 @@ pub fn plan_tags(
             new_cells: n,
         });
     }
-    let held = wall_held(map, &free, walls, config);
-    let field = predicted_error(map, &free, &seen, &held, config);
     Plan {
         tags: chosen,
-        coverage: share(covered_count, free.len()),
-        free_cells: free.len(),
-        predicted_error_mean_m: field.mean_m,
-        predicted_error_max_m: field.max_m,
-        wall_held: share(held.iter().filter(|&&h| h).count(), free.len()),
-        unreachable_cells: field.unreachable,
-        cell_errors_m: field.cells_m,
+        prediction: prediction(map, &free, &seen, walls, config),
     }
 }
 
@@ -449,8 +439,12 @@ mod tests {
         assert_eq!(plan.tags.len(), 2, "{plan:?}");
         let left = plan.tags.iter().filter(|t| t.x_m < 4.1).count();
         assert_eq!(left, 1, "{plan:?}");
-        assert!(plan.coverage > 0.9, "{}", plan.coverage);
-        assert!(plan.predicted_error_max_m < 0.1);
+        assert!(
+            plan.prediction.coverage > 0.9,
+            "{}",
+            plan.prediction.coverage
+        );
+        assert!(plan.prediction.predicted_error_max_m < 0.1);
     }
 
     /// The inner faces of the two rooms' outer walls.
@@ -543,7 +537,7 @@ mod tests {
                 ..PlanConfig::default()
             },
         );
-        assert!(short.coverage < wide.coverage);
-        assert!(short.predicted_error_mean_m > wide.predicted_error_mean_m);
+        assert!(short.prediction.coverage < wide.prediction.coverage);
+        assert!(short.prediction.predicted_error_mean_m > wide.prediction.predicted_error_mean_m);
     }
 }

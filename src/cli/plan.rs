@@ -84,17 +84,17 @@ impl PlanArgs {
         }
         let plan = plan_tags(&map, &corners, &walls, &config);
         let json = serde_json::json!({ "plan": plan, "config": config });
-        self.write(&json, &map, &plan.cell_errors_m)?;
+        self.write(&json, &map, &plan.prediction.cell_errors_m)?;
         tracing::info!(
             "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
             plan.tags.len(),
             corners.len(),
-            100.0 * plan.coverage,
-            plan.free_cells,
-            100.0 * plan.wall_held,
+            100.0 * plan.prediction.coverage,
+            plan.prediction.free_cells,
+            100.0 * plan.prediction.wall_held,
             walls.len(),
-            plan.predicted_error_mean_m,
-            plan.predicted_error_max_m
+            plan.prediction.predicted_error_mean_m,
+            plan.prediction.predicted_error_max_m
         );
         for t in &plan.tags {
             tracing::info!(
