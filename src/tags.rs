@@ -5,9 +5,9 @@
 //! source in `vendor/`).
 //!
 //! **Pixel convention.** Both libraries report positions with the top-left pixel's *corner* at
-//! (0, 0) (its centre at (0.5, 0.5)): on rendered tags seen head-on, kornia's corners sit
-//! +0.500 / +0.502 px and the C library's +0.446 / +0.454 px from the truth in the centre
-//! convention. We shift both by [`LIBRARY_TO_CENTRE_PX`] so every position we report has the
+//! (0, 0) (its centre at (0.5, 0.5)): on rendered tags seen head-on, kornia-apriltag's own
+//! pipeline's corners sit +0.500 / +0.502 px and the C library's (and so our kornia backend's)
+//! +0.446 / +0.454 px from the truth in the centre convention. We shift both by [`LIBRARY_TO_CENTRE_PX`] so every position we report has the
 //! top-left pixel's centre at (0, 0), as OpenCV, Kalibr and DESIGN.md.
 //!
 //! Both return corners in the C library's order: counter-clockwise around the tag in the image
