@@ -6,8 +6,8 @@
 //! - its decoder samples each bit cell half a pixel off the C library 3.4.5's (kornia's bilinear
 //!   `value_for_pixel` has no `- 0.5`), which flips bits on small tags: handed the C library's
 //!   own 47 quads, kornia's decoder reads 41;
-//! - its quad fit (single precision, its own cluster order) puts 5 of the 47 quads 0.6 to 6 px
-//!   from the C library's.
+//! - its quad fit puts 5 of the 47 quads 0.6 to 6 px from the C library's (not traced further:
+//!   it fits in single precision and orders cluster points its own way).
 //!
 //! So [`detect`] keeps kornia-apriltag's adaptive threshold, connected components, tag families
 //! and code tables, and does the rest as the C library 3.4.5 does (`apriltag_quad_thresh.c`,
