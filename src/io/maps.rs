@@ -161,7 +161,7 @@ pub fn save_accumulator_png(path: &Path, acc: &Accumulator) -> Result<(), IoErro
 
 /// Writes `corners.csv`: `x_m,y_m,votes,kind`.
 pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoError> {
-    let mut s = String::from("x_m,y_m,votes,kind\n");
+    let mut s = format!("{FEATURES_HEADER}\n");
     for f in features {
         let _ = writeln!(
             s,
@@ -206,77 +206,102 @@ pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
     })
 }
 
-/// Reads `corners.csv` (`x_m,y_m,votes,kind`), naming the line of the first bad row.
-pub fn load_features_csv(path: &Path) -> Result<Vec<Feature>, IoError> {
-    let text = read_text(path)?;
+/// Header of `corners.csv`.
+const FEATURES_HEADER: &str = "x_m,y_m,votes,kind";
+
+/// The rows of a small CSV file with a fixed header: (line number, trimmed fields), blank lines
+/// skipped; a wrong header or field count names the line.
+fn csv_rows<'a>(
+    path: &Path,
+    text: &'a str,
+    header: &str,
+) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
     let mut lines = text.lines().enumerate();
     match lines.next() {
-        Some((_, header)) if header.trim() == "x_m,y_m,votes,kind" => {}
+        Some((_, first)) if first.trim() == header => {}
         _ => {
             return Err(IoError::line(
                 path,
                 1,
-                "expected the header `x_m,y_m,votes,kind`",
+                format!("expected the header `{header}`"),
             ))
         }
     }
-    let mut features = Vec::new();
-    for (i, line) in lines {
-        let line_no = i as u64 + 1;
-        if line.trim().is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        let [x, y, votes, kind] = fields.as_slice() else {
-            return Err(IoError::line(
-                path,
-                line_no,
-                format!(
-                    "expected 4 fields (x_m,y_m,votes,kind), found {}",
-                    fields.len()
-                ),
-            ));
-        };
-        let number = |s: &str, what: &str| -> Result<f64, IoError> {
-            s.parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| {
-                    IoError::line(
-                        path,
-                        line_no,
-                        format!("{what}: `{s}` is not a finite number"),
-                    )
-                })
-        };
-        let kind = match *kind {
-            "corner" => crate::hough::FeatureKind::Corner,
-            "edge" => crate::hough::FeatureKind::Edge,
-            "unknown" => crate::hough::FeatureKind::Unknown,
-            other => {
+    let n = header.split(',').count();
+    lines
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(i, line)| {
+            let line_no = i as u64 + 1;
+            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+            if fields.len() != n {
                 return Err(IoError::line(
                     path,
                     line_no,
-                    format!("kind: `{other}`, expected corner, edge or unknown"),
-                ))
+                    format!("expected {n} fields ({header}), found {}", fields.len()),
+                ));
             }
-        };
-        features.push(Feature {
-            x_m: number(x, "x_m")?,
-            y_m: number(y, "y_m")?,
-            votes: votes.parse().map_err(|_| {
-                IoError::line(
-                    path,
-                    line_no,
-                    format!("votes: `{votes}` is not a whole number"),
-                )
-            })?,
-            sightings: 1,
-            spread_deg: 0.0,
-            kind,
-        });
-    }
-    Ok(features)
+            Ok((line_no, fields))
+        })
+        .collect()
+}
+
+/// A CSV field that must be a finite number.
+fn finite_field(path: &Path, line_no: u64, name: &str, s: &str) -> Result<f64, IoError> {
+    s.parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| {
+            IoError::line(
+                path,
+                line_no,
+                format!("{name}: `{s}` is not a finite number"),
+            )
+        })
+}
+
+/// A CSV field that must be a whole number.
+fn count_field(path: &Path, line_no: u64, name: &str, s: &str) -> Result<usize, IoError> {
+    s.parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && v.fract() == 0.0 && *v >= 0.0 && *v <= u32::MAX as f64)
+        .map(|v| v as usize)
+        .ok_or_else(|| {
+            IoError::line(
+                path,
+                line_no,
+                format!("{name}: `{s}` is not a whole number"),
+            )
+        })
+}
+
+/// Reads `corners.csv` (`x_m,y_m,votes,kind`), naming the line of the first bad row.
+pub fn load_features_csv(path: &Path) -> Result<Vec<Feature>, IoError> {
+    let text = read_text(path)?;
+    csv_rows(path, &text, FEATURES_HEADER)?
+        .into_iter()
+        .map(|(line_no, f)| {
+            let kind = match f[3] {
+                "corner" => crate::hough::FeatureKind::Corner,
+                "edge" => crate::hough::FeatureKind::Edge,
+                "unknown" => crate::hough::FeatureKind::Unknown,
+                other => {
+                    return Err(IoError::line(
+                        path,
+                        line_no,
+                        format!("kind: `{other}`, expected corner, edge or unknown"),
+                    ))
+                }
+            };
+            Ok(Feature {
+                x_m: finite_field(path, line_no, "x_m", f[0])?,
+                y_m: finite_field(path, line_no, "y_m", f[1])?,
+                votes: count_field(path, line_no, "votes", f[2])? as u32,
+                sightings: 1,
+                spread_deg: 0.0,
+                kind,
+            })
+        })
+        .collect()
 }
 
 /// Header of `walls.csv`.
@@ -305,60 +330,19 @@ pub fn save_walls_csv(path: &Path, walls: &[WallSegment]) -> Result<(), IoError>
 /// Reads `walls.csv`, naming the line of the first bad row.
 pub fn load_walls_csv(path: &Path) -> Result<Vec<WallSegment>, IoError> {
     let text = read_text(path)?;
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, header)) if header.trim() == WALLS_HEADER => {}
-        _ => {
-            return Err(IoError::line(
-                path,
-                1,
-                format!("expected the header `{WALLS_HEADER}`"),
-            ))
-        }
-    }
     let names: Vec<&str> = WALLS_HEADER.split(',').collect();
-    let mut walls = Vec::new();
-    for (i, line) in lines {
-        let line_no = i as u64 + 1;
-        if line.trim().is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if fields.len() != names.len() {
-            return Err(IoError::line(
-                path,
-                line_no,
-                format!(
-                    "expected {} fields ({WALLS_HEADER}), found {}",
-                    names.len(),
-                    fields.len()
-                ),
-            ));
-        }
-        let mut v = [0.0; 8];
-        for (k, (field, name)) in fields.iter().zip(&names).enumerate() {
-            let count = *name == "readings";
-            v[k] = field
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite() && (!count || x.fract() == 0.0 && *x >= 0.0))
-                .ok_or_else(|| {
-                    let what = if count {
-                        "a whole number"
-                    } else {
-                        "a finite number"
-                    };
-                    IoError::line(path, line_no, format!("{name}: `{field}` is not {what}"))
-                })?;
-        }
-        walls.push(WallSegment {
-            normal_rad: v[0],
-            offset_m: v[1],
-            from_m: [v[2], v[3]],
-            to_m: [v[4], v[5]],
-            readings: v[6] as usize,
-            rms_m: v[7],
-        });
-    }
-    Ok(walls)
+    csv_rows(path, &text, WALLS_HEADER)?
+        .into_iter()
+        .map(|(line_no, f)| {
+            let v = |k: usize| finite_field(path, line_no, names[k], f[k]);
+            Ok(WallSegment {
+                normal_rad: v(0)?,
+                offset_m: v(1)?,
+                from_m: [v(2)?, v(3)?],
+                to_m: [v(4)?, v(5)?],
+                readings: count_field(path, line_no, names[6], f[6])?,
+                rms_m: v(7)?,
+            })
+        })
+        .collect()
 }
