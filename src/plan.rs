@@ -126,15 +126,7 @@ pub fn predict(
     let free = free_cells(map);
     let mut seen = vec![false; g.width * g.height];
     for t in tags {
-        let tag = Feature {
-            x_m: t[0],
-            y_m: t[1],
-            votes: 0,
-            sightings: 0,
-            spread_deg: 0.0,
-            kind: FeatureKind::Corner,
-        };
-        for i in covered(map, &tag, &free, config) {
+        for i in covered(map, (t[0], t[1]), &free, config) {
             seen[i] = true;
         }
     }
@@ -217,7 +209,7 @@ pub fn plan_tags(
     let free = free_cells(map);
     let covers: Vec<Vec<usize>> = corners
         .iter()
-        .map(|c| covered(map, c, &free, config))
+        .map(|c| covered(map, (c.x_m, c.y_m), &free, config))
         .collect();
     let mut seen = vec![false; g.width * g.height];
     let mut chosen: Vec<ProposedTag> = Vec::new();
@@ -256,15 +248,15 @@ pub fn plan_tags(
     }
 }
 
-/// Free cells in range and in line of sight of a corner.
-fn covered(map: &OccupancyMap, c: &Feature, free: &[usize], config: &PlanConfig) -> Vec<usize> {
+/// Free cells in range and in line of sight of a tag at `at` (metres).
+fn covered(map: &OccupancyMap, at: (f64, f64), free: &[usize], config: &PlanConfig) -> Vec<usize> {
     let g = &map.geometry;
     free.iter()
         .copied()
         .filter(|&i| {
             let (x, y) = g.centre(i % g.width, i / g.width);
-            let d = (x - c.x_m).hypot(y - c.y_m);
-            d <= config.capture_range_m && line_of_sight(map, (x, y), (c.x_m, c.y_m), config)
+            let d = (x - at.0).hypot(y - at.1);
+            d <= config.capture_range_m && line_of_sight(map, (x, y), at, config)
         })
         .collect()
 }
