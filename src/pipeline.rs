@@ -91,9 +91,7 @@ pub fn map_trajectory(
     timings_s.insert("place_readings".into(), start.elapsed().as_secs_f64());
 
     let t = Instant::now();
-    let mut counting = CountingGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
-    counting.insert_all(&readings);
-    let counting = counting.map();
+    let counting = counting_map(run, &readings, config)?;
     timings_s.insert("grid_counting".into(), t.elapsed().as_secs_f64());
 
     let t = Instant::now();
