@@ -182,16 +182,11 @@ fn wall_held(
     let mut held = vec![false; g.width * g.height];
     for &i in free {
         let (x, y) = g.centre(i % g.width, i / g.width);
+        // The range a sonar facing the wall head-on would measure from here (a hair of cone:
+        // the beam's angle to the normal rounds to about 1e-16 rad).
         held[i] = walls.iter().any(|w| {
-            let n = w.normal();
-            let d = n[0] * x + n[1] * y - w.offset_m;
-            let along = [-n[1], n[0]];
-            let s = along[0] * x + along[1] * y;
-            let (a, b) = (
-                along[0] * w.from_m[0] + along[1] * w.from_m[1],
-                along[0] * w.to_m[0] + along[1] * w.to_m[1],
-            );
-            d > 0.0 && d <= config.wall_range_m && s >= a.min(b) && s <= a.max(b)
+            w.expected_range([x, y], w.normal_rad + std::f64::consts::PI, 1e-9, 0.0)
+                .is_some_and(|d| d <= config.wall_range_m)
         });
     }
     held
