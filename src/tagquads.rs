@@ -84,10 +84,10 @@ pub(crate) fn detect(
     if image.width() < 4 || image.height() < 4 {
         return Ok(Vec::new());
     }
-    let small = if decimate > 1 {
-        decimate_image(image, decimate)
+    let small: std::borrow::Cow<'_, GrayImage> = if decimate > 1 {
+        std::borrow::Cow::Owned(decimate_image(image, decimate))
     } else {
-        image.clone()
+        std::borrow::Cow::Borrowed(image)
     };
     let (w, h) = (small.width() as usize, small.height() as usize);
     if w < 4 || h < 4 || families.is_empty() {
