@@ -53,7 +53,13 @@ fn ratio(num: usize, den: usize) -> f64 {
     }
 }
 
-/// Cells crossed by a wall.
+/// Points this close below a cell boundary are taken to lie on it: 1 µm.
+const BOUNDARY_M: f64 = 1e-6;
+
+/// Cells crossed by a wall. A wall lying on a boundary between cells (the samples' walls at whole
+/// multiples of the cell size) is given to the cell above the boundary, as exact arithmetic would:
+/// without the nudge, rounding decides (16.0 m from an origin at -0.2 m is cell 80.99999999999999,
+/// from 0 it is 80).
 pub fn wall_cells(world: &World, g: &GridGeometry) -> Vec<bool> {
     let mut truth = vec![false; g.width * g.height];
     let step = 0.25 * g.resolution_m;
@@ -61,7 +67,7 @@ pub fn wall_cells(world: &World, g: &GridGeometry) -> Vec<bool> {
         let n = (w.segment.length() / step).ceil().max(1.0) as usize;
         for k in 0..=n {
             let p = w.segment.a + (w.segment.b - w.segment.a) * (k as f64 / n as f64);
-            if let Some((c, r)) = g.cell_of(p.x, p.y) {
+            if let Some((c, r)) = g.cell_of(p.x + BOUNDARY_M, p.y + BOUNDARY_M) {
                 truth[r * g.width + c] = true;
             }
         }
@@ -157,5 +163,55 @@ pub fn score_features(
         recall: ratio(found, reachable),
         features: features.len(),
         reachable_corners: reachable,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Pose2, Segment};
+    use crate::world::Wall;
+
+    fn one_wall(a: [f64; 2], b: [f64; 2]) -> World {
+        let wall = Wall {
+            segment: Segment {
+                a: Point2::new(a[0], a[1]),
+                b: Point2::new(b[0], b[1]),
+            },
+            height_m: 2.0,
+        };
+        World::new(
+            vec![wall],
+            vec![],
+            vec![],
+            vec![],
+            Pose2::new(1.0, 1.0, 0.0),
+        )
+    }
+
+    fn geometry(origin: f64) -> GridGeometry {
+        GridGeometry {
+            width: 100,
+            height: 100,
+            resolution_m: 0.2,
+            origin_m: [origin, origin],
+        }
+    }
+
+    #[test]
+    fn a_wall_on_a_cell_boundary_gets_the_same_cell_whatever_the_origin() {
+        // x = 16 m is a cell boundary with either origin; 16.2 / 0.2 rounds down to 80.99999...
+        let world = one_wall([16.0, 1.1], [16.0, 1.9]);
+        for origin in [0.0, -0.2] {
+            let g = geometry(origin);
+            let truth = wall_cells(&world, &g);
+            let row = ((1.5 - origin) / 0.2).floor() as usize;
+            let cols: Vec<f64> = (0..g.width)
+                .filter(|&c| truth[row * g.width + c])
+                .map(|c| origin + c as f64 * 0.2)
+                .collect();
+            assert_eq!(cols.len(), 1, "origin {origin}");
+            assert!((cols[0] - 16.0).abs() < 1e-9, "origin {origin}: {cols:?}");
+        }
     }
 }
