@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Survey figures over several seeds: simulate, render, survey (the demo's steps) for each seed and
-# print one row of report.json metrics per run, then the worst of each column.
+# print one row of report.json metrics per run (KEYS="a b ..." picks other report.json metrics).
 #   scripts/survey_seeds.sh [WORLD] [SEEDS...]     e.g. scripts/survey_seeds.sh samples/museum/world.yaml 1 2 3 4 5
 set -euo pipefail
 world=${1:-samples/office/world.yaml}
@@ -11,7 +11,7 @@ bin=${STEREOTAG:-${CARGO_TARGET_DIR:-target}/release/stereotag}
 [ -x "$bin" ] || cargo build --release
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-keys="ate_m.odometry ate_m.online ate_m.offline landmarks.median_error_m map.occupied_precision map.occupied_recall map_online.occupied_precision map_online.occupied_recall map_corrected.occupied_precision map_corrected.occupied_recall map_ground_truth.occupied_precision map_ground_truth.occupied_recall"
+keys=${KEYS:-"ate_m.odometry ate_m.online ate_m.offline landmarks.median_error_m map.occupied_precision map.occupied_recall map_online.occupied_precision map_online.occupied_recall map_corrected.occupied_precision map_corrected.occupied_recall map_ground_truth.occupied_precision map_ground_truth.occupied_recall"}
 printf 'seed'; for k in $keys; do printf '\t%s' "$k"; done; printf '\n'
 for s in "${seeds[@]}"; do
   "$bin" -q demo --world "$world" --seed "$s" --out "$tmp/$s" --no-rerun >/dev/null
