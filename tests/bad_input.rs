@@ -114,6 +114,32 @@ fn a_good_run_maps() {
 }
 
 #[test]
+fn an_odometry_jump_is_named_with_its_line_and_the_run_still_maps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    std::fs::write(
+        run.join("odometry.csv"),
+        "t_s,x_m,y_m,theta_rad\n0,2.5,2.5,0\n1,100002.6,2.5,0\n",
+    )
+    .unwrap();
+    let out = tmp.path().join("map");
+    let (code, err) = stereotag(&[
+        "map",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("odometry.csv:3") && err.contains("jumps 100000.10 m"),
+        "{err}"
+    );
+    assert!(out.join("map.pgm").exists());
+}
+
+#[test]
 fn truncated_row() {
     check(
         "sonar.csv",

@@ -57,7 +57,7 @@ impl Localize {
             );
             Vec::new()
         };
-        let run = io::load_run(&self.run)?;
+        let run = super::load_run(&self.run)?;
         let odometry: std::borrow::Cow<'_, [_]> = match &calibration {
             Some(c) => {
                 tracing::info!(

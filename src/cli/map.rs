@@ -40,7 +40,7 @@ pub struct Map {
 
 impl Map {
     pub fn run(&self) -> anyhow::Result<()> {
-        let run = io::load_run(&self.run)?;
+        let run = super::load_run(&self.run)?;
         let config = match &self.config {
             Some(p) => io::parse_yaml::<MappingConfig>(
                 p,

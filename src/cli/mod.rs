@@ -185,6 +185,32 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
     bar
 }
 
+/// Loads a run directory and warns about each odometry jump in it (a reset or glitch in a log:
+/// everything after it is placed with it).
+pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunDataset> {
+    let run = stereotag::io::load_run(run_dir)?;
+    let jumps = stereotag::run::odometry_jumps(&run.odometry);
+    let file = run_dir.join("odometry.csv");
+    for j in jumps.iter().take(3) {
+        tracing::warn!(
+            "{}:{}: the odometry jumps {:.2} m at t = {:.2} s (faster than {} m/s): a reset or a glitch? Everything after it is placed with it",
+            file.display(),
+            j.line,
+            j.distance_m,
+            j.t_s,
+            stereotag::run::JUMP_SPEED_MPS
+        );
+    }
+    if jumps.len() > 3 {
+        tracing::warn!(
+            "{}: {} more odometry jumps",
+            file.display(),
+            jumps.len() - 3
+        );
+    }
+    Ok(run)
+}
+
 /// The world file to score a run against: the one given, else the one run.yaml names if it exists.
 pub(crate) fn world_of_run(
     given: Option<&Path>,

@@ -169,7 +169,7 @@ pub(crate) fn survey_run(job: &SurveyJob<'_>) -> anyhow::Result<SurveyOutput> {
 /// [`survey_run`] writing into an output directory under construction (not committed here).
 pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Result<SurveyOutput> {
     let started = std::time::Instant::now();
-    let run = io::load_run(job.run_dir)?;
+    let run = super::load_run(job.run_dir)?;
     let world = super::world_of_run(job.world, job.run_dir, &run)
         .as_deref()
         .map(io::load_world)
