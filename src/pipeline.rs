@@ -50,6 +50,11 @@ pub struct SonarMap {
     pub walls: Vec<WallSegment>,
     /// Readings used (with an echo or not).
     pub readings: usize,
+    /// Readings with an echo.
+    pub echoes: usize,
+    /// Echoes whose point (the sensor's position plus the range along its axis) lies outside the
+    /// grid: what the grid loses when it does not cover the run.
+    pub echoes_off_grid: usize,
     /// Seconds per stage.
     pub timings_s: BTreeMap<String, f64>,
 }
@@ -93,6 +98,21 @@ pub fn map_trajectory(
     let t = Instant::now();
     let counting = counting_map(run, &readings, config)?;
     timings_s.insert("grid_counting".into(), t.elapsed().as_secs_f64());
+    let echo_points: Vec<(f64, f64)> = readings
+        .iter()
+        .filter_map(|r| {
+            let range = r
+                .range_m
+                .filter(|x| x.is_finite() && *x < layout.max_range_m)?;
+            let p = r.world_from_sensor;
+            Some((p.x + range * p.theta.cos(), p.y + range * p.theta.sin()))
+        })
+        .collect();
+    let echoes = echo_points.len();
+    let echoes_off_grid = echo_points
+        .iter()
+        .filter(|(x, y)| counting.geometry.cell_of(*x, *y).is_none())
+        .count();
 
     let t = Instant::now();
     let mut log_odds = LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
@@ -124,6 +144,8 @@ pub fn map_trajectory(
         accumulator,
         walls,
         readings: readings.len(),
+        echoes,
+        echoes_off_grid,
         timings_s,
     })
 }

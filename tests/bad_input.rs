@@ -140,6 +140,32 @@ fn an_odometry_jump_is_named_with_its_line_and_the_run_still_maps() {
 }
 
 #[test]
+fn a_run_the_grid_does_not_cover_is_warned_about() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    // Odometry from a robot whose log starts at (-10, -10): the paper's grid starts at (0, 0).
+    std::fs::write(
+        run.join("odometry.csv"),
+        "t_s,x_m,y_m,theta_rad\n0,-10,-10,0\n1,-9.9,-10,0\n",
+    )
+    .unwrap();
+    let out = tmp.path().join("map");
+    let (code, err) = stereotag(&[
+        "map",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("3 of 3 sonar echoes (100%) fall outside the grid (x 0.0..16.0 m"),
+        "{err}"
+    );
+}
+
+#[test]
 fn truncated_row() {
     check(
         "sonar.csv",

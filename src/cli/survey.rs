@@ -516,6 +516,7 @@ fn write_outputs(
 
 /// Prints the landmarks, the planned-versus-surveyed table and the before/after figures.
 pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: Option<&World>) {
+    super::map::warn_if_off_grid(&s.raw);
     let get = |k: &str| metrics.get(k).copied();
     tracing::info!(
         "{} landmarks ({} matched with a Hough corner); {} sightings fused, {} gated out; offline graph: {} keyframes, {} factors",
