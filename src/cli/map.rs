@@ -117,7 +117,7 @@ pub(crate) fn write_map_outputs(
 }
 
 /// Share of echoes off the grid above which the grid is taken not to cover the run: 25% (odometry
-/// drift puts 10-15% of the samples' echoes off their grids, ground-truth poses 0.4-3%: echoes
+/// drift puts up to 15% of the samples' echoes off their grids, ground-truth poses 0.4-3%: echoes
 /// from behind the outer walls).
 const OFF_GRID_WARN: f64 = 0.25;
 
