@@ -428,6 +428,8 @@ fn median_sorted(v: &[f64]) -> Option<f64> {
 pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64> {
     let mut m = BTreeMap::new();
     m.insert("sightings.total".into(), sightings as f64);
+    m.insert("echoes".into(), survey.raw.echoes as f64);
+    m.insert("echoes.off_grid".into(), survey.raw.echoes_off_grid as f64);
     m.insert(
         "sightings.fused".into(),
         survey.online.accepted.len() as f64,
