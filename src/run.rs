@@ -110,8 +110,8 @@ pub fn pose_at(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
 /// An odometry step longer than a robot could drive in its time: a reset or a glitch in a log.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OdometryJump {
-    /// Line of `odometry.csv` the step ends on (the header is line 1).
-    pub line: usize,
+    /// Index of the sample the step ends on (0 is the first pose).
+    pub index: usize,
     /// Time of that line, seconds.
     pub t_s: f64,
     /// Length of the step, metres.
@@ -134,7 +134,7 @@ pub fn odometry_jumps(odometry: &[StampedPose]) -> Vec<OdometryJump> {
             let d = (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y);
             let dt = w[1].t_s - w[0].t_s;
             (d > JUMP_MIN_M && d > JUMP_SPEED_MPS * dt).then_some(OdometryJump {
-                line: i + 3,
+                index: i + 1,
                 t_s: w[1].t_s,
                 distance_m: d,
             })
@@ -215,7 +215,7 @@ mod tests {
         ];
         let jumps = odometry_jumps(&odometry);
         assert_eq!(jumps.len(), 1, "{jumps:?}");
-        assert_eq!(jumps[0].line, 4);
+        assert_eq!(jumps[0].index, 2);
         assert!((jumps[0].distance_m - 1e5).abs() < 1.0);
     }
 }

@@ -120,7 +120,7 @@ fn an_odometry_jump_is_named_with_its_line_and_the_run_still_maps() {
     good_run(&run);
     std::fs::write(
         run.join("odometry.csv"),
-        "t_s,x_m,y_m,theta_rad\n0,2.5,2.5,0\n1,100002.6,2.5,0\n",
+        "t_s,x_m,y_m,theta_rad\n0,2.5,2.5,0\n\n1,100002.6,2.5,0\n",
     )
     .unwrap();
     let out = tmp.path().join("map");
@@ -133,7 +133,7 @@ fn an_odometry_jump_is_named_with_its_line_and_the_run_still_maps() {
     ]);
     assert_eq!(code, 0, "{err}");
     assert!(
-        err.contains("odometry.csv:3") && err.contains("jumps 100000.10 m"),
+        err.contains("odometry.csv:4") && err.contains("jumps 100000.10 m"),
         "{err}"
     );
     assert!(out.join("map.pgm").exists());

@@ -191,11 +191,20 @@ pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunData
     let run = stereotag::io::load_run(run_dir)?;
     let jumps = stereotag::run::odometry_jumps(&run.odometry);
     let file = run_dir.join("odometry.csv");
+    // The file's line of each pose: the reader skips the header and blank lines.
+    let lines: Vec<usize> = std::fs::read_to_string(&file)
+        .unwrap_or_default()
+        .lines()
+        .enumerate()
+        .skip(1)
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, _)| i + 1)
+        .collect();
     for j in jumps.iter().take(3) {
         tracing::warn!(
             "{}:{}: the odometry jumps {:.2} m at t = {:.2} s (faster than {} m/s): a reset or a glitch? Everything after it is placed with it",
             file.display(),
-            j.line,
+            lines.get(j.index).copied().unwrap_or(j.index + 2),
             j.distance_m,
             j.t_s,
             stereotag::run::JUMP_SPEED_MPS
