@@ -36,8 +36,9 @@ fn good_run(dir: &Path) {
     .unwrap();
 }
 
-/// Replaces one file of a good run and checks the error.
-fn check(file: &str, content: &str, expect: &str) {
+/// Maps a good run with one file replaced by `content`: the temporary directory (run and map in
+/// it), the map's path, the exit status and stderr.
+fn map_with(file: &str, content: &str) -> (tempfile::TempDir, std::path::PathBuf, i32, String) {
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");
     good_run(&run);
@@ -50,6 +51,12 @@ fn check(file: &str, content: &str, expect: &str) {
         "--out",
         out.to_str().unwrap(),
     ]);
+    (tmp, out, code, err)
+}
+
+/// Replaces one file of a good run and checks the error.
+fn check(file: &str, content: &str, expect: &str) {
+    let (tmp, out, code, err) = map_with(file, content);
     assert_eq!(code, 2, "{file}: {err}");
     assert!(
         err.contains(file) && err.contains(expect),
@@ -113,52 +120,28 @@ fn a_good_run_maps() {
     assert_eq!(code, 0);
 }
 
+/// Maps a good run whose odometry.csv is `odometry`; the run must still map (exit 0, a map
+/// written); returns stderr.
+fn map_warnings(odometry: &str) -> String {
+    let (_tmp, out, code, err) = map_with("odometry.csv", odometry);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.join("map.pgm").exists());
+    err
+}
+
 #[test]
 fn an_odometry_jump_is_named_with_its_line_and_the_run_still_maps() {
-    let tmp = tempfile::tempdir().unwrap();
-    let run = tmp.path().join("run");
-    good_run(&run);
-    std::fs::write(
-        run.join("odometry.csv"),
-        "t_s,x_m,y_m,theta_rad\n0,2.5,2.5,0\n\n1,100002.6,2.5,0\n",
-    )
-    .unwrap();
-    let out = tmp.path().join("map");
-    let (code, err) = stereotag(&[
-        "map",
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    let err = map_warnings("t_s,x_m,y_m,theta_rad\n0,2.5,2.5,0\n\n1,100002.6,2.5,0\n");
     assert!(
         err.contains("odometry.csv:4") && err.contains("jumps 100000.10 m"),
         "{err}"
     );
-    assert!(out.join("map.pgm").exists());
 }
 
 #[test]
 fn a_run_the_grid_does_not_cover_is_warned_about() {
-    let tmp = tempfile::tempdir().unwrap();
-    let run = tmp.path().join("run");
-    good_run(&run);
     // Odometry from a robot whose log starts at (-10, -10): the paper's grid starts at (0, 0).
-    std::fs::write(
-        run.join("odometry.csv"),
-        "t_s,x_m,y_m,theta_rad\n0,-10,-10,0\n1,-9.9,-10,0\n",
-    )
-    .unwrap();
-    let out = tmp.path().join("map");
-    let (code, err) = stereotag(&[
-        "map",
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    let err = map_warnings("t_s,x_m,y_m,theta_rad\n0,-10,-10,0\n1,-9.9,-10,0\n");
     assert!(
         err.contains("3 of 3 sonar echoes (100%) fall outside the grid (x 0.0..16.0 m"),
         "{err}"
