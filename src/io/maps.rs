@@ -1,7 +1,7 @@
 //! Maps on disk: ROS map_server pairs (PGM + YAML), the paper's inverse-grey PNG, the Hough
 //! accumulator image, `corners.csv` and `walls.csv`.
 
-use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
+use super::{csv_rows, parse_yaml, read_text, to_yaml, write_file, IoError};
 use crate::grid::OccupancyMap;
 use crate::hough::{Accumulator, Feature};
 use crate::wallmap::WallSegment;
@@ -208,42 +208,6 @@ pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
 
 /// Header of `corners.csv`.
 const FEATURES_HEADER: &str = "x_m,y_m,votes,kind";
-
-/// The rows of a small CSV file with a fixed header: (line number, trimmed fields), blank lines
-/// skipped; a wrong header or field count names the line.
-fn csv_rows<'a>(
-    path: &Path,
-    text: &'a str,
-    header: &str,
-) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, first)) if first.trim() == header => {}
-        _ => {
-            return Err(IoError::line(
-                path,
-                1,
-                format!("expected the header `{header}`"),
-            ))
-        }
-    }
-    let n = header.split(',').count();
-    lines
-        .filter(|(_, line)| !line.trim().is_empty())
-        .map(|(i, line)| {
-            let line_no = i as u64 + 1;
-            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-            if fields.len() != n {
-                return Err(IoError::line(
-                    path,
-                    line_no,
-                    format!("expected {n} fields ({header}), found {}", fields.len()),
-                ));
-            }
-            Ok((line_no, fields))
-        })
-        .collect()
-}
 
 /// A CSV field that must be a finite number.
 fn finite_field(path: &Path, line_no: u64, name: &str, s: &str) -> Result<f64, IoError> {

@@ -116,6 +116,42 @@ pub fn load_gray(path: &Path) -> Result<image::GrayImage, IoError> {
         .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))
 }
 
+/// The data rows of a CSV file with a fixed header: (1-based line number, trimmed fields), blank
+/// lines skipped; a wrong header or field count names the line.
+pub(crate) fn csv_rows<'a>(
+    path: &Path,
+    text: &'a str,
+    header: &str,
+) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
+    let mut lines = text.lines().enumerate();
+    let first = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    if first != header {
+        return Err(IoError::line(
+            path,
+            1,
+            format!("expected the header `{header}`, found `{first}`"),
+        ));
+    }
+    let n = header.split(',').count();
+    let mut rows = Vec::new();
+    for (i, line) in lines {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != n {
+            return Err(IoError::line(
+                path,
+                i as u64 + 1,
+                format!("expected {n} fields ({header}), found {}", fields.len()),
+            ));
+        }
+        rows.push((i as u64 + 1, fields));
+    }
+    Ok(rows)
+}
+
 /// Reads a whole text file.
 pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
     std::fs::read_to_string(path).map_err(|e| IoError::file(path, e))

@@ -1,7 +1,7 @@
 //! The run dataset directory (DESIGN.md): `run.yaml`, `odometry.csv`, `sonar.csv`, `stereo.csv`,
 //! `ground_truth.csv`.
 
-use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
+use super::{csv_rows, parse_yaml, read_text, to_yaml, write_file, IoError};
 use crate::geometry::Pose2;
 use crate::run::{RunDataset, RunMeta, StampedPose, StereoEntry, RUN_FORMAT};
 use crate::sonar::SonarReading;
@@ -11,41 +11,6 @@ use std::path::Path;
 const POSE_HEADER: &str = "t_s,x_m,y_m,theta_rad";
 const SONAR_HEADER: &str = "t_s,sensor,range_m";
 const STEREO_HEADER: &str = "t_s,left,right";
-
-/// Data lines of a CSV file after checking its header: (1-based line number, fields).
-fn csv_rows<'a>(
-    path: &'a Path,
-    text: &'a str,
-    header: &str,
-) -> Result<Vec<(u64, Vec<&'a str>)>, IoError> {
-    let mut lines = text.lines().enumerate();
-    let first = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
-    if first != header {
-        return Err(IoError::line(
-            path,
-            1,
-            format!("expected the header `{header}`, found `{first}`"),
-        ));
-    }
-    let n = header.split(',').count();
-    let mut rows = Vec::new();
-    for (i, line) in lines {
-        let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if fields.len() != n {
-            return Err(IoError::line(
-                path,
-                i as u64 + 1,
-                format!("expected {n} fields ({header}), found {}", fields.len()),
-            ));
-        }
-        rows.push((i as u64 + 1, fields));
-    }
-    Ok(rows)
-}
 
 fn number(path: &Path, line: u64, name: &str, field: &str) -> Result<f64, IoError> {
     match field.parse::<f64>() {
