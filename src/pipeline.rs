@@ -98,21 +98,17 @@ pub fn map_trajectory(
     let t = Instant::now();
     let counting = counting_map(run, &readings, config)?;
     timings_s.insert("grid_counting".into(), t.elapsed().as_secs_f64());
-    let echo_points: Vec<(f64, f64)> = readings
+    let (echoes, echoes_off_grid) = readings
         .iter()
         .filter_map(|r| {
             let range = r
                 .range_m
                 .filter(|x| x.is_finite() && *x < layout.max_range_m)?;
             let p = r.world_from_sensor;
-            Some((p.x + range * p.theta.cos(), p.y + range * p.theta.sin()))
+            let (x, y) = (p.x + range * p.theta.cos(), p.y + range * p.theta.sin());
+            Some(counting.geometry.cell_of(x, y).is_none())
         })
-        .collect();
-    let echoes = echo_points.len();
-    let echoes_off_grid = echo_points
-        .iter()
-        .filter(|(x, y)| counting.geometry.cell_of(*x, *y).is_none())
-        .count();
+        .fold((0, 0), |(n, off), is_off| (n + 1, off + is_off as usize));
 
     let t = Instant::now();
     let mut log_odds = LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;

@@ -190,8 +190,12 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
 pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunDataset> {
     let run = stereotag::io::load_run(run_dir)?;
     let jumps = stereotag::run::odometry_jumps(&run.odometry);
+    if jumps.is_empty() {
+        return Ok(run);
+    }
     let file = run_dir.join("odometry.csv");
-    // The file's line of each pose: the reader skips the header and blank lines.
+    // The file's line of each pose (the reader skips the header and blank lines), read again
+    // only when there is a jump to name.
     let lines: Vec<usize> = std::fs::read_to_string(&file)
         .unwrap_or_default()
         .lines()
