@@ -79,6 +79,12 @@ pub struct FuseConfig {
     /// from unequal wheels, distance scale) in the offline graph and correct the whole run with
     /// them, also before the first sighting (ours: on).
     pub calibrate_odometry: bool,
+    /// While the run streams in, re-solve the graph of the run so far now and then (after a
+    /// tag seen before is seen again, once the robot has travelled 5 m and a quarter of its
+    /// distance so far since the last solve) and go on from its pose, landmarks and odometry calibration,
+    /// as an incremental smoother does; the filter then predicts with calibrated odometry
+    /// (ours: on; needs `calibrate_odometry`).
+    pub online_resolve: bool,
     /// Constant part of a sonar range's sigma when localising against surveyed walls, m (ours:
     /// 1 cm, the simulated sonar's).
     pub sonar_sigma_m: f64,
@@ -180,6 +186,7 @@ impl Default for FuseConfig {
             corner_factors: false,
             max_iterations: 50,
             calibrate_odometry: true,
+            online_resolve: true,
             sonar_sigma_m: 0.01,
             sonar_sigma_frac: 0.01,
             wall_sigma_m: 0.02,
@@ -357,6 +364,8 @@ pub struct OnlineResult {
     pub nis: Vec<(f64, f64)>,
     /// Position sigma of the pose (√ of the largest eigenvalue) at each odometry time, metres.
     pub sigma_m: Vec<f64>,
+    /// Times the graph of the run so far was re-solved ([`FuseConfig::online_resolve`]).
+    pub resolves: usize,
 }
 
 /// Odometry noise of one increment, in the frame of its start.
@@ -391,12 +400,39 @@ impl Ekf {
     /// Predicts with the odometry increment from `last` to `to` and moves `last` on; returns the
     /// distance travelled.
     fn advance(&mut self, last: &mut Pose2, to: Pose2, config: &FuseConfig) -> f64 {
-        let delta = last.between(&to);
+        self.advance_calibrated(last, to, None, config)
+    }
+
+    /// [`Ekf::advance`] with the increment corrected by an odometry calibration.
+    fn advance_calibrated(
+        &mut self,
+        last: &mut Pose2,
+        to: Pose2,
+        calibration: Option<&OdometryCalibration>,
+        config: &FuseConfig,
+    ) -> f64 {
+        let mut delta = last.between(&to);
         let path = delta.x.hypot(delta.y);
+        if let Some(c) = calibration {
+            delta.theta = wrap_angle(delta.theta);
+            delta = c.correct(delta, delta.theta, path);
+        }
         let q = odometry_covariance(path, wrap_angle(delta.theta).abs(), config);
         self.predict(&delta, &q);
         *last = to;
         path
+    }
+
+    /// The landmarks the filter holds, in slot order.
+    fn landmarks(&self, extras: &[Extras]) -> Vec<Landmark> {
+        self.slots
+            .iter()
+            .enumerate()
+            .map(|(slot, key)| {
+                let (xy, cov) = self.landmark_xy_cov(slot);
+                landmark_from(key, xy, self.x[3 + 3 * slot + 2], &cov, &extras[slot])
+            })
+            .collect()
     }
 
     /// Position sigma of the pose (√ of the largest eigenvalue), metres.
@@ -601,6 +637,15 @@ struct Extras {
     corner: Option<CornerMatch>,
 }
 
+/// Travel between two re-solves of the online graph, at least (metres; see
+/// [`FuseConfig::online_resolve`]).
+const RESOLVE_MIN_TRAVEL_M: f64 = 5.0;
+/// Travel between two re-solves of the online graph as a share of the travel so far, at least:
+/// the solves grow with the run, so they come less often as it goes on (about eight on the
+/// museum's 165 m, 0.17 s in all; with 0.1 instead of 0.25 there are fourteen, 0.31 s, for an
+/// online ATE within 1 cm of this one's on the office and museum sample runs).
+const RESOLVE_SHARE: f64 = 0.25;
+
 /// Indices of the sightings in time order.
 fn time_order(sightings: &[TagSighting]) -> std::iter::Peekable<std::vec::IntoIter<usize>> {
     let mut order: Vec<usize> = (0..sightings.len()).collect();
@@ -627,19 +672,25 @@ pub fn run_online(
         pose_at_sighting: vec![start; sightings.len()],
         nis: Vec::new(),
         sigma_m: Vec::with_capacity(odometry.len()),
+        resolves: 0,
     };
     let mut last_odom = start;
     let mut pending = time_order(sightings);
-    for sample in odometry {
+    let mut calibration: Option<OdometryCalibration> = None;
+    let (mut travel, mut travel_at_solve) = (0.0, 0.0);
+    let resolve = config.online_resolve && config.calibrate_odometry;
+    for (i, sample) in odometry.iter().enumerate() {
+        let mut seen_again = false;
         while let Some(&k) = pending.peek() {
             if sightings[k].t_s > sample.t_s {
                 break;
             }
             pending.next();
             let odom = pose_at(odometry, sightings[k].t_s).unwrap_or(sample.pose);
-            ekf.advance(&mut last_odom, odom, config);
+            travel += ekf.advance_calibrated(&mut last_odom, odom, calibration.as_ref(), config);
             result.pose_at_sighting[k] = ekf.pose();
-            fuse_sighting(
+            let known = ekf.slot(&sightings[k].key()).is_some();
+            let fused = fuse_sighting(
                 &mut ekf,
                 &mut extras,
                 &sightings[k],
@@ -648,13 +699,35 @@ pub fn run_online(
                 config,
                 &mut result,
             );
+            seen_again |= known && fused;
         }
-        ekf.advance(&mut last_odom, sample.pose, config);
+        travel += ekf.advance_calibrated(&mut last_odom, sample.pose, calibration.as_ref(), config);
         result.trajectory.push(StampedPose {
             t_s: sample.t_s,
             pose: ekf.pose(),
         });
         result.sigma_m.push(ekf.position_sigma_m());
+        let since = travel - travel_at_solve;
+        if resolve && seen_again && since >= RESOLVE_MIN_TRAVEL_M.max(RESOLVE_SHARE * travel) {
+            travel_at_solve = travel;
+            let so_far = OnlineResult {
+                landmarks: ekf.landmarks(&extras),
+                ..result.clone()
+            };
+            let solved = run_offline(&odometry[..=i], sightings, &so_far, config);
+            result.resolves += 1;
+            if let (Some(c), Some(now)) = (solved.odometry_calibration, solved.trajectory.last()) {
+                calibration = Some(c);
+                ekf.x[0] = now.pose.x;
+                ekf.x[1] = now.pose.y;
+                ekf.x[2] = now.pose.theta;
+                for (slot, l) in solved.landmarks.iter().enumerate() {
+                    ekf.x[3 + 3 * slot] = l.position_m[0];
+                    ekf.x[3 + 3 * slot + 1] = l.position_m[1];
+                    ekf.x[3 + 3 * slot + 2] = l.yaw_rad;
+                }
+            }
+        }
     }
     // Sightings after the last odometry sample: fused at the last pose.
     for k in pending {
@@ -669,15 +742,7 @@ pub fn run_online(
             &mut result,
         );
     }
-    result.landmarks = ekf
-        .slots
-        .iter()
-        .enumerate()
-        .map(|(slot, key)| {
-            let (xy, cov) = ekf.landmark_xy_cov(slot);
-            landmark_from(key, xy, ekf.x[3 + 3 * slot + 2], &cov, &extras[slot])
-        })
-        .collect();
+    result.landmarks = ekf.landmarks(&extras);
     result.conflicts = find_conflicts(sightings, &result, config);
     result
 }
@@ -708,6 +773,7 @@ fn landmark_from(
     }
 }
 
+/// Fuses one sighting (a new landmark, or an update when it passes the gate); true when fused.
 fn fuse_sighting(
     ekf: &mut Ekf,
     extras: &mut Vec<Extras>,
@@ -716,7 +782,7 @@ fn fuse_sighting(
     corners: &[Feature],
     config: &FuseConfig,
     result: &mut OnlineResult,
-) {
+) -> bool {
     let (z, r) = sighting.measurement(config);
     let key = sighting.key();
     let slot = match ekf.slot(&key) {
@@ -724,12 +790,12 @@ fn fuse_sighting(
             let (y, s, jac) = ekf.innovation(slot, &z, &r);
             let Some(s_inv) = s.try_inverse() else {
                 result.rejected.push(index);
-                return;
+                return false;
             };
             let d2 = (y.transpose() * s_inv * y)[0];
             if d2 > config.gate_chi2 {
                 result.rejected.push(index);
-                return;
+                return false;
             }
             ekf.update(&y, &s, &jac, &r);
             result.nis.push((sighting.t_s, d2));
@@ -752,6 +818,7 @@ fn fuse_sighting(
     e.size_sum += sighting.size_m;
     e.n += 1;
     result.accepted.push(index);
+    true
 }
 
 /// Groups gated-out sightings by place and reports the places seen often enough.
@@ -1804,6 +1871,7 @@ mod tests {
     /// A square loop driven with a biased odometry, a tag at each corner seen from near it.
     fn square_run(
         bias: f64,
+        laps: usize,
     ) -> (
         Vec<StampedPose>,
         Vec<StampedPose>,
@@ -1821,9 +1889,8 @@ mod tests {
         let mut t = 0.0;
         let mut gt = Pose2::new(0.5, 0.5, 0.0);
         let mut od = gt;
-        for lap in 0..2 {
-            for side in 0..4 {
-                let _ = (lap, side);
+        for _ in 0..4 * laps {
+            {
                 for _ in 0..40 {
                     let step = Pose2::new(0.1, 0.0, 0.0);
                     gt = gt.compose(&step);
@@ -1872,7 +1939,7 @@ mod tests {
 
     #[test]
     fn online_and_offline_beat_odometry_on_a_biased_loop() {
-        let (odom, truth, sightings, tags) = square_run(0.01);
+        let (odom, truth, sightings, tags) = square_run(0.01, 2);
         let config = FuseConfig::default();
         let online = run_online(&odom, &sightings, &[], &config);
         let offline = run_offline(&odom, &sightings, &online, &config);
@@ -1903,9 +1970,34 @@ mod tests {
         );
     }
 
+    /// Over four laps of the biased square, the filter that re-solves the run so far learns the
+    /// odometry's errors and tracks the later laps far better than the plain EKF.
+    #[test]
+    fn re_solving_online_learns_the_odometry_errors() {
+        let (odom, truth, sightings, _) = square_run(0.01, 4);
+        let later = |r: &OnlineResult| {
+            let half = r.trajectory.len() / 2;
+            ate_m(&r.trajectory[half..], &truth[half..]).unwrap()
+        };
+        let plain = run_online(
+            &odom,
+            &sightings,
+            &[],
+            &FuseConfig {
+                online_resolve: false,
+                ..FuseConfig::default()
+            },
+        );
+        let resolved = run_online(&odom, &sightings, &[], &FuseConfig::default());
+        assert_eq!(plain.resolves, 0);
+        assert!(resolved.resolves >= 2, "{} re-solves", resolved.resolves);
+        let (a, b) = (later(&plain), later(&resolved));
+        assert!(b < 0.25 * a, "later laps: plain {a} m, re-solved {b} m");
+    }
+
     #[test]
     fn localisation_against_a_survey_bounds_the_drift() {
-        let (odom, truth, sightings, _) = square_run(0.01);
+        let (odom, truth, sightings, _) = square_run(0.01, 2);
         let config = FuseConfig::default();
         let online = run_online(&odom, &sightings, &[], &config);
         let survey = run_offline(&odom, &sightings, &online, &config);
@@ -1922,7 +2014,7 @@ mod tests {
 
     #[test]
     fn a_moved_tag_is_reported_not_fused() {
-        let (odom, _, mut sightings, _) = square_run(0.0);
+        let (odom, _, mut sightings, _) = square_run(0.0, 2);
         // Tag 1 is moved by 1 m along x after the first lap.
         let lap_end = odom[odom.len() / 2].t_s;
         for s in sightings
@@ -1946,7 +2038,7 @@ mod tests {
 
     #[test]
     fn a_tag_is_matched_with_the_corner_it_marks() {
-        let (odom, _, sightings, _) = square_run(0.0);
+        let (odom, _, sightings, _) = square_run(0.0, 2);
         let corner = |x: f64, y: f64| Feature {
             x_m: x,
             y_m: y,
