@@ -435,7 +435,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
         survey.online.rejected.len() as f64,
     );
     m.insert("conflicts".into(), survey.online.conflicts.len() as f64);
-    m.insert("online.resolves".into(), survey.online.resolves as f64);
+    m.insert(
+        "online.resolves".into(),
+        survey.online.resolves.len() as f64,
+    );
     m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
     m.insert(
         "landmarks.matched_corners".into(),

@@ -153,6 +153,9 @@ pub fn survey_blueprint() -> bp::Blueprint {
         bp::TimeSeriesView::new("Tag NIS")
             .with_origin("/metrics/tag_nis")
             .into(),
+        bp::TextLogView::new("Online re-solves")
+            .with_origin("/events")
+            .into(),
     ]);
     let report = bp::TextDocumentView::new("Report").with_origin("/report");
     bp::Blueprint::new(
@@ -812,6 +815,24 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
     for (t, nis) in &s.online.nis {
         rec.set_duration_secs("time", *t);
         rec.log("metrics/tag_nis", &rerun::Scalars::single(*nis))?;
+    }
+    for r in &s.online.resolves {
+        let c = &r.odometry_calibration;
+        rec.set_duration_secs("time", r.t_s);
+        rec.log(
+            "events/online_resolve",
+            &rerun::TextLog::new(format!(
+                "online re-solve of the run so far: pose moved {:.3} m and turned {:.2} deg; \
+                 odometry from now on: turn scale {:+.2}%, heading drift {:+.4} rad/m, \
+                 distance scale {:+.2}%",
+                r.moved_m,
+                r.turned_rad.to_degrees(),
+                100.0 * c.turn_scale_error,
+                c.heading_drift_rad_per_m,
+                100.0 * c.distance_scale_error
+            ))
+            .with_level(rerun::TextLogLevel::INFO),
+        )?;
     }
     rec.reset_time();
     Ok(())

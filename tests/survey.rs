@@ -166,6 +166,7 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         "/map/hough",
         "/landmarks/tag_0/covariance",
         "/metrics/position_error_m/offline",
+        "/events/online_resolve",
         "/report",
     ] {
         assert!(
