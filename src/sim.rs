@@ -407,6 +407,15 @@ const BUG_GIVE_UP_M: f64 = 10.0;
 /// The first boundary is abandoned after this much travel if it never closes (ours: 150 m).
 const BOUNDARY_GIVE_UP_M: f64 = 150.0;
 
+/// The robot counts as stuck when its odometry position has stayed within this radius (ours:
+/// 0.5 m) ...
+const STUCK_RADIUS_M: f64 = 0.5;
+/// ... over this long (ours: 60 s, ten times what the sample worlds' corners take to round).
+const STUCK_WINDOW_S: f64 = 60.0;
+/// A frontier target reached but still unknown (the cells under and beside the robot, which no
+/// sonar cone covers) keeps frontier cells this close from being chosen again (ours: 0.5 m).
+const REACHED_EXCLUSION_M: f64 = 0.5;
+
 /// Spacing of the revisit targets along the first boundary loop, metres of travel.
 pub const REVISIT_SPACING_M: f64 = 1.0;
 /// A revisit target within this distance (odometry) counts as reached, metres.
@@ -460,7 +469,12 @@ pub fn simulate(
     let mut pick_target = false;
     let mut targets: Vec<Point2<f64>> = Vec::new();
     let mut failed: Vec<Point2<f64>> = Vec::new();
+    let mut reached: Vec<Point2<f64>> = Vec::new();
     let mut target_started = 0.0;
+    // The odometry position once a second over the last STUCK_WINDOW_S, and the escapes made.
+    let mut recent: std::collections::VecDeque<(f64, Point2<f64>)> = Default::default();
+    let mut next_recent = 0.0;
+    let mut escapes = 0usize;
     let mut known_history: Vec<(f64, usize)> = Vec::new();
     let mut end_reason = String::from("time budget ended");
     let mut next_progress = 1.0;
@@ -542,6 +556,7 @@ pub fn simulate(
                 t,
                 &grid,
                 &mut failed,
+                &mut reached,
                 &mut known_history,
                 &mut targets,
                 &mut target_started,
@@ -576,6 +591,45 @@ pub fn simulate(
                     target: Some(first),
                 };
                 revisit = Some(queue);
+            }
+        }
+
+        if t >= next_recent {
+            next_recent = t + 1.0;
+            recent.push_back((t, odom.position()));
+            while recent
+                .front()
+                .is_some_and(|(t0, _)| t - t0 > STUCK_WINDOW_S)
+            {
+                recent.pop_front();
+            }
+            let spans = recent
+                .front()
+                .is_some_and(|(t0, _)| t - t0 >= STUCK_WINDOW_S - 1.0);
+            let here = odom.position();
+            if spans
+                && !matches!(mode, Mode::LookAround { .. })
+                && recent
+                    .iter()
+                    .all(|(_, p)| (p - here).norm() < STUCK_RADIUS_M)
+            {
+                // Stuck (circling in a pocket of clutter, or turning between targets it cannot
+                // see): give the target up and drive out along the most open direction.
+                if let Mode::Straight { target: Some(tg) }
+                | Mode::Follow(FollowState {
+                    target: Some(tg), ..
+                }) = &mode
+                {
+                    if revisit.is_none() {
+                        failed.push(*tg);
+                    }
+                }
+                mode = Mode::Straight {
+                    target: Some(escape_target(world, truth, odom, e)),
+                };
+                target_started = t;
+                recent.clear();
+                escapes += 1;
             }
         }
 
@@ -641,6 +695,12 @@ pub fn simulate(
         }
     }
     on_progress(t);
+    if escapes > 0 {
+        end_reason.push_str(&format!(
+            "; stuck {escapes} time{} (within {STUCK_RADIUS_M} m for {STUCK_WINDOW_S} s), driven out",
+            if escapes == 1 { "" } else { "s" }
+        ));
+    }
 
     let run = RunDataset {
         meta: RunMeta {
@@ -680,6 +740,7 @@ fn explore_step(
     t: f64,
     grid: &CountingGrid,
     failed: &mut Vec<Point2<f64>>,
+    reached: &mut Vec<Point2<f64>>,
     known_history: &mut Vec<(f64, usize)>,
     targets: &mut Vec<Point2<f64>>,
     target_started: &mut f64,
@@ -693,6 +754,8 @@ fn explore_step(
     {
         if (odom.position() - tg).norm() >= 0.3 {
             failed.push(*tg);
+        } else {
+            reached.push(*tg);
         }
     }
     let map = grid.map();
@@ -710,7 +773,7 @@ fn explore_step(
             return Err("explored area stopped growing".into());
         }
     }
-    match choose_target(&map, odom.position(), failed, e.robot_radius_m) {
+    match choose_target(&map, odom.position(), failed, reached, e.robot_radius_m) {
         Some(tg) => {
             targets.push(tg);
             *target_started = t;
@@ -718,6 +781,33 @@ fn explore_step(
         }
         None => Err("no reachable unexplored region left".into()),
     }
+}
+
+/// Where a stuck robot drives to (odometry frame): up to 1.5 m along the most open of 72
+/// directions around it, stopping the follow distance short of what is there.
+fn escape_target(world: &World, truth: Pose2, odom: Pose2, e: &ExplorationConfig) -> Point2<f64> {
+    let (bearing, open) = (0..72)
+        .map(|k| {
+            let bearing = k as f64 * std::f64::consts::TAU / 72.0;
+            let open = clearance(
+                world,
+                truth.position(),
+                truth.theta + bearing,
+                e.robot_radius_m,
+                50.0,
+            );
+            (bearing, open)
+        })
+        .fold((0.0, f64::NEG_INFINITY), |best, c| {
+            if c.1 > best.1 {
+                c
+            } else {
+                best
+            }
+        });
+    let heading = odom.theta + bearing;
+    let go = (open - e.follow_distance_m).clamp(0.3, 1.5);
+    odom.position() + Vector2::new(heading.cos(), heading.sin()) * go
 }
 
 /// Moves a pose by `ds` along an arc turning `dth` (midpoint rule).
@@ -899,6 +989,7 @@ fn choose_target(
     map: &OccupancyMap,
     from: Point2<f64>,
     failed: &[Point2<f64>],
+    reached: &[Point2<f64>],
     robot_radius: f64,
 ) -> Option<Point2<f64>> {
     let g = &map.geometry;
@@ -941,7 +1032,11 @@ fn choose_target(
             if map.occupancy[j].is_none() {
                 // A frontier cell: score by unknown cells around, minus travel.
                 let (x, y) = g.centre(cc as usize, rr as usize);
-                if failed.iter().any(|f| (f.x - x).hypot(f.y - y) < 1.0) {
+                if failed.iter().any(|f| (f.x - x).hypot(f.y - y) < 1.0)
+                    || reached
+                        .iter()
+                        .any(|f| (f.x - x).hypot(f.y - y) < REACHED_EXCLUSION_M)
+                {
                     continue;
                 }
                 let mut unknown = 0;
@@ -1022,6 +1117,74 @@ mod tests {
             &mut rng,
         );
         assert!(r.is_none(), "{r:?}");
+    }
+
+    /// A robot that cannot get anywhere (a box hardly larger than itself) is found stuck once
+    /// its odometry has stayed within 0.5 m for a minute, and the run says so.
+    #[test]
+    fn a_robot_that_cannot_move_on_is_found_stuck() {
+        let w = crate::world::rectangle_world(0.9, 0.9, Pose2::new(0.45, 0.45, 0.0));
+        let mut c = SimConfig::default();
+        c.exploration.duration_s = 600.0;
+        let out = simulate(&w, &c, |_| {}).unwrap();
+        assert!(
+            out.end_reason.contains("stuck 1 time"),
+            "{}",
+            out.end_reason
+        );
+    }
+
+    /// A frontier target reached but still unknown (under the robot, where no cone reaches) is
+    /// not chosen again: on the office (seed 1) the robot used to turn on the spot between two
+    /// such cells 0.2 m apart for 130 s. Now it is never found stuck nor stays within 0.5 m for
+    /// 90 s, and exploring ends because nothing reachable is left unexplored.
+    #[test]
+    fn exploration_does_not_dwell_on_targets_it_has_reached() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let loaded = crate::io::load_world(&root.join("samples/office/world.yaml")).unwrap();
+        let c = SimConfig {
+            seed: 1,
+            ..loaded.simulation
+        };
+        let out = simulate(&loaded.world, &c, |_| {}).unwrap();
+        assert!(
+            out.end_reason
+                .starts_with("no reachable unexplored region left")
+                && !out.end_reason.contains("stuck"),
+            "{}",
+            out.end_reason
+        );
+        let truth = out.run.ground_truth.unwrap();
+        for (i, a) in truth.iter().enumerate() {
+            let window = truth[i..].iter().take_while(|b| b.t_s - a.t_s <= 90.0);
+            let far = window
+                .map(|b| (b.pose.position() - a.pose.position()).norm())
+                .fold(0.0, f64::max);
+            if truth.last().unwrap().t_s - a.t_s >= 90.0 {
+                assert!(
+                    far >= 0.5,
+                    "within {far:.2} m of {:?} for 90 s from t = {}",
+                    a.pose,
+                    a.t_s
+                );
+            }
+        }
+    }
+
+    /// A stuck robot drives out along the most open direction: facing the end wall of a corridor,
+    /// it heads back down the corridor, the follow distance short of the far end at most 1.5 m.
+    #[test]
+    fn the_way_out_is_the_most_open_direction() {
+        let w = corridor();
+        let e = ExplorationConfig::default();
+        let truth = Pose2::new(0.5, 1.5, std::f64::consts::PI);
+        // The odometry has drifted: the target is in its frame.
+        let odom = Pose2::new(0.7, 1.4, std::f64::consts::PI + 0.1);
+        let target = escape_target(&w, truth, odom, &e);
+        let rel = odom.inverse().transform_point(target);
+        // Straight behind the robot in its own frame, 1.5 m away.
+        assert!((rel.coords.norm() - 1.5).abs() < 1e-9, "{rel}");
+        assert!(rel.x < -1.45, "{rel}");
     }
 
     #[test]
