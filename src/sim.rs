@@ -412,9 +412,6 @@ const BOUNDARY_GIVE_UP_M: f64 = 150.0;
 const STUCK_RADIUS_M: f64 = 0.5;
 /// ... over this long (ours: 60 s, ten times what the sample worlds' corners take to round).
 const STUCK_WINDOW_S: f64 = 60.0;
-/// A frontier target reached but still unknown (the cells under and beside the robot, which no
-/// sonar cone covers) keeps frontier cells this close from being chosen again (ours: 0.5 m).
-const REACHED_EXCLUSION_M: f64 = 0.5;
 
 /// Spacing of the revisit targets along the first boundary loop, metres of travel.
 pub const REVISIT_SPACING_M: f64 = 1.0;
@@ -469,7 +466,6 @@ pub fn simulate(
     let mut pick_target = false;
     let mut targets: Vec<Point2<f64>> = Vec::new();
     let mut failed: Vec<Point2<f64>> = Vec::new();
-    let mut reached: Vec<Point2<f64>> = Vec::new();
     let mut target_started = 0.0;
     // The odometry position once a second over the last STUCK_WINDOW_S, and the escapes made.
     let mut recent: std::collections::VecDeque<(f64, Point2<f64>)> = Default::default();
@@ -556,7 +552,6 @@ pub fn simulate(
                 t,
                 &grid,
                 &mut failed,
-                &mut reached,
                 &mut known_history,
                 &mut targets,
                 &mut target_started,
@@ -740,7 +735,6 @@ fn explore_step(
     t: f64,
     grid: &CountingGrid,
     failed: &mut Vec<Point2<f64>>,
-    reached: &mut Vec<Point2<f64>>,
     known_history: &mut Vec<(f64, usize)>,
     targets: &mut Vec<Point2<f64>>,
     target_started: &mut f64,
@@ -754,8 +748,6 @@ fn explore_step(
     {
         if (odom.position() - tg).norm() >= 0.3 {
             failed.push(*tg);
-        } else {
-            reached.push(*tg);
         }
     }
     let map = grid.map();
@@ -773,7 +765,7 @@ fn explore_step(
             return Err("explored area stopped growing".into());
         }
     }
-    match choose_target(&map, odom.position(), failed, reached, e.robot_radius_m) {
+    match choose_target(&map, odom.position(), failed, e.robot_radius_m) {
         Some(tg) => {
             targets.push(tg);
             *target_started = t;
@@ -989,7 +981,6 @@ fn choose_target(
     map: &OccupancyMap,
     from: Point2<f64>,
     failed: &[Point2<f64>],
-    reached: &[Point2<f64>],
     robot_radius: f64,
 ) -> Option<Point2<f64>> {
     let g = &map.geometry;
@@ -1032,11 +1023,7 @@ fn choose_target(
             if map.occupancy[j].is_none() {
                 // A frontier cell: score by unknown cells around, minus travel.
                 let (x, y) = g.centre(cc as usize, rr as usize);
-                if failed.iter().any(|f| (f.x - x).hypot(f.y - y) < 1.0)
-                    || reached
-                        .iter()
-                        .any(|f| (f.x - x).hypot(f.y - y) < REACHED_EXCLUSION_M)
-                {
+                if failed.iter().any(|f| (f.x - x).hypot(f.y - y) < 1.0) {
                     continue;
                 }
                 let mut unknown = 0;
@@ -1134,40 +1121,36 @@ mod tests {
         );
     }
 
-    /// A frontier target reached but still unknown (under the robot, where no cone reaches) is
-    /// not chosen again: on the office (seed 1) the robot used to turn on the spot between two
-    /// such cells 0.2 m apart for 130 s. Now it is never found stuck nor stays within 0.5 m for
-    /// 90 s, and exploring ends because nothing reachable is left unexplored.
+    /// On willow (seed 5) the robot, sent to a revisit target, used to circle a pocket of
+    /// clutter at (6.2, 3.0) m for the last 1100 s of the run. It is now found stuck, driven out,
+    /// and never stays within 0.5 m for two minutes.
     #[test]
-    fn exploration_does_not_dwell_on_targets_it_has_reached() {
+    fn a_robot_circling_a_pocket_is_driven_out() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let loaded = crate::io::load_world(&root.join("samples/office/world.yaml")).unwrap();
+        let loaded = crate::io::load_world(&root.join("samples/willow/world.yaml")).unwrap();
         let c = SimConfig {
-            seed: 1,
+            seed: 5,
             ..loaded.simulation
         };
         let out = simulate(&loaded.world, &c, |_| {}).unwrap();
-        assert!(
-            out.end_reason
-                .starts_with("no reachable unexplored region left")
-                && !out.end_reason.contains("stuck"),
-            "{}",
-            out.end_reason
-        );
+        assert!(out.end_reason.contains("stuck"), "{}", out.end_reason);
         let truth = out.run.ground_truth.unwrap();
+        let end = truth.last().unwrap().t_s;
         for (i, a) in truth.iter().enumerate() {
-            let window = truth[i..].iter().take_while(|b| b.t_s - a.t_s <= 90.0);
-            let far = window
+            if end - a.t_s < 120.0 {
+                break;
+            }
+            let far = truth[i..]
+                .iter()
+                .take_while(|b| b.t_s - a.t_s <= 120.0)
                 .map(|b| (b.pose.position() - a.pose.position()).norm())
                 .fold(0.0, f64::max);
-            if truth.last().unwrap().t_s - a.t_s >= 90.0 {
-                assert!(
-                    far >= 0.5,
-                    "within {far:.2} m of {:?} for 90 s from t = {}",
-                    a.pose,
-                    a.t_s
-                );
-            }
+            assert!(
+                far >= 0.5,
+                "within {far:.2} m of {:?} from t = {} s for 120 s",
+                a.pose,
+                a.t_s
+            );
         }
     }
 
