@@ -282,7 +282,7 @@ fn a_later_run_localises_against_the_survey() {
     );
     // `plan --tags` predicts this error from a map of the home and the surveyed tags, with the
     // walls and without: RMS of the predicted error at the cells the robot drove through, against
-    // the RMS error it had there (measured: 4.0 vs 3.7 cm with walls, 7.7 vs 6.1 cm tags only).
+    // the RMS error it had there (measured: 3.8 vs 3.7 cm with walls, 6.3 vs 5.8 cm tags only).
     let gt_map = dir.path().join("gt_map");
     let ok = |c: &mut Command| assert!(c.status().unwrap().success());
     ok(stereotag()
