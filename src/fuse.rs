@@ -96,6 +96,11 @@ pub struct FuseConfig {
     pub wall_sigma_m: f64,
     /// χ² gate of a sonar range against a surveyed wall, 1 dof (6.63: 99%).
     pub sonar_gate_chi2: f64,
+    /// A range is not fused when the filter knows its distance to the wall worse than this, m
+    /// (ours: 0.2 m): the nearest face in the beam may then be the wrong one, and a range off the
+    /// wrong face pulls the pose further off (willow, seed-1 survey, seed-2 run: 20 m without a
+    /// sighting, position sigma 0.6 m, then 2 m and 19 degrees off).
+    pub sonar_max_range_sigma_m: f64,
     /// Hold the survey's trajectory after its last sighting to the walls mapped before it
     /// ([`hold_tail_to_walls`]; ours: on).
     pub hold_tail_to_walls: bool,
@@ -138,6 +143,7 @@ impl FuseConfig {
             ("huber_sigma", self.huber_sigma),
             ("sonar_sigma_m", self.sonar_sigma_m),
             ("sonar_gate_chi2", self.sonar_gate_chi2),
+            ("sonar_max_range_sigma_m", self.sonar_max_range_sigma_m),
         ];
         let non_negative = [
             ("sighting_sigma_floor_m", self.sighting_sigma_floor_m),
@@ -191,6 +197,7 @@ impl Default for FuseConfig {
             sonar_sigma_frac: 0.01,
             wall_sigma_m: 0.02,
             sonar_gate_chi2: 6.63,
+            sonar_max_range_sigma_m: 0.2,
             hold_tail_to_walls: true,
         }
     }
@@ -1477,7 +1484,7 @@ fn fuse_range(
         n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy),
     );
     let known = (h.transpose() * ekf.p.fixed_view::<3, 3>(0, 0) * h)[0];
-    if known < config.wall_sigma_m.powi(2) {
+    if known < config.wall_sigma_m.powi(2) || known > config.sonar_max_range_sigma_m.powi(2) {
         return None;
     }
     let r = (config.sonar_sigma_m + config.sonar_sigma_frac * range).powi(2)
@@ -1847,6 +1854,28 @@ mod tests {
         assert!(end(&with).abs() < 0.03, "{}", end(&with));
         assert!(with.ranges_fused() > 10 && with.ranges_gated_out() == 0);
         assert!(ate_m(&with.trajectory, &truth).unwrap() < 0.03);
+    }
+
+    /// A range is not fused while the filter knows its distance to the wall worse than
+    /// `sonar_max_range_sigma_m`: the face it would be matched with may be the wrong one.
+    #[test]
+    fn a_lost_filter_does_not_fuse_ranges() {
+        let (layout, wall, odometry, _, readings) = corridor();
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: std::slice::from_ref(&wall),
+        };
+        let config = FuseConfig::default();
+        for (sigma, fused) in [(0.05, true), (0.5, false)] {
+            let (mut ekf, _) = Ekf::at_start(&odometry);
+            ekf.p = DMatrix::identity(3, 3) * (sigma * sigma);
+            ekf.p[(2, 2)] = 1e-6;
+            let before = ekf.x.clone();
+            let outcome = fuse_range(&mut ekf, &readings[0], &sonar, &config);
+            assert_eq!(outcome.is_some(), fused, "sigma {sigma}: {outcome:?}");
+            assert_eq!(ekf.x == before, !fused, "sigma {sigma}");
+        }
     }
 
     /// A survey whose last sighting came 2 m into the corridor: its offline trajectory is right
