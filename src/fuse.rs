@@ -1418,6 +1418,37 @@ pub struct LocalizeResult {
     /// Each sonar range matched with a surveyed wall: its index in the run's readings, and whether
     /// it was fused (else gated out: a person, a moved object, an echo off the cone's edge).
     pub range_outcomes: Vec<(usize, bool)>,
+    /// Times the filter was found lost and started again from the sightings (seconds): see
+    /// [`RELOCALISE_AFTER`].
+    pub relocalised_t_s: Vec<f64>,
+}
+
+/// Gated-out sightings in a row, each putting the robot where the others do (within
+/// [`RELOCALISE_AGREE_M`] and [`RELOCALISE_AGREE_RAD`] once the odometry between them is
+/// accounted for), after which the filter takes itself for lost and starts again from the last
+/// of them (ours: 3; one or two can be blunders).
+pub const RELOCALISE_AFTER: usize = 3;
+/// How close the poses the gated-out sightings give must agree, metres.
+const RELOCALISE_AGREE_M: f64 = 0.3;
+/// How close their headings must agree, radians (about 6 degrees).
+const RELOCALISE_AGREE_RAD: f64 = 0.1;
+
+/// The robot pose a sighting of a surveyed landmark gives, with its covariance (the sighting's
+/// and the landmark's position noise, and the heading's carried over the distance to the tag).
+fn pose_from_sighting(s: &TagSighting, l: &Landmark, config: &FuseConfig) -> (Pose2, Matrix3<f64>) {
+    let (z, r) = s.measurement(config);
+    let theta = wrap_angle(l.yaw_rad - z.z);
+    let (st, ct) = theta.sin_cos();
+    let x = l.position_m[0] - (ct * z.x - st * z.y);
+    let y = l.position_m[1] - (st * z.x + ct * z.y);
+    let yaw_var = r[(2, 2)] + config.yaw_sigma_floor_rad.powi(2);
+    let c = &l.covariance_m2;
+    let pos_var =
+        0.5 * (r[(0, 0)] + r[(1, 1)] + c[0][0] + c[1][1]) + (z.x * z.x + z.y * z.y) * yaw_var;
+    (
+        Pose2::new(x, y, theta),
+        Matrix3::from_diagonal(&Vector3::new(pos_var, pos_var, yaw_var)),
+    )
 }
 
 impl LocalizeResult {
@@ -1518,9 +1549,12 @@ pub fn localize(
         rejected: Vec::new(),
         unknown: Vec::new(),
         range_outcomes: Vec::new(),
+        relocalised_t_s: Vec::new(),
     };
     let mut last = start;
     let mut travelled = 0.0;
+    // Gated-out sightings since the last fused one: the pose each gives and the odometry then.
+    let mut lost: Vec<(Pose2, Matrix3<f64>, Pose2)> = Vec::new();
     for sample in odometry {
         while let Some(&k) = pending.peek() {
             if sightings[k].t_s > sample.t_s {
@@ -1567,12 +1601,33 @@ pub fn localize(
                 .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
             if d2 > config.gate_chi2 {
                 out.rejected.push(k);
+                let (pose, cov) = pose_from_sighting(s, l, config);
+                lost.push((pose, cov, odom));
+                let agree = lost.len() >= RELOCALISE_AFTER
+                    && lost[lost.len() - RELOCALISE_AFTER..]
+                        .iter()
+                        .all(|(p, _, o)| {
+                            let moved = p.compose(&o.between(&odom));
+                            (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
+                                && wrap_angle(moved.theta - pose.theta).abs()
+                                    <= RELOCALISE_AGREE_RAD
+                        });
+                if agree {
+                    ekf.x[0] = pose.x;
+                    ekf.x[1] = pose.y;
+                    ekf.x[2] = pose.theta;
+                    ekf.p.copy_from(&cov);
+                    out.relocalised_t_s.push(s.t_s);
+                    lost.clear();
+                    travelled = 0.0;
+                }
                 continue;
             }
             full.update(&y, &sm, &jac, &r);
             ekf.x.copy_from(&full.x.rows(0, 3));
             ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
             out.accepted.push(k);
+            lost.clear();
             travelled = 0.0;
         }
         travelled += ekf.advance(&mut last, sample.pose, config);
@@ -1854,6 +1909,45 @@ mod tests {
         assert!(end(&with).abs() < 0.03, "{}", end(&with));
         assert!(with.ranges_fused() > 10 && with.ranges_gated_out() == 0);
         assert!(ate_m(&with.trajectory, &truth).unwrap() < 0.03);
+    }
+
+    /// A robot whose odometry jumps (a wheel slip, a kidnap) has its sightings gated out; three in
+    /// a row that agree put it back where they say.
+    #[test]
+    fn a_lost_filter_starts_again_from_sightings_that_agree() {
+        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig::default();
+        let online = run_online(&odom, &sightings, &[], &config);
+        let survey = run_offline(&odom, &sightings, &online, &config);
+        // Halfway round, the odometry jumps 1 m to the robot's left.
+        let half = odom.len() / 2;
+        let jump = odom[half].pose.compose(&Pose2::new(0.0, 1.0, 0.0));
+        let jumped: Vec<StampedPose> = odom
+            .iter()
+            .enumerate()
+            .map(|(i, p)| StampedPose {
+                t_s: p.t_s,
+                pose: if i < half {
+                    p.pose
+                } else {
+                    jump.compose(&odom[half].pose.between(&p.pose))
+                },
+            })
+            .collect();
+        let result = localize(&jumped, &sightings, &survey.landmarks, None, &config);
+        assert_eq!(
+            result.relocalised_t_s.len(),
+            1,
+            "{:?}",
+            result.relocalised_t_s
+        );
+        assert!(result.relocalised_t_s[0] > odom[half].t_s);
+        let (end, gt) = (
+            result.trajectory.last().unwrap().pose,
+            truth.last().unwrap().pose,
+        );
+        let error = (end.x - gt.x).hypot(end.y - gt.y);
+        assert!(error < 0.05, "{error} m off at the end");
     }
 
     /// A range is not fused while the filter knows its distance to the wall worse than

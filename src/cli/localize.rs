@@ -145,6 +145,7 @@ impl Localize {
         metrics.insert("walls.surveyed".into(), walls.len().into());
         metrics.insert("ranges.fused".into(), result.ranges_fused().into());
         metrics.insert("ranges.gated_out".into(), result.ranges_gated_out().into());
+        metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
         metrics.insert(
             "odometry.calibrated".into(),
             f64::from(u8::from(calibration.is_some())).into(),
@@ -200,6 +201,13 @@ impl Localize {
             result.rejected.len(),
             result.unknown.len()
         );
+        for t in &result.relocalised_t_s {
+            tracing::warn!(
+                "lost at t = {t:.1} s: {} sightings in a row were gated out and agreed among \
+                 themselves; started again from them",
+                stereotag::fuse::RELOCALISE_AFTER
+            );
+        }
         if !walls.is_empty() {
             tracing::info!(
                 "{} sonar ranges fused against {} surveyed walls ({} gated out)",
