@@ -4,8 +4,9 @@
 
 use crate::camera::{Rectification, StereoRig};
 use crate::fuse::{
-    align_se2, associate, ate_m, hold_tail_to_walls, run_offline, run_online, FuseConfig, Landmark,
-    OfflineResult, OnlineResult, SonarInput, TagSighting,
+    align_se2, associate, ate_m, hold_tail_to_walls, run_offline, run_online_calibrated,
+    FuseConfig, Landmark, OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
+    TagSighting,
 };
 use crate::geometry::Pose2;
 use crate::grid::{
@@ -204,20 +205,28 @@ pub struct Survey {
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// Runs the survey over a run and its tag sightings: raw map, online filter, offline pass, and
-/// the map rebuilt from the corrected poses.
+/// Runs the survey over a run and its tag sightings: raw map, online filter (predicting with
+/// `calibration` until it finds the run's own, when an earlier survey of the robot gives one),
+/// offline pass, and the map rebuilt from the corrected poses.
 pub fn survey(
     run: &RunDataset,
     sightings: &[TagSighting],
     mapping: &MappingConfig,
     fuse: &FuseConfig,
+    calibration: Option<OdometryCalibration>,
 ) -> Result<Survey, PipelineError> {
     let mut timings_s = BTreeMap::new();
     let t = Instant::now();
     let raw = map_trajectory(run, &run.odometry, mapping)?;
     timings_s.insert("map_raw".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
-    let online = run_online(&run.odometry, sightings, &raw.features_online, fuse);
+    let online = run_online_calibrated(
+        &run.odometry,
+        sightings,
+        &raw.features_online,
+        fuse,
+        calibration,
+    );
     timings_s.insert("fuse_online".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
     let online_map = counting_map(run, &run.placed_readings(&online.trajectory), mapping)?;

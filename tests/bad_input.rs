@@ -436,6 +436,40 @@ fn survey_of_a_sonar_only_run_says_so_and_runs() {
 }
 
 #[test]
+fn survey_names_an_earlier_survey_it_cannot_take_a_calibration_from() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    good_run(&run);
+    let earlier = tmp.path().join("earlier");
+    std::fs::create_dir_all(&earlier).unwrap();
+    let with = |out: &Path| {
+        stereotag(&[
+            "survey",
+            "--run",
+            run.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--no-rerun",
+            "--calibration-from",
+            earlier.to_str().unwrap(),
+        ])
+    };
+    // No landmarks.json there.
+    let out = tmp.path().join("none");
+    let (code, err) = with(&out);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("landmarks.json"), "{err}");
+    assert!(!out.exists());
+    // A landmarks.json without an odometry calibration.
+    std::fs::write(earlier.join("landmarks.json"), r#"{"landmarks": []}"#).unwrap();
+    let out = tmp.path().join("no_calibration");
+    let (code, err) = with(&out);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no odometry_calibration"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
 fn survey_names_a_missing_image_and_a_rig_that_does_not_fit() {
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");

@@ -42,6 +42,7 @@ impl Demo {
                 out: &self.out,
                 world: Some(&self.world),
                 config: None,
+                calibration_from: None,
                 detect: DetectOptions {
                     keep_images: false,
                     backend: Backend::ApriltagC,

@@ -28,6 +28,11 @@ pub struct SurveyArgs {
     /// Fusion settings (YAML, `stereotag config --default fuse`).
     #[arg(long)]
     config: Option<PathBuf>,
+    /// An earlier survey of the same robot (its directory): the online filter predicts with the
+    /// odometry errors that survey found (its landmarks.json's odometry_calibration) until the
+    /// run's own are learnt, instead of dead reckoning until the first loop closes.
+    #[arg(long, value_name = "SURVEY_DIR")]
+    calibration_from: Option<PathBuf>,
     #[command(flatten)]
     detect: DetectArgs,
     /// Replace the output directory if it exists.
@@ -100,6 +105,7 @@ impl SurveyArgs {
             out: &self.out,
             world: self.world.as_deref(),
             config: self.config.as_deref(),
+            calibration_from: self.calibration_from.as_deref(),
             detect: self.detect.options(&[], quiet),
             force: self.force,
             rerun: &self.rerun,
@@ -152,6 +158,8 @@ pub(crate) struct SurveyJob<'a> {
     /// World file (default: the one run.yaml names, if it exists).
     pub world: Option<&'a Path>,
     pub config: Option<&'a Path>,
+    /// An earlier survey whose odometry calibration the online filter starts with.
+    pub calibration_from: Option<&'a Path>,
     pub detect: DetectOptions<'a>,
     pub force: bool,
     pub rerun: &'a super::RerunArgs,
@@ -176,6 +184,21 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
         .transpose()?
         .map(|w| w.world);
     let fuse = load_fuse_config(job.config)?;
+    let calibration = job
+        .calibration_from
+        .map(|d| {
+            let path = d.join("landmarks.json");
+            io::load_landmarks(&path)?
+                .odometry_calibration
+                .ok_or_else(|| {
+                    anyhow::Error::from(UsageError(format!(
+                    "{}: no odometry_calibration (a survey whose offline pass did not estimate \
+                     one); survey without --calibration-from",
+                    path.display()
+                )))
+                })
+        })
+        .transpose()?;
     let mapping = run.meta.mapping.clone().unwrap_or_default();
     let recorder = super::recorder(job.rerun, super::Recording::Survey, &dir.path("survey.rrd"))?;
 
@@ -198,10 +221,14 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
             let t = std::time::Instant::now();
             (compress_pairs(images), t.elapsed().as_secs_f64())
         },
-        || survey(&run, &sightings, &mapping, &fuse),
+        || survey(&run, &sightings, &mapping, &fuse, calibration),
     );
     let result = result?;
     let mut metrics = survey_metrics(&result, sightings.len());
+    metrics.insert(
+        "online.calibration_from_earlier_survey".into(),
+        f64::from(u8::from(calibration.is_some())),
+    );
     if let Some(w) = &world {
         metrics.extend(score_survey(&result, &run, w, &mapping)?);
     }
