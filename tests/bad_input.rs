@@ -413,14 +413,20 @@ fn run_with_pair(dir: &Path) {
 }
 
 fn survey(run: &Path, out: &Path) -> (i32, String) {
-    stereotag(&[
+    survey_with(run, out, &[])
+}
+
+fn survey_with(run: &Path, out: &Path, extra: &[&str]) -> (i32, String) {
+    let mut args = vec![
         "survey",
         "--run",
         run.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
         "--no-rerun",
-    ])
+    ];
+    args.extend_from_slice(extra);
+    stereotag(&args)
 }
 
 #[test]
@@ -443,16 +449,11 @@ fn survey_names_an_earlier_survey_it_cannot_take_a_calibration_from() {
     let earlier = tmp.path().join("earlier");
     std::fs::create_dir_all(&earlier).unwrap();
     let with = |out: &Path| {
-        stereotag(&[
-            "survey",
-            "--run",
-            run.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--no-rerun",
-            "--calibration-from",
-            earlier.to_str().unwrap(),
-        ])
+        survey_with(
+            &run,
+            out,
+            &["--calibration-from", earlier.to_str().unwrap()],
+        )
     };
     // No landmarks.json there.
     let out = tmp.path().join("none");
