@@ -1592,7 +1592,7 @@ pub fn localize(
     let mut last = start;
     let mut travelled = 0.0;
     // Gated-out sightings since the last fused one: the pose each gives and the odometry then.
-    let mut lost: Vec<(Pose2, Matrix3<f64>, Pose2)> = Vec::new();
+    let mut lost: Vec<(Pose2, Pose2)> = Vec::new();
     for sample in odometry {
         while let Some(&k) = pending.peek() {
             if sightings[k].t_s > sample.t_s {
@@ -1640,16 +1640,13 @@ pub fn localize(
             if d2 > config.gate_chi2 {
                 out.rejected.push(k);
                 let (pose, cov) = pose_from_sighting(s, l, config);
-                lost.push((pose, cov, odom));
+                lost.push((pose, odom));
                 let agree = lost.len() >= RELOCALISE_AFTER
-                    && lost[lost.len() - RELOCALISE_AFTER..]
-                        .iter()
-                        .all(|(p, _, o)| {
-                            let moved = p.compose(&o.between(&odom));
-                            (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
-                                && wrap_angle(moved.theta - pose.theta).abs()
-                                    <= RELOCALISE_AGREE_RAD
-                        });
+                    && lost[lost.len() - RELOCALISE_AFTER..].iter().all(|(p, o)| {
+                        let moved = p.compose(&o.between(&odom));
+                        (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
+                            && wrap_angle(moved.theta - pose.theta).abs() <= RELOCALISE_AGREE_RAD
+                    });
                 if agree {
                     ekf.x[0] = pose.x;
                     ekf.x[1] = pose.y;

@@ -467,9 +467,7 @@ pub fn simulate(
     let mut targets: Vec<Point2<f64>> = Vec::new();
     let mut failed: Vec<Point2<f64>> = Vec::new();
     let mut target_started = 0.0;
-    // The odometry position once a second over the last STUCK_WINDOW_S, and the escapes made.
-    let mut recent: std::collections::VecDeque<(f64, Point2<f64>)> = Default::default();
-    let mut next_recent = 0.0;
+    let mut stuck_watch = StuckWatch::default();
     let mut escapes = 0usize;
     let mut known_history: Vec<(f64, usize)> = Vec::new();
     let mut end_reason = String::from("time budget ended");
@@ -589,43 +587,24 @@ pub fn simulate(
             }
         }
 
-        if t >= next_recent {
-            next_recent = t + 1.0;
-            recent.push_back((t, odom.position()));
-            while recent
-                .front()
-                .is_some_and(|(t0, _)| t - t0 > STUCK_WINDOW_S)
+        if stuck_watch.observe(t, odom.position()) && !matches!(mode, Mode::LookAround { .. }) {
+            // Stuck (circling in a pocket of clutter, or turning between targets it cannot see):
+            // give the target up and drive out along the most open direction.
+            if let Mode::Straight { target: Some(tg) }
+            | Mode::Follow(FollowState {
+                target: Some(tg), ..
+            }) = &mode
             {
-                recent.pop_front();
-            }
-            let spans = recent
-                .front()
-                .is_some_and(|(t0, _)| t - t0 >= STUCK_WINDOW_S - 1.0);
-            let here = odom.position();
-            if spans
-                && !matches!(mode, Mode::LookAround { .. })
-                && recent
-                    .iter()
-                    .all(|(_, p)| (p - here).norm() < STUCK_RADIUS_M)
-            {
-                // Stuck (circling in a pocket of clutter, or turning between targets it cannot
-                // see): give the target up and drive out along the most open direction.
-                if let Mode::Straight { target: Some(tg) }
-                | Mode::Follow(FollowState {
-                    target: Some(tg), ..
-                }) = &mode
-                {
-                    if revisit.is_none() {
-                        failed.push(*tg);
-                    }
+                if revisit.is_none() {
+                    failed.push(*tg);
                 }
-                mode = Mode::Straight {
-                    target: Some(escape_target(world, truth, odom, e)),
-                };
-                target_started = t;
-                recent.clear();
-                escapes += 1;
             }
+            mode = Mode::Straight {
+                target: Some(escape_target(world, truth, odom, e)),
+            };
+            target_started = t;
+            stuck_watch.recent.clear();
+            escapes += 1;
         }
 
         let (v, w, next_mode) = control(world, truth, odom, &mode, e);
@@ -772,6 +751,42 @@ fn explore_step(
             Ok(Mode::Straight { target: Some(tg) })
         }
         None => Err("no reachable unexplored region left".into()),
+    }
+}
+
+/// The odometry position once a second over the last [`STUCK_WINDOW_S`], to tell a robot that
+/// stays put.
+#[derive(Debug, Default)]
+struct StuckWatch {
+    recent: std::collections::VecDeque<(f64, Point2<f64>)>,
+    next_t_s: f64,
+}
+
+impl StuckWatch {
+    /// Notes the position (once a second); true when it has stayed within [`STUCK_RADIUS_M`]
+    /// over the whole window.
+    fn observe(&mut self, t: f64, here: Point2<f64>) -> bool {
+        if t < self.next_t_s {
+            return false;
+        }
+        self.next_t_s = t + 1.0;
+        self.recent.push_back((t, here));
+        while self
+            .recent
+            .front()
+            .is_some_and(|(t0, _)| t - t0 > STUCK_WINDOW_S)
+        {
+            self.recent.pop_front();
+        }
+        let spans = self
+            .recent
+            .front()
+            .is_some_and(|(t0, _)| t - t0 >= STUCK_WINDOW_S - 1.0);
+        spans
+            && self
+                .recent
+                .iter()
+                .all(|(_, p)| (p - here).norm() < STUCK_RADIUS_M)
     }
 }
 
