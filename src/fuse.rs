@@ -1514,9 +1514,51 @@ pub struct SonarInput<'a> {
 
 /// A wall face is used only when its normal is this far inside the beam's half-cone: 2 degrees
 /// (outside the cone the echo comes off the cone's edge, longer than the perpendicular).
-const WALL_CONE_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+pub const WALL_CONE_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
 /// ... and the foot of the perpendicular this far inside the face's ends: 5 cm.
-const WALL_INSET_M: f64 = 0.05;
+pub const WALL_INSET_M: f64 = 0.05;
+
+/// A sonar range matched with a surveyed wall face.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallMatch {
+    /// The face's index in [`SonarInput::walls`].
+    pub wall: usize,
+    /// The range measured, metres.
+    pub range_m: f64,
+    /// The range expected off the face from the pose given, metres.
+    pub expected_m: f64,
+}
+
+/// The surveyed wall face a sonar range taken at `world_from_robot` is matched with, as
+/// [`localize`] matches it: the nearest face whose normal lies [`WALL_CONE_MARGIN_RAD`] inside
+/// the beam and whose foot of the perpendicular lies [`WALL_INSET_M`] inside its ends. `None`
+/// for no echo, an echo at the sensor's largest range, an unknown sensor or no face in the beam.
+pub fn wall_in_beam(
+    sonar: &SonarInput<'_>,
+    reading: &SonarReading,
+    world_from_robot: Pose2,
+) -> Option<WallMatch> {
+    let range = reading.range_m?;
+    let sensor = sonar.layout.sensors.get(reading.sensor)?;
+    if range >= sonar.layout.max_range_m - 1e-6 {
+        return None;
+    }
+    let at = world_from_robot.compose(&sensor.robot_from_sensor());
+    let half = 0.5 * sonar.layout.cone_rad - WALL_CONE_MARGIN_RAD;
+    sonar
+        .walls
+        .iter()
+        .enumerate()
+        .filter_map(|(i, w)| {
+            w.expected_range([at.x, at.y], at.theta, half, WALL_INSET_M)
+                .map(|expected_m| WallMatch {
+                    wall: i,
+                    range_m: range,
+                    expected_m,
+                })
+        })
+        .min_by(|a, b| a.expected_m.total_cmp(&b.expected_m))
+}
 
 /// Fuses one sonar range against the nearest surveyed wall face in the beam; `Some(fused)` when
 /// a face is in the beam, `None` when there is none (or the filter already knows its distance to
@@ -1527,22 +1569,11 @@ fn fuse_range(
     sonar: &SonarInput<'_>,
     config: &FuseConfig,
 ) -> Option<bool> {
-    let range = reading.range_m?;
-    let sensor = sonar.layout.sensors.get(reading.sensor)?;
-    if range >= sonar.layout.max_range_m - 1e-6 {
-        return None;
-    }
     let pose = ekf.pose();
-    let at = pose.compose(&sensor.robot_from_sensor());
-    let half = 0.5 * sonar.layout.cone_rad - WALL_CONE_MARGIN_RAD;
-    let (expected, wall) = sonar
-        .walls
-        .iter()
-        .filter_map(|w| {
-            w.expected_range([at.x, at.y], at.theta, half, WALL_INSET_M)
-                .map(|r| (r, w))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    let m = wall_in_beam(sonar, reading, pose)?;
+    let (range, expected) = (m.range_m, m.expected_m);
+    let wall = sonar.walls.get(m.wall)?;
+    let sensor = sonar.layout.sensors.get(reading.sensor)?;
     // range = n . (p + R(theta) o) - offset.
     let n = wall.normal();
     let (st, ct) = pose.theta.sin_cos();
@@ -2013,6 +2044,69 @@ mod tests {
         );
         let error = (end.x - gt.x).hypot(end.y - gt.y);
         assert!(error < 0.05, "{error} m off at the end");
+    }
+
+    /// The face a range is matched with: the nearest one in the beam, none without an echo.
+    #[test]
+    fn a_range_is_matched_with_the_nearest_face_in_its_beam() {
+        let (layout, wall, _, _, readings) = corridor();
+        // A nearer face across the same beam, and one behind the sensor.
+        let nearer = WallSegment {
+            offset_m: -0.35,
+            from_m: [2.0, 0.35],
+            to_m: [4.0, 0.35],
+            ..wall
+        };
+        let behind = WallSegment {
+            normal_rad: 0.5 * std::f64::consts::PI,
+            offset_m: -0.5,
+            from_m: [-1.0, -0.5],
+            to_m: [11.0, -0.5],
+            ..wall
+        };
+        let walls = [wall, nearer, behind];
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: &walls,
+        };
+        let reading = readings[0];
+        let m = wall_in_beam(&sonar, &reading, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        assert_eq!(m.wall, 0);
+        assert!((m.expected_m - 0.3).abs() < 1e-12, "{m:?}");
+        assert_eq!(m.range_m, reading.range_m.unwrap());
+        let m = wall_in_beam(&sonar, &reading, Pose2::new(3.0, 0.0, 0.0)).unwrap();
+        assert_eq!(m.wall, 1);
+        assert!((m.expected_m - 0.15).abs() < 1e-12, "{m:?}");
+        // Past the nearer face's end (less its inset) the far wall is matched again.
+        let m = wall_in_beam(&sonar, &reading, Pose2::new(3.97, 0.0, 0.0)).unwrap();
+        assert_eq!(m.wall, 0);
+        // Turned 20 degrees, the wall's normal is outside the beam less its margin.
+        assert_eq!(
+            wall_in_beam(&sonar, &reading, Pose2::new(0.0, 0.0, 20f64.to_radians())),
+            None
+        );
+        let none = SonarReading {
+            range_m: None,
+            ..reading
+        };
+        assert_eq!(wall_in_beam(&sonar, &none, Pose2::new(0.0, 0.0, 0.0)), None);
+        let at_max = SonarReading {
+            range_m: Some(layout.max_range_m),
+            ..reading
+        };
+        assert_eq!(
+            wall_in_beam(&sonar, &at_max, Pose2::new(0.0, 0.0, 0.0)),
+            None
+        );
+        let unknown = SonarReading {
+            sensor: 3,
+            ..reading
+        };
+        assert_eq!(
+            wall_in_beam(&sonar, &unknown, Pose2::new(0.0, 0.0, 0.0)),
+            None
+        );
     }
 
     /// A range is not fused while the filter knows its distance to the wall worse than
