@@ -13,7 +13,14 @@ use stereotag::run::pose_at;
 /// A range whose misfit is over this is counted apart: 5 cm (2.5 sigma of a range and a wall).
 const FAR_M: f64 = 0.05;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("wall_misfits: {e}");
+        std::process::exit(2);
+    }
+}
+
+fn run() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1).map(std::path::PathBuf::from);
     let (Some(survey), Some(run_dir)) = (args.next(), args.next()) else {
         return Err("usage: wall_misfits SURVEY_DIR RUN_DIR".into());

@@ -2050,7 +2050,8 @@ mod tests {
     #[test]
     fn a_range_is_matched_with_the_nearest_face_in_its_beam() {
         let (layout, wall, _, _, readings) = corridor();
-        // A nearer face across the same beam, and one behind the sensor.
+        // A nearer face across the same beam, and a still nearer one behind the sensor (facing
+        // it, but not in the beam's direction).
         let nearer = WallSegment {
             offset_m: -0.35,
             from_m: [2.0, 0.35],
@@ -2059,9 +2060,9 @@ mod tests {
         };
         let behind = WallSegment {
             normal_rad: 0.5 * std::f64::consts::PI,
-            offset_m: -0.5,
-            from_m: [-1.0, -0.5],
-            to_m: [11.0, -0.5],
+            offset_m: 0.0,
+            from_m: [-1.0, 0.0],
+            to_m: [11.0, 0.0],
             ..wall
         };
         let walls = [wall, nearer, behind];
