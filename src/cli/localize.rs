@@ -71,6 +71,17 @@ impl Localize {
             None => run.odometry.as_slice().into(),
         };
         let config = load_fuse_config(self.config.as_deref())?;
+        let config = match calibration {
+            Some(_) => {
+                let c = config.for_calibrated_odometry();
+                tracing::info!(
+                    "predicting with {} heading noise per √rad turned (calibrated odometry)",
+                    c.heading_sigma_per_sqrt_rad
+                );
+                c
+            }
+            None => config,
+        };
         let world_path = super::world_of_run(self.world.as_deref(), &self.run, &run);
         let world = world_path
             .as_deref()
