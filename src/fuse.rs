@@ -1555,7 +1555,9 @@ pub struct WallMatch {
 /// The surveyed wall face a sonar range taken at `world_from_robot` is matched with, as
 /// [`localize`] matches it: the nearest face whose normal lies [`WALL_CONE_MARGIN_RAD`] inside
 /// the beam and whose foot of the perpendicular lies [`WALL_INSET_M`] inside its ends. `None`
-/// for no echo, an echo at the sensor's largest range, an unknown sensor or no face in the beam.
+/// for no echo, an echo at the sensor's largest range, an unknown sensor, no face in the beam,
+/// or a nearest face beyond the sensor's largest range (it cannot have sent the echo, and a
+/// range matched with it would only be gated out or, with the pose uncertain, pull it off).
 pub fn wall_in_beam(
     sonar: &SonarInput<'_>,
     reading: &SonarReading,
@@ -1581,6 +1583,7 @@ pub fn wall_in_beam(
                 })
         })
         .min_by(|a, b| a.expected_m.total_cmp(&b.expected_m))
+        .filter(|m| m.expected_m < sonar.layout.max_range_m)
 }
 
 /// Fuses one sonar range against the nearest surveyed wall face in the beam; `Some(fused)` when
@@ -2149,6 +2152,23 @@ mod tests {
         };
         assert_eq!(
             wall_in_beam(&sonar, &at_max, Pose2::new(0.0, 0.0, 0.0)),
+            None
+        );
+        // A face beyond the sensor's reach cannot have sent the echo.
+        let far = WallSegment {
+            offset_m: wall.offset_m - layout.max_range_m,
+            from_m: [-1.0, 0.5 + layout.max_range_m],
+            to_m: [11.0, 0.5 + layout.max_range_m],
+            ..wall
+        };
+        let m = far.expected_range([0.0, 0.2], 0.5 * std::f64::consts::PI, 0.1, 0.0);
+        assert!(m.is_some_and(|e| e > layout.max_range_m), "{m:?}");
+        let beyond = SonarInput {
+            walls: std::slice::from_ref(&far),
+            ..sonar
+        };
+        assert_eq!(
+            wall_in_beam(&beyond, &reading, Pose2::new(0.0, 0.0, 0.0)),
             None
         );
         let unknown = SonarReading {
