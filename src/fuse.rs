@@ -46,7 +46,8 @@ pub struct FuseConfig {
     /// measured choice: the calibration removes the 1% wheel-base error that the 0.03 covers,
     /// and with 0.03 each sonar range turns the heading too far. The localisation ATE summed
     /// over the pairs of README, with the walls: willow's 14 pairs 110 cm at 0.03, 81 at 0.02,
-    /// 75 at 0.015 and 0.01; office's 12 and museum's 12 within 2 cm of 0.03's; tags alone
+    /// 75 at 0.015 and 0.01 (73 at 0.015 once faces beyond the sonar's reach are not matched);
+    /// office's 12 and museum's 12 within 2 cm of 0.03's; tags alone
     /// office's 12 pairs 80 cm at 0.03, 85 at 0.015, 88 at 0.01).
     pub calibrated_heading_sigma_per_sqrt_rad: f64,
     /// Heading noise per √m travelled (ours: 0.01 rad/√m: random wheel noise of 2 mm/√m on each
@@ -1556,8 +1557,7 @@ pub struct WallMatch {
 /// [`localize`] matches it: the nearest face whose normal lies [`WALL_CONE_MARGIN_RAD`] inside
 /// the beam and whose foot of the perpendicular lies [`WALL_INSET_M`] inside its ends. `None`
 /// for no echo, an echo at the sensor's largest range, an unknown sensor, no face in the beam,
-/// or a nearest face beyond the sensor's largest range (it cannot have sent the echo, and a
-/// range matched with it would only be gated out or, with the pose uncertain, pull it off).
+/// or a nearest face beyond the sensor's largest range (it cannot have sent the echo).
 pub fn wall_in_beam(
     sonar: &SonarInput<'_>,
     reading: &SonarReading,
