@@ -1491,9 +1491,9 @@ pub struct LocalizeResult {
 /// of them (ours: 3; one or two can be blunders).
 pub const RELOCALISE_AFTER: usize = 3;
 /// How close the poses the gated-out sightings give must agree, metres.
-const RELOCALISE_AGREE_M: f64 = 0.3;
+pub const RELOCALISE_AGREE_M: f64 = 0.3;
 /// How close their headings must agree, radians (about 6 degrees).
-const RELOCALISE_AGREE_RAD: f64 = 0.1;
+pub const RELOCALISE_AGREE_RAD: f64 = 0.1;
 
 /// The robot pose a sighting of a surveyed landmark gives, with its covariance (the sighting's
 /// and the landmark's position noise, and the heading's carried over the distance to the tag).
