@@ -1741,7 +1741,8 @@ pub fn localize(
 
 /// Holds the end of a survey's offline trajectory, after its last fused sighting at `last_t_s`, to
 /// walls mapped from the readings before it: from the offline pose there, the filter of
-/// [`localize`] runs on the rest of the odometry (corrected with `calibration`) with the ranges
+/// [`localize`] runs on the rest of the odometry (corrected with `calibration`, and then
+/// predicted with [`FuseConfig::for_calibrated_odometry`] as `localize` does) with the ranges
 /// taken after it. Until then the offline graph has nothing but odometry there. `sonar` holds the
 /// run's readings and the walls; the trajectory is returned whole.
 pub fn hold_tail_to_walls(
@@ -1780,7 +1781,10 @@ pub fn hold_tail_to_walls(
             readings: &readings,
             ..sonar
         }),
-        config,
+        &match calibration {
+            Some(_) => config.for_calibrated_odometry(),
+            None => config.clone(),
+        },
     );
     let mut out = offline[..start].to_vec();
     out.extend(held.trajectory);
