@@ -30,6 +30,7 @@ mod tagquads;
 pub mod tags;
 #[cfg(feature = "rerun")]
 pub mod viz;
+pub mod vo;
 pub mod wallmap;
 pub mod walls;
 pub mod world;
