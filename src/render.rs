@@ -1293,7 +1293,9 @@ pub fn visible_tags(
 }
 
 /// When to take stereo pictures along a run: whenever a tag is in view of both cameras within
-/// `max_range_m`, at most once per `min_travel_m` of travel or `min_turn_rad` of turn.
+/// `max_range_m`, at most once per `min_travel_m` of travel or `min_turn_rad` of turn; and, for the
+/// visual odometry, with no tag in view as well once the robot has moved `every` since the last
+/// picture.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CapturePolicy {
     /// Farthest tag worth a picture (ours: 6 m; a 16 cm tag is still 12 px wide there).
@@ -1302,6 +1304,10 @@ pub struct CapturePolicy {
     pub min_travel_m: f64,
     /// Least turn between pictures (ours: 10 degrees).
     pub min_turn_rad: f64,
+    /// Travel (m) or turn (rad) after which a picture is taken whatever is in view (ours: 0.3 m
+    /// or 20 degrees, so that consecutive pictures share most of what they see); `None` for
+    /// pictures of tags only.
+    pub every: Option<(f64, f64)>,
 }
 
 impl Default for CapturePolicy {
@@ -1310,6 +1316,7 @@ impl Default for CapturePolicy {
             max_range_m: 6.0,
             min_travel_m: 0.15,
             min_turn_rad: 10f64.to_radians(),
+            every: Some((0.3, 20f64.to_radians())),
         }
     }
 }
@@ -1335,6 +1342,16 @@ pub fn plan_captures(
             if moved < policy.min_travel_m && turned < policy.min_turn_rad {
                 continue;
             }
+            if policy
+                .every
+                .is_some_and(|(m, rad)| moved >= m || turned >= rad)
+            {
+                out.push(*p);
+                continue;
+            }
+        } else if policy.every.is_some() {
+            out.push(*p);
+            continue;
         }
         let seen = truths(world, &paints, rig, &world_from_left(rig, &p.pose), config);
         if seen

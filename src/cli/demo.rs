@@ -29,12 +29,20 @@ impl Demo {
         let dir = OutputDir::create(&self.out, force)?;
         let run_dir = dir.path("run");
         let rig = Path::new("calibration/rigs/default.yaml");
-        let sim = simulate_world(&self.world, &run_dir, Some(rig), false, quiet, |c| {
-            if let Some(s) = self.seed {
-                c.seed = s;
-            }
-            Ok(())
-        })?;
+        let policy = stereotag::render::CapturePolicy::default();
+        let sim = simulate_world(
+            &self.world,
+            &run_dir,
+            Some((rig, &policy)),
+            false,
+            quiet,
+            |c| {
+                if let Some(s) = self.seed {
+                    c.seed = s;
+                }
+                Ok(())
+            },
+        )?;
         tracing::info!("{}; surveying", sim.end_reason);
         let output = survey_into(
             &SurveyJob {
@@ -51,6 +59,7 @@ impl Demo {
                     min_contrast: super::survey::DEFAULT_MIN_CONTRAST,
                     tag_size_m: None,
                     quiet,
+                    visual_odometry: true,
                 },
                 force,
                 rerun: &self.rerun,

@@ -2,6 +2,7 @@ use super::{progress, relative_path, UsageError};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use stereotag::io::{self, OutputDir};
+use stereotag::render::CapturePolicy;
 use stereotag::sim::{self, OdometryNoise, SimOutput};
 use stereotag::sonar::SonarLayout;
 
@@ -30,12 +31,16 @@ pub struct Simulate {
     /// boundary loop (both added for surveys).
     #[arg(long)]
     paper_exploration: bool,
-    /// Stereo rig for the pictures taken when a tag is in view.
+    /// Stereo rig of the pictures (taken whenever a tag is in view, and every 0.3 m or 20
+    /// degrees in between for the visual odometry).
     #[arg(long, default_value = "calibration/rigs/default.yaml")]
     rig: PathBuf,
     /// Take no stereo pictures (sonar and odometry only).
     #[arg(long)]
     no_stereo: bool,
+    /// Take pictures only when a tag is in view (none in between for the visual odometry).
+    #[arg(long, conflicts_with = "no_stereo")]
+    tag_pictures_only: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -43,8 +48,14 @@ pub struct Simulate {
 
 impl Simulate {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
-        let rig = (!self.no_stereo).then_some(self.rig.as_path());
-        simulate_world(&self.world, &self.out, rig, self.force, quiet, |c| {
+        let policy = CapturePolicy {
+            every: (!self.tag_pictures_only)
+                .then_some(CapturePolicy::default().every)
+                .flatten(),
+            ..CapturePolicy::default()
+        };
+        let pictures = (!self.no_stereo).then_some((self.rig.as_path(), &policy));
+        simulate_world(&self.world, &self.out, pictures, self.force, quiet, |c| {
             if let Some(s) = self.seed {
                 c.seed = s;
             }
@@ -73,7 +84,7 @@ impl Simulate {
 pub(crate) fn simulate_world(
     world_path: &Path,
     out: &Path,
-    rig_path: Option<&Path>,
+    pictures: Option<(&Path, &CapturePolicy)>,
     force: bool,
     quiet: bool,
     adjust: impl FnOnce(&mut sim::SimConfig) -> anyhow::Result<()>,
@@ -96,10 +107,11 @@ pub(crate) fn simulate_world(
             .into_owned(),
     );
     output.run.meta.mapping = Some(loaded.mapping.clone());
-    if let Some(rig_path) = rig_path.filter(|_| !loaded.world.tags.is_empty()) {
+    if let Some((rig_path, policy)) = pictures.filter(|_| !loaded.world.tags.is_empty()) {
         take_pictures(
             &loaded.world,
             rig_path,
+            policy,
             &dir,
             &mut output,
             config.seed,
@@ -130,20 +142,21 @@ fn render_seed(seed: u64, k: usize) -> u64 {
         .wrapping_add(k as u64 + 1)
 }
 
-/// Renders a stereo pair wherever a tag is in view and lists them in `stereo.csv`.
+/// Renders the stereo pairs `policy` asks for and lists them in `stereo.csv`.
 fn take_pictures(
     world: &stereotag::world::World,
     rig_path: &Path,
+    policy: &CapturePolicy,
     dir: &OutputDir,
     output: &mut SimOutput,
     seed: u64,
     quiet: bool,
 ) -> anyhow::Result<()> {
-    use stereotag::render::{plan_captures, CapturePolicy, RenderConfig, Renderer};
+    use stereotag::render::{plan_captures, RenderConfig, Renderer};
     let rig = io::load_rig(rig_path)?;
     let truth = output.run.ground_truth.clone().unwrap_or_default();
     let config = RenderConfig::default();
-    let plan = plan_captures(world, &rig, &truth, &CapturePolicy::default(), &config)?;
+    let plan = plan_captures(world, &rig, &truth, policy, &config)?;
     std::fs::create_dir_all(dir.path("stereo/left"))?;
     std::fs::create_dir_all(dir.path("stereo/right"))?;
     let bar = progress(plan.len() as u64, "render", quiet);
