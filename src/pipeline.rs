@@ -18,6 +18,7 @@ use crate::score::{score_features, score_map, FeatureScore, MapScore};
 use crate::sonar::PlacedReading;
 use crate::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
 use crate::tags::{TagDetector, TagError};
+use crate::vo::VisualTurn;
 use crate::wallmap::{map_walls, WallSegment};
 use crate::world::World;
 use std::collections::BTreeMap;
@@ -201,16 +202,19 @@ pub struct Survey {
     pub corrected: SonarMap,
     /// The surveyed landmarks (offline positions, matched with the corrected map's corners).
     pub landmarks: Vec<Landmark>,
+    /// The turns the cameras measured between pictures, as fused.
+    pub visual: Vec<VisualTurn>,
     /// Seconds per stage.
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// Runs the survey over a run and its tag sightings: raw map, online filter (predicting with
-/// `calibration` until it finds the run's own, when an earlier survey of the robot gives one),
-/// offline pass, and the map rebuilt from the corrected poses.
+/// Runs the survey over a run, its tag sightings and the turns its cameras measured: raw map,
+/// online filter (predicting with `calibration` until it finds the run's own, when an earlier
+/// survey of the robot gives one), offline pass, and the map rebuilt from the corrected poses.
 pub fn survey(
     run: &RunDataset,
     sightings: &[TagSighting],
+    visual: &[VisualTurn],
     mapping: &MappingConfig,
     fuse: &FuseConfig,
     calibration: Option<OdometryCalibration>,
@@ -222,6 +226,7 @@ pub fn survey(
     let t = Instant::now();
     let online = run_online_calibrated(
         &run.odometry,
+        visual,
         sightings,
         &raw.features_online,
         fuse,
@@ -232,11 +237,11 @@ pub fn survey(
     let online_map = counting_map(run, &run.placed_readings(&online.trajectory), mapping)?;
     timings_s.insert("map_online".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
-    let mut offline = run_offline(&run.odometry, sightings, &online, fuse);
+    let mut offline = run_offline(&run.odometry, visual, sightings, &online, fuse);
     timings_s.insert("fuse_offline".into(), t.elapsed().as_secs_f64());
     if fuse.hold_tail_to_walls {
         let t = Instant::now();
-        hold_tail(run, sightings, &online, &mut offline, mapping, fuse)?;
+        hold_tail(run, sightings, visual, &online, &mut offline, mapping, fuse)?;
         timings_s.insert("fuse_tail".into(), t.elapsed().as_secs_f64());
     }
     let t = Instant::now();
@@ -261,6 +266,7 @@ pub fn survey(
         offline,
         corrected,
         landmarks,
+        visual: visual.to_vec(),
         timings_s,
     })
 }
@@ -282,6 +288,7 @@ fn counting_map(
 fn hold_tail(
     run: &RunDataset,
     sightings: &[TagSighting],
+    visual: &[VisualTurn],
     online: &OnlineResult,
     offline: &mut OfflineResult,
     mapping: &MappingConfig,
@@ -308,6 +315,7 @@ fn hold_tail(
     let walls = map_walls(&readings, 0.5 * layout.cone_rad, layout.max_range_m, &grid);
     offline.trajectory = hold_tail_to_walls(
         &run.odometry,
+        visual,
         &offline.trajectory,
         last_t,
         offline.odometry_calibration.as_ref(),
@@ -414,6 +422,25 @@ pub fn score_survey(
             m.insert("ate_m.offline_aligned".into(), ate);
         }
     }
+    if let Some(truth) = run.ground_truth.as_deref() {
+        let errors: Vec<(f64, f64)> = survey
+            .visual
+            .iter()
+            .filter_map(|v| {
+                let a = crate::run::pose_at(truth, v.from_t_s)?;
+                let b = crate::run::pose_at(truth, v.to_t_s)?;
+                let e = crate::geometry::wrap_angle(v.turn_rad - (b.theta - a.theta));
+                Some((e, v.sigma_rad))
+            })
+            .collect();
+        if !errors.is_empty() {
+            let n = errors.len() as f64;
+            let rms = (errors.iter().map(|(e, _)| e * e).sum::<f64>() / n).sqrt();
+            let nees = errors.iter().map(|(e, s)| (e / s).powi(2)).sum::<f64>() / n;
+            m.insert("visual.turn_error_rms_deg".into(), rms.to_degrees());
+            m.insert("visual.turn_nees".into(), nees);
+        }
+    }
     m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
     m.insert("landmarks.planned".into(), world.tags.len() as f64);
     Ok(m)
@@ -456,6 +483,15 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
             .iter()
             .filter(|l| l.matched_corner.is_some())
             .count() as f64,
+    );
+    m.insert("visual.turns".into(), survey.visual.len() as f64);
+    m.insert(
+        "visual.fused_online".into(),
+        survey.online.visual_fused as f64,
+    );
+    m.insert(
+        "visual.gated_out_online".into(),
+        survey.online.visual_rejected as f64,
     );
     m.insert("offline.keyframes".into(), survey.offline.keyframes as f64);
     m.insert("offline.factors".into(), survey.offline.factors as f64);

@@ -1,4 +1,4 @@
-use super::survey::{detect_run, load_fuse_config, load_run_rig};
+use super::survey::{detect_run, load_fuse_config, load_run_rig, DetectOptions};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use stereotag::fuse::{ate_m, error_growth, localize, SonarInput};
@@ -100,15 +100,18 @@ impl Localize {
             f.dedup();
             f
         };
-        let (sightings, _) = match load_run_rig(&self.run, &run)? {
+        let (sightings, _, visual) = match load_run_rig(&self.run, &run)? {
             Some(rig) => detect_run(
-                &self.detect.options(&families, quiet),
+                &DetectOptions {
+                    visual_odometry: config.visual_odometry,
+                    ..self.detect.options(&families, quiet)
+                },
                 &self.run,
                 &run,
                 &rig,
                 world.as_ref(),
             )?,
-            None => (Vec::new(), Vec::new()),
+            None => (Vec::new(), Vec::new(), Vec::new()),
         };
         let sonar = SonarInput {
             readings: &run.sonar,
@@ -117,6 +120,7 @@ impl Localize {
         };
         let result = localize(
             &odometry,
+            &visual,
             &sightings,
             &landmarks,
             (!walls.is_empty()).then_some(sonar),
@@ -157,6 +161,9 @@ impl Localize {
         metrics.insert("ranges.fused".into(), result.ranges_fused().into());
         metrics.insert("ranges.gated_out".into(), result.ranges_gated_out().into());
         metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
+        metrics.insert("visual.turns".into(), visual.len().into());
+        metrics.insert("visual.fused".into(), result.visual_fused.into());
+        metrics.insert("visual.gated_out".into(), result.visual_rejected.into());
         metrics.insert(
             "odometry.calibrated".into(),
             f64::from(u8::from(calibration.is_some())).into(),

@@ -7,9 +7,10 @@ use stereotag::camera::StereoRig;
 use stereotag::fuse::{FuseConfig, TagSighting};
 use stereotag::io::{self, LandmarkRecord, LandmarksFile, OutputDir, Trajectories};
 use stereotag::pipeline::{score_survey, sightings_from_pair, survey, survey_metrics, Survey};
-use stereotag::run::RunDataset;
+use stereotag::run::{pose_at, RunDataset};
 use stereotag::stereo::StereoConfig;
 use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
+use stereotag::vo::{frame_pairs, relative_motion, VisualTurn, VoConfig, VoImage};
 use stereotag::world::World;
 
 /// Arguments of `stereotag survey`.
@@ -88,6 +89,7 @@ impl DetectArgs {
             min_contrast: self.min_contrast,
             tag_size_m: self.tag_size_m,
             quiet,
+            visual_odometry: false,
         }
     }
 }
@@ -125,6 +127,8 @@ pub(crate) struct DetectOptions<'a> {
     pub min_contrast: u8,
     pub tag_size_m: Option<f64>,
     pub quiet: bool,
+    /// Measure the turns between pictures ([`stereotag::vo`]) as well.
+    pub visual_odometry: bool,
 }
 
 /// A decoded stereo pair (left, right).
@@ -149,7 +153,7 @@ fn compress_while_detecting(pairs: usize, pixels: usize) -> bool {
 }
 
 /// A run's sightings and, when keeping them, its pairs.
-pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<KeptPair>>);
+pub(crate) type Detected = (Vec<TagSighting>, Vec<Option<KeptPair>>, Vec<VisualTurn>);
 
 /// Everything `survey_run` needs.
 pub(crate) struct SurveyJob<'a> {
@@ -206,11 +210,12 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
     let detect_start = std::time::Instant::now();
     let options = DetectOptions {
         keep_images: recorder.is_some(),
+        visual_odometry: fuse.visual_odometry,
         ..job.detect.clone()
     };
-    let (sightings, images) = match &rig {
+    let (sightings, images, visual) = match &rig {
         Some(rig) => detect_run(&options, job.run_dir, &run, rig, world.as_ref())?,
-        None => (Vec::new(), Vec::new()),
+        None => (Vec::new(), Vec::new(), Vec::new()),
     };
     let detect_s = detect_start.elapsed().as_secs_f64();
 
@@ -221,7 +226,7 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
             let t = std::time::Instant::now();
             (compress_pairs(images), t.elapsed().as_secs_f64())
         },
-        || survey(&run, &sightings, &mapping, &fuse, calibration),
+        || survey(&run, &sightings, &visual, &mapping, &fuse, calibration),
     );
     let result = result?;
     let mut metrics = survey_metrics(&result, sightings.len());
@@ -399,63 +404,145 @@ pub(crate) fn detect_run(
             run.stereo.len()
         );
     }
+    // The pairs of pictures whose motion the visual odometry measures: pair `k` to `next[k]`.
+    let vo_config = VoConfig::default();
+    let mut next: Vec<Option<usize>> = vec![None; run.stereo.len()];
+    if job.visual_odometry {
+        let times: Vec<f64> = run.stereo.iter().map(|e| e.t_s).collect();
+        for (a, b) in frame_pairs(&times, &run.odometry, &vo_config) {
+            next[a] = Some(b);
+        }
+    }
     let bar = progress(run.stereo.len() as u64, "detect", job.quiet);
-    let per_pair: Vec<anyhow::Result<(Vec<TagSighting>, Option<KeptPair>)>> = run
-        .stereo
+    // Runs of consecutive pairs, each worked through in order by one thread, so that a picture's
+    // images are decoded and prepared for the visual odometry once, for both turns it ends and
+    // starts (only a turn that crosses into the next run decodes its last picture again).
+    const RUN_OF_PAIRS: usize = 16;
+    let starts: Vec<usize> = (0..run.stereo.len()).step_by(RUN_OF_PAIRS).collect();
+    type PerPair = (Vec<TagSighting>, Option<KeptPair>, Option<VisualTurn>);
+    let per_run: Vec<anyhow::Result<Vec<PerPair>>> = starts
         .par_iter()
-        .enumerate()
         .map_init(
             || detectors.take(make),
-            |detector, (frame, entry)| {
+            |detector, &first| {
                 let detector = detector.as_mut().map_err(|e| anyhow::anyhow!("{e}"))?;
-                let left_path = run_dir.join(&entry.left);
-                let right_path = run_dir.join(&entry.right);
-                let left = io::load_gray(&left_path)?;
-                let right = io::load_gray(&right_path)?;
-                check_image_size(&left, &rig.left, &left_path, "the rig")?;
-                check_image_size(&right, &rig.right, &right_path, "the rig")?;
-                let (sightings, rejected) = sightings_from_pair(
-                    detector.as_mut(),
-                    rig,
-                    &rect,
-                    &left,
-                    &right,
-                    (entry.t_s, frame),
-                    &known,
-                    &stereo_config,
-                )?;
-                for r in rejected {
-                    tracing::debug!(
-                        "pair {frame} (t = {:.1} s): tag {} rejected: {}",
-                        entry.t_s,
-                        r.id,
-                        r.reason
-                    );
+                let last = (first + RUN_OF_PAIRS).min(run.stereo.len());
+                let mut out: Vec<PerPair> = Vec::with_capacity(last - first);
+                // The picture a turn starts from (its index and prepared images), and where to.
+                let mut from: Option<(usize, VoImage, VoImage, usize)> = None;
+                for (frame, entry) in run.stereo.iter().enumerate().take(last).skip(first) {
+                    let left_path = run_dir.join(&entry.left);
+                    let right_path = run_dir.join(&entry.right);
+                    let left = io::load_gray(&left_path)?;
+                    let right = io::load_gray(&right_path)?;
+                    check_image_size(&left, &rig.left, &left_path, "the rig")?;
+                    check_image_size(&right, &rig.right, &right_path, "the rig")?;
+                    let (sightings, rejected) = sightings_from_pair(
+                        detector.as_mut(),
+                        rig,
+                        &rect,
+                        &left,
+                        &right,
+                        (entry.t_s, frame),
+                        &known,
+                        &stereo_config,
+                    )?;
+                    for r in rejected {
+                        tracing::debug!(
+                            "pair {frame} (t = {:.1} s): tag {} rejected: {}",
+                            entry.t_s,
+                            r.id,
+                            r.reason
+                        );
+                    }
+                    let ends = from.as_ref().is_some_and(|f| f.3 == frame);
+                    let starts = next[frame].is_some();
+                    if ends || starts {
+                        let here = VoImage::new(&left);
+                        if let Some((a, a_left, a_right, _)) = from.take().filter(|_| ends) {
+                            let t = visual_turn(
+                                run,
+                                rig,
+                                (a, &a_left, &a_right),
+                                (frame, &here),
+                                &vo_config,
+                            );
+                            out[a - first].2 = t;
+                        }
+                        if let Some(to) = next[frame] {
+                            from = Some((frame, here, VoImage::new(&right), to));
+                        }
+                    }
+                    let kept = match (job.keep_images, compress_now) {
+                        (false, _) => None,
+                        (true, false) => Some(KeptPair::Decoded((left, right))),
+                        (true, true) => jpeg_pair(&left, &right).map(|(l, r)| KeptPair::Jpeg(l, r)),
+                    };
+                    out.push((sightings, kept, None));
+                    bar.inc(1);
                 }
-                let kept = match (job.keep_images, compress_now) {
-                    (false, _) => None,
-                    (true, false) => Some(KeptPair::Decoded((left, right))),
-                    (true, true) => jpeg_pair(&left, &right).map(|(l, r)| KeptPair::Jpeg(l, r)),
-                };
-                bar.inc(1);
-                Ok((sightings, kept))
+                // A turn into the next run of pairs: its last picture decoded here as well.
+                if let Some((a, a_left, a_right, to)) = from {
+                    let path = run_dir.join(&run.stereo[to].left);
+                    let image = io::load_gray(&path)?;
+                    check_image_size(&image, &rig.left, &path, "the rig")?;
+                    let here = VoImage::new(&image);
+                    out[a - first].2 =
+                        visual_turn(run, rig, (a, &a_left, &a_right), (to, &here), &vo_config);
+                }
+                Ok(out)
             },
         )
         .collect();
     bar.finish_and_clear();
     let mut sightings = Vec::new();
     let mut images = Vec::new();
-    for r in per_pair {
-        let (s, e) = r?;
-        sightings.extend(s);
-        images.push(e);
+    let mut visual = Vec::new();
+    for r in per_run {
+        for (s, e, v) in r? {
+            sightings.extend(s);
+            images.push(e);
+            visual.extend(v);
+        }
     }
     tracing::info!(
         "{} tag sightings in {} stereo pairs",
         sightings.len(),
         run.stereo.len()
     );
-    Ok((sightings, images))
+    if job.visual_odometry {
+        let tried = next.iter().flatten().count();
+        tracing::info!(
+            "visual odometry: the turn between {} of {tried} pairs of pictures measured",
+            visual.len()
+        );
+    }
+    Ok((sightings, images, visual))
+}
+
+/// The turn from picture `from` to picture `to` of the run (their images prepared), measured by
+/// the visual odometry from the odometry's; `None` when the pictures do not show it (too little
+/// texture in common).
+fn visual_turn(
+    run: &RunDataset,
+    rig: &StereoRig,
+    (from, left, right): (usize, &VoImage, &VoImage),
+    (to, next): (usize, &VoImage),
+    config: &VoConfig,
+) -> Option<VisualTurn> {
+    let (a, b) = (&run.stereo[from], &run.stereo[to]);
+    let prior = pose_at(&run.odometry, a.t_s)?.between(&pose_at(&run.odometry, b.t_s)?);
+    match relative_motion(rig, (left, right), next, &prior, config) {
+        Ok(m) => Some(m.turn(a.t_s, b.t_s)),
+        Err(e) => {
+            tracing::debug!(
+                "visual odometry, pictures at {:.2} s and {:.2} s: {e}",
+                a.t_s,
+                b.t_s
+            );
+            None
+        }
+    }
 }
 
 /// Writes every survey output into the staging directory.
@@ -481,6 +568,12 @@ fn write_outputs(
         &s.corrected.features_offline,
     )?;
     io::save_walls_csv(&dir.path("walls_corrected.csv"), &s.corrected.walls)?;
+    io::save_visual_turns_csv(
+        &dir.path("visual_turns.csv"),
+        &s.visual,
+        &run.odometry,
+        run.ground_truth.as_deref(),
+    )?;
     let planned = |l: &stereotag::fuse::Landmark| {
         world
             .and_then(|w| w.tags.iter().find(|t| t.id == l.id && t.family == l.family))

@@ -24,8 +24,8 @@ pub use rig::{
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
 pub use survey::{
-    load_landmarks, save_landmarks, save_trajectory_csv, save_wpilib_layout, LandmarkRecord,
-    LandmarksFile, Trajectories,
+    load_landmarks, save_landmarks, save_trajectory_csv, save_visual_turns_csv, save_wpilib_layout,
+    LandmarkRecord, LandmarksFile, Trajectories, VISUAL_TURNS_HEADER,
 };
 pub use world::{load_world, LoadedWorld, WorldFile};
 

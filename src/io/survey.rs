@@ -1,4 +1,5 @@
-//! Survey outputs: `landmarks.json`, the WPILib `layout.json` and `trajectory.csv` (DESIGN.md).
+//! Survey outputs: `landmarks.json`, the WPILib `layout.json` and `trajectory.csv` (DESIGN.md), and
+//! `visual_turns.csv` (ours).
 
 use super::{read_text, write_file, IoError};
 use crate::fuse::{Landmark, OdometryCalibration};
@@ -148,6 +149,41 @@ pub fn save_trajectory_csv(path: &Path, t: &Trajectories<'_>) -> Result<(), IoEr
             pose(t.online.get(i).map(|p| p.pose)),
             pose(t.offline.get(i).map(|p| p.pose)),
             pose(t.ground_truth.and_then(|g| pose_at(g, o.t_s))),
+        );
+    }
+    write_file(path, s.as_bytes())
+}
+
+/// Header of `visual_turns.csv`.
+pub const VISUAL_TURNS_HEADER: &str =
+    "from_t_s,to_t_s,turn_rad,sigma_rad,odom_turn_rad,gt_turn_rad";
+
+/// Writes the turns the visual odometry measured, beside the odometry's (and the truth's, when
+/// known) over the same frames.
+pub fn save_visual_turns_csv(
+    path: &Path,
+    turns: &[crate::vo::VisualTurn],
+    odometry: &[crate::run::StampedPose],
+    ground_truth: Option<&[crate::run::StampedPose]>,
+) -> Result<(), IoError> {
+    let turn_of = |trajectory: &[crate::run::StampedPose], v: &crate::vo::VisualTurn| match (
+        pose_at(trajectory, v.from_t_s),
+        pose_at(trajectory, v.to_t_s),
+    ) {
+        (Some(a), Some(b)) => format!("{:.6}", crate::geometry::wrap_angle(b.theta - a.theta)),
+        _ => String::new(),
+    };
+    let mut s = format!("{VISUAL_TURNS_HEADER}\n");
+    for v in turns {
+        let _ = writeln!(
+            s,
+            "{:.4},{:.4},{:.6},{:.6},{},{}",
+            v.from_t_s,
+            v.to_t_s,
+            v.turn_rad,
+            v.sigma_rad,
+            turn_of(odometry, v),
+            ground_truth.map_or(String::new(), |g| turn_of(g, v)),
         );
     }
     write_file(path, s.as_bytes())
