@@ -10,8 +10,11 @@
 //! free cell is the sighting error plus the odometry drift over the way to the nearest covered
 //! cell and back (the shortest way over free cells). Where the map's straight walls (`walls.csv`
 //! from `stereotag map`) are within sonar range, `localize` holds the robot to them between
-//! sightings, and the drift there is [`PlanConfig::wall_drift_m_per_m`] instead of
-//! [`PlanConfig::drift_m_per_m`].
+//! sightings, and the error there is [`PlanConfig::wall_sighting_error_m`] and
+//! [`PlanConfig::wall_drift_m_per_m`] instead of [`PlanConfig::sighting_error_m`] and
+//! [`PlanConfig::drift_m_per_m`]. The defaults are for a robot that measures its turns with its
+//! cameras between sightings (`localize`'s default); [`PlanConfig::wheels_only`] for one that
+//! does not.
 
 use crate::grid::OccupancyMap;
 use crate::hough::{Feature, FeatureKind};
@@ -33,17 +36,22 @@ pub struct PlanConfig {
     /// Smallest distance between two chosen tags, metres (ours: 1.5 m; two tags in one corner
     /// add little).
     pub min_separation_m: f64,
-    /// Position error right after a sighting, metres (ours: 3 cm: `localize` on office runs
-    /// against a survey whose landmarks are 4 cm off, in the first half metre after a sighting,
-    /// 3.0-4.1 cm RMS).
+    /// Position error right after a sighting, metres (ours: 2.5 cm: `localize --no-walls` with
+    /// the cameras' turns on the 12 pairs of office seeds 1-4, 2.1-2.7 cm RMS in the first 2 m
+    /// after a sighting; 3 cm without the cameras' turns, against surveys 4 cm off).
     pub sighting_error_m: f64,
+    /// Position error right after a sighting where a mapped wall is within
+    /// [`Self::wall_range_m`], metres (ours: 0.9 cm: `localize` on the same pairs, 0.9 cm RMS in
+    /// the first metre; 3 cm without the cameras' turns).
+    pub wall_sighting_error_m: f64,
     /// Drift per metre travelled between sightings, metres, with the odometry corrected by the
-    /// survey's calibration as `localize` does (ours: 0.7 cm/m: `localize --no-walls` on office
-    /// runs, 4 cm RMS up to 4 m after a sighting, 6.7 cm at 4-8 m, 10-13 cm at 8-16 m).
+    /// survey's calibration as `localize` does (ours: 0.3 cm/m: `localize --no-walls` with the
+    /// cameras' turns, 3.0 cm RMS at 2-4 m after a sighting, 4.4 cm at 4-8 m; 0.7 cm/m without
+    /// them, 4 cm at 2-4 m, 6.7 cm at 4-8 m).
     pub drift_m_per_m: f64,
-    /// Drift per metre where a mapped wall is within [`Self::wall_range_m`] (ours: 0.15 cm/m:
-    /// `localize` against the office walls, 3.0-3.7 cm RMS up to 8 m after a sighting, 4.5-5.5
-    /// cm at 8-16 m).
+    /// Drift per metre where a mapped wall is within [`Self::wall_range_m`] (ours: 0.12 cm/m:
+    /// `localize` against the office walls with the cameras' turns, 1.3 cm RMS at 2-4 m after a
+    /// sighting, 1.6 cm at 4-8 m; 0.15 cm/m without them, from 3.0-3.7 cm).
     pub wall_drift_m_per_m: f64,
     /// A wall holds the robot when it is at most this far in front of the wall's face, metres
     /// (ours: 1.5 m, inside the sonars' 2.1 m).
@@ -59,11 +67,26 @@ impl Default for PlanConfig {
             target_coverage: 0.9,
             max_tags: 12,
             min_separation_m: 1.5,
-            sighting_error_m: 0.03,
-            drift_m_per_m: 0.007,
-            wall_drift_m_per_m: 0.0015,
+            sighting_error_m: 0.025,
+            wall_sighting_error_m: 0.009,
+            drift_m_per_m: 0.003,
+            wall_drift_m_per_m: 0.0012,
             wall_range_m: 1.5,
             corner_clearance_m: 0.3,
+        }
+    }
+}
+
+impl PlanConfig {
+    /// The error model of a robot that does not measure its turns with its cameras between
+    /// sightings (`localize` with `visual_odometry: false`, or a run with pictures of tags only).
+    pub fn wheels_only() -> Self {
+        Self {
+            sighting_error_m: 0.03,
+            wall_sighting_error_m: 0.03,
+            drift_m_per_m: 0.007,
+            wall_drift_m_per_m: 0.0015,
+            ..Self::default()
         }
     }
 }
@@ -343,7 +366,12 @@ fn predicted_error(
         if drift[i] == u64::MAX {
             unreachable += 1;
         } else {
-            cells_m[i] = Some(config.sighting_error_m + 2.0 * drift[i] as f64 * 1e-6);
+            let floor = if held[i] {
+                config.wall_sighting_error_m
+            } else {
+                config.sighting_error_m
+            };
+            cells_m[i] = Some(floor + 2.0 * drift[i] as f64 * 1e-6);
         }
     }
     let errors: Vec<f64> = cells_m.iter().flatten().copied().collect();
@@ -459,7 +487,7 @@ mod tests {
         let (map, _) = two_rooms();
         let config = PlanConfig {
             capture_range_m: 1.5,
-            ..PlanConfig::default()
+            ..PlanConfig::wheels_only()
         };
         let tags = [[0.15, 0.15]];
         let bare = predict(&map, &tags, &[], &config);
@@ -484,6 +512,15 @@ mod tests {
         let near = bare.cell_errors_m[near.1 * map.geometry.width + near.0].unwrap();
         assert_eq!(near, config.sighting_error_m);
         assert!(far > near + 2.0 * config.drift_m_per_m * 7.0, "{far}");
+        // With the cameras' turns a held cell seen by a tag starts from the smaller error.
+        let visual = PlanConfig {
+            capture_range_m: 1.5,
+            ..PlanConfig::default()
+        };
+        let walled = predict(&map, &tags, &room_walls(), &visual);
+        let near = map.geometry.cell_of(0.5, 0.5).unwrap();
+        let near = walled.cell_errors_m[near.1 * map.geometry.width + near.0].unwrap();
+        assert_eq!(near, visual.wall_sighting_error_m);
     }
 
     #[test]

@@ -26,6 +26,10 @@ pub struct PlanArgs {
     /// as for `localize --no-walls`.
     #[arg(long)]
     no_walls: bool,
+    /// Predict for a robot that does not measure its turns with its cameras between sightings
+    /// (`localize` with `visual_odometry: false`, or runs with pictures of tags only).
+    #[arg(long)]
+    no_visual_odometry: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -35,7 +39,11 @@ impl PlanArgs {
     pub fn run(&self) -> anyhow::Result<()> {
         let map = io::load_ros_occupancy(&self.map.join("map.yaml"))?;
         let corners = io::load_features_csv(&self.map.join("corners.csv"))?;
-        let mut config = PlanConfig::default();
+        let mut config = if self.no_visual_odometry {
+            PlanConfig::wheels_only()
+        } else {
+            PlanConfig::default()
+        };
         if let Some(r) = self.range_m {
             config.capture_range_m = r;
         }
