@@ -41,17 +41,19 @@ pub struct PlanConfig {
     /// after a sighting; 3 cm without the cameras' turns, against surveys 4 cm off).
     pub sighting_error_m: f64,
     /// Position error right after a sighting where a mapped wall is within
-    /// [`Self::wall_range_m`], metres (ours: 0.9 cm: `localize` on the same pairs, 0.9 cm RMS in
-    /// the first metre; 3 cm without the cameras' turns).
+    /// [`Self::wall_range_m`], metres (ours: 0.8 cm: `localize` against the office walls with the
+    /// cameras' turns, survey seed 1, runs 2-5: 0.6-1.0 cm RMS in the first 0.5 m after a
+    /// sighting; 3 cm without the cameras' turns).
     pub wall_sighting_error_m: f64,
     /// Drift per metre travelled between sightings, metres, with the odometry corrected by the
     /// survey's calibration as `localize` does (ours: 0.3 cm/m: `localize --no-walls` with the
     /// cameras' turns, 3.0 cm RMS at 2-4 m after a sighting, 4.4 cm at 4-8 m; 0.7 cm/m without
     /// them, 4 cm at 2-4 m, 6.7 cm at 4-8 m).
     pub drift_m_per_m: f64,
-    /// Drift per metre where a mapped wall is within [`Self::wall_range_m`] (ours: 0.12 cm/m:
-    /// `localize` against the office walls with the cameras' turns, 1.3 cm RMS at 2-4 m after a
-    /// sighting, 1.6 cm at 4-8 m; 0.15 cm/m without them, from 3.0-3.7 cm).
+    /// Drift per metre where a mapped wall is within [`Self::wall_range_m`] (ours: 0.06 cm/m:
+    /// the same runs, 1.1-1.9 cm RMS at 4-8 m after a sighting; with these two the prediction's
+    /// RMS over the cells driven is 1.1-1.2 cm against 1.0-1.2 cm measured,
+    /// `scripts/plan_check.sh`; 0.15 cm/m without the cameras' turns).
     pub wall_drift_m_per_m: f64,
     /// A wall holds the robot when it is at most this far in front of the wall's face, metres
     /// (ours: 1.5 m, inside the sonars' 2.1 m).
@@ -68,9 +70,9 @@ impl Default for PlanConfig {
             max_tags: 12,
             min_separation_m: 1.5,
             sighting_error_m: 0.025,
-            wall_sighting_error_m: 0.009,
+            wall_sighting_error_m: 0.008,
             drift_m_per_m: 0.003,
-            wall_drift_m_per_m: 0.0012,
+            wall_drift_m_per_m: 0.0006,
             wall_range_m: 1.5,
             corner_clearance_m: 0.3,
         }
@@ -313,7 +315,9 @@ struct ErrorField {
 
 /// The predicted error at each free cell: the sighting error plus the drift over the shortest way
 /// from a covered cell, there and back (Dijkstra over free cells, each step costing its length
-/// times the drift where it lands).
+/// times the drift where it lands). A cell held by a wall starts from the smaller wall sighting
+/// error, and a cell beside it is predicted from it when that is less: the robot drives out of
+/// the walls' reach with the error they left it, and drifts from there.
 fn predicted_error(
     map: &OccupancyMap,
     free: &[usize],
@@ -322,15 +326,6 @@ fn predicted_error(
     config: &PlanConfig,
 ) -> ErrorField {
     let g = &map.geometry;
-    // Drift in micrometres, so the heap orders integers.
-    let mut drift = vec![u64::MAX; seen.len()];
-    let mut heap = BinaryHeap::new();
-    for &i in free {
-        if seen[i] {
-            drift[i] = 0;
-            heap.push(Reverse((0u64, i)));
-        }
-    }
     let step_um = |j: usize| {
         let rate = if held[j] {
             config.wall_drift_m_per_m
@@ -339,39 +334,33 @@ fn predicted_error(
         };
         (rate * g.resolution_m * 1e6).round() as u64
     };
-    while let Some(Reverse((d, i))) = heap.pop() {
-        if d > drift[i] {
-            continue;
-        }
-        let (col, row) = (i % g.width, i / g.width);
-        let neighbours = [
-            (col > 0).then(|| i - 1),
-            (col + 1 < g.width).then(|| i + 1),
-            (row > 0).then(|| i - g.width),
-            (row + 1 < g.height).then(|| i + g.width),
-        ];
-        for j in neighbours.into_iter().flatten() {
-            if map.is_free(j) {
-                let dj = d + step_um(j);
-                if dj < drift[j] {
-                    drift[j] = dj;
-                    heap.push(Reverse((dj, j)));
-                }
-            }
+    // Drift in micrometres, so the heap orders integers.
+    let mut drift = vec![u64::MAX; seen.len()];
+    for &i in free {
+        if seen[i] {
+            drift[i] = 0;
         }
     }
-    let mut cells_m = vec![None; seen.len()];
-    let mut unreachable = 0;
+    relax(map, &mut drift, step_um);
+    let mut error_um = drift;
     for &i in free {
-        if drift[i] == u64::MAX {
-            unreachable += 1;
-        } else {
+        if error_um[i] != u64::MAX {
             let floor = if held[i] {
                 config.wall_sighting_error_m
             } else {
                 config.sighting_error_m
             };
-            cells_m[i] = Some(floor + 2.0 * drift[i] as f64 * 1e-6);
+            error_um[i] = (floor * 1e6).round() as u64 + 2 * error_um[i];
+        }
+    }
+    relax(map, &mut error_um, |j| 2 * step_um(j));
+    let mut cells_m = vec![None; seen.len()];
+    let mut unreachable = 0;
+    for &i in free {
+        if error_um[i] == u64::MAX {
+            unreachable += 1;
+        } else {
+            cells_m[i] = Some(error_um[i] as f64 * 1e-6);
         }
     }
     let errors: Vec<f64> = cells_m.iter().flatten().copied().collect();
@@ -388,6 +377,38 @@ fn predicted_error(
         mean_m,
         max_m,
         unreachable,
+    }
+}
+
+/// Lowers each free cell's `cost` to the least over its free neighbours' plus `step` of the cell
+/// (Dijkstra from every cell with a finite cost; `u64::MAX` is unreached).
+fn relax(map: &OccupancyMap, cost: &mut [u64], step: impl Fn(usize) -> u64) {
+    let width = map.geometry.width;
+    let height = map.geometry.height;
+    let mut heap: BinaryHeap<_> = (0..cost.len())
+        .filter(|&i| cost[i] != u64::MAX)
+        .map(|i| Reverse((cost[i], i)))
+        .collect();
+    while let Some(Reverse((d, i))) = heap.pop() {
+        if d > cost[i] {
+            continue;
+        }
+        let (col, row) = (i % width, i / width);
+        let neighbours = [
+            (col > 0).then(|| i - 1),
+            (col + 1 < width).then(|| i + 1),
+            (row > 0).then(|| i - width),
+            (row + 1 < height).then(|| i + width),
+        ];
+        for j in neighbours.into_iter().flatten() {
+            if map.is_free(j) {
+                let dj = d + step(j);
+                if dj < cost[j] {
+                    cost[j] = dj;
+                    heap.push(Reverse((dj, j)));
+                }
+            }
+        }
     }
 }
 
