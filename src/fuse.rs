@@ -823,7 +823,11 @@ fn events(
         .map(|(k, s)| (s.t_s, Event::Sighting(k)))
         .collect();
     if config.visual_odometry {
-        for (j, v) in visual.iter().enumerate().filter(|(_, v)| v.from_t_s >= from_t_s) {
+        for (j, v) in visual
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.from_t_s >= from_t_s)
+        {
             events.push((v.from_t_s, Event::TurnStarts(j)));
             events.push((v.to_t_s, Event::TurnEnds(j)));
         }
@@ -860,7 +864,9 @@ pub fn run_online_calibrated(
     };
     let mut last_odom = start;
     let first_t = odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
-    let mut pending = events(sightings, visual, first_t, config).into_iter().peekable();
+    let mut pending = events(sightings, visual, first_t, config)
+        .into_iter()
+        .peekable();
     // The visual turn whose start the heading copy holds.
     let mut cloned_for: Option<usize> = None;
     let prior = calibration;

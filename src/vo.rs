@@ -368,7 +368,10 @@ fn halve(src: &[f32], w: usize, h: usize) -> (Vec<f32>, usize, usize) {
     let (hw, hh) = (w / 2, h / 2);
     let mut out = Vec::with_capacity(hw * hh);
     for y in 0..hh {
-        let (a, b) = (&src[2 * y * w..2 * y * w + 2 * hw], &src[(2 * y + 1) * w..(2 * y + 1) * w + 2 * hw]);
+        let (a, b) = (
+            &src[2 * y * w..2 * y * w + 2 * hw],
+            &src[(2 * y + 1) * w..(2 * y + 1) * w + 2 * hw],
+        );
         out.extend(
             a.chunks_exact(2)
                 .zip(b.chunks_exact(2))
