@@ -155,10 +155,7 @@ impl Render {
             .render(&loaded.world, Pose2::new(x, y, theta), &config)?;
         let secs = start.elapsed().as_secs_f64();
         let dir = OutputDir::create(&self.out, self.force)?;
-        let save = |img: &image::GrayImage, name: &str| {
-            img.save(dir.path(name))
-                .map_err(|e| anyhow::anyhow!("{}: {e}", dir.target().join(name).display()))
-        };
+        let save = |img: &image::GrayImage, name: &str| io::save_camera_png(&dir.path(name), img);
         save(&pair.left, "left.png")?;
         save(&pair.right, "right.png")?;
         let truth = serde_json::json!({
@@ -224,8 +221,7 @@ fn save_pair(
 ) -> anyhow::Result<(String, String)> {
     let names = (format!("left/{k:06}.png"), format!("right/{k:06}.png"));
     for (img, name) in [(left, &names.0), (right, &names.1)] {
-        img.save(dir.path(name))
-            .map_err(|e| anyhow::anyhow!("{}: {e}", dir.target().join(name).display()))?;
+        io::save_camera_png(&dir.path(name), img)?;
     }
     Ok(names)
 }

@@ -174,12 +174,8 @@ fn take_pictures(
             format!("stereo/left/{k:06}.png"),
             format!("stereo/right/{k:06}.png"),
         );
-        pair.left
-            .save(dir.path(&left))
-            .with_context(|| format!("writing {left}"))?;
-        pair.right
-            .save(dir.path(&right))
-            .with_context(|| format!("writing {right}"))?;
+        io::save_camera_png(&dir.path(&left), &pair.left)?;
+        io::save_camera_png(&dir.path(&right), &pair.right)?;
         output.run.stereo.push(stereotag::run::StereoEntry {
             t_s: p.t_s,
             left,
