@@ -6,8 +6,9 @@
 //! that. The cameras see walls, floor and furniture all the time, so the image motion between two
 //! frames measures the turn directly. For frames `a` (a stereo pair) and `b` (its left image):
 //!
-//! 1. corners (Shi-Tomasi, kornia's `gftt_response`, the strongest of each cell of a grid) in the
-//!    left image of `a`, found at pyramid level 1 where the sensor noise is smoothed away;
+//! 1. corners (Shi-Tomasi's response, the strongest of each cell of a grid) in the left image of
+//!    `a`, found at pyramid level 1 where the sensor noise is smoothed away (our own: kornia's
+//!    `gftt_response` at full resolution took longer than the whole motion);
 //! 2. each matched along its epipolar line in the right image of `a` by normalised
 //!    cross-correlation (a quarter-resolution search, then quarter-pixel steps at full resolution)
 //!    and triangulated;
@@ -17,8 +18,8 @@
 //!    (Gauss-Newton from the wheel odometry, Huber weights, points off by more than three sigma
 //!    left out), with its covariance from the reprojection residuals.
 //!
-//! Walls and floors here carry a soft, cloudy texture (painted plaster, carpet): kornia's
-//! pyramidal Lucas-Kanade tracker wandered off on it (median 150 px from the right place on the
+//! Walls and floors here carry a soft, cloudy texture (painted plaster, carpet): kornia-imgproc's
+//! pyramidal Lucas-Kanade tracker, tried first, wandered off on it (median 150 px from the right place on the
 //! rendered office), so points are matched by correlation, which needs a peak that stands out.
 
 use crate::camera::StereoRig;
@@ -135,22 +136,20 @@ impl Level {
         let sums = with_sums.then(|| {
             let (w, h) = (image.width(), image.height());
             let s = image.as_slice();
-            let mut sum: Vec<f64> = Vec::with_capacity((w + 1) * (h + 1));
-            let mut sum2: Vec<f64> = Vec::with_capacity((w + 1) * (h + 1));
-            sum.resize(w + 1, 0.0);
-            sum2.resize(w + 1, 0.0);
-            for y in 0..h {
+            let mut sum = vec![0.0f64; (w + 1) * (h + 1)];
+            let mut sum2 = vec![0.0f64; (w + 1) * (h + 1)];
+            for (y, pixels) in s.chunks_exact(w).enumerate() {
+                let (above, below) = sum.split_at_mut((y + 1) * (w + 1));
+                let (above2, below2) = sum2.split_at_mut((y + 1) * (w + 1));
+                let above = &above[y * (w + 1) + 1..];
+                let above2 = &above2[y * (w + 1) + 1..];
                 let (mut row, mut row2) = (0.0, 0.0);
-                sum.push(0.0);
-                sum2.push(0.0);
-                let above = y * (w + 1);
                 for x in 0..w {
-                    let v = s[y * w + x] as f64;
+                    let v = pixels[x] as f64;
                     row += v;
                     row2 += v * v;
-                    let (a, a2) = (sum[above + x + 1], sum2[above + x + 1]);
-                    sum.push(a + row);
-                    sum2.push(a2 + row2);
+                    below[x + 1] = above[x] + row;
+                    below2[x + 1] = above2[x] + row2;
                 }
             }
             (sum, sum2)
@@ -392,6 +391,16 @@ pub struct VoImage {
 impl VoImage {
     /// From an 8-bit grey image.
     pub fn new(gray: &image::GrayImage) -> Self {
+        Self::with_half_sums(gray, true)
+    }
+
+    /// From an 8-bit grey image only ever searched along epipolar lines (a right camera's): the
+    /// same, less the integral images at half resolution, which only tracking uses.
+    pub fn for_stereo_matching(gray: &image::GrayImage) -> Self {
+        Self::with_half_sums(gray, false)
+    }
+
+    fn with_half_sums(gray: &image::GrayImage, half_sums: bool) -> Self {
         let (w, h) = (gray.width() as usize, gray.height() as usize);
         let full = blur(gray.as_raw(), w, h);
         let (half, hw, hh) = halve(&full, w, h);
@@ -402,7 +411,7 @@ impl VoImage {
         };
         Self {
             full: level(full, w, h, false),
-            half: level(half, hw, hh, true),
+            half: level(half, hw, hh, half_sums),
             quarter: level(quarter, qw, qh, true),
         }
     }
@@ -1123,7 +1132,10 @@ mod tests {
                     },
                 )
                 .unwrap();
-            (VoImage::new(&pair.left), VoImage::new(&pair.right))
+            (
+                VoImage::new(&pair.left),
+                VoImage::for_stereo_matching(&pair.right),
+            )
         };
         let config = VoConfig::default();
         let mut squares = 0.0;
