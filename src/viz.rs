@@ -153,6 +153,9 @@ pub fn survey_blueprint() -> bp::Blueprint {
         bp::TimeSeriesView::new("Tag NIS")
             .with_origin("/metrics/tag_nis")
             .into(),
+        bp::TimeSeriesView::new("Turn error (cameras vs wheels)")
+            .with_origin("/metrics/turn_deg")
+            .into(),
         bp::TextLogView::new("Online re-solves")
             .with_origin("/events")
             .into(),
@@ -815,6 +818,35 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
     for (t, nis) in &s.online.nis {
         rec.set_duration_secs("time", *t);
         rec.log("metrics/tag_nis", &rerun::Scalars::single(*nis))?;
+    }
+    // Each turn the cameras measured, at the picture it ends: its error against the truth beside
+    // the wheels' over the same stretch, and its sigma.
+    let odometry = &scene.run.odometry;
+    for v in &s.visual {
+        rec.set_duration_secs("time", v.to_t_s);
+        rec.log(
+            "metrics/turn_deg/visual_sigma",
+            &rerun::Scalars::single(v.sigma_rad.to_degrees()),
+        )?;
+        let turn = |poses: &[StampedPose]| {
+            Some(crate::geometry::wrap_angle(
+                pose_at(poses, v.to_t_s)?.theta - pose_at(poses, v.from_t_s)?.theta,
+            ))
+        };
+        let Some(truth) = truth.and_then(turn) else {
+            continue;
+        };
+        let error = |turn: f64| crate::geometry::wrap_angle(turn - truth).to_degrees();
+        rec.log(
+            "metrics/turn_deg/visual_error",
+            &rerun::Scalars::single(error(v.turn_rad)),
+        )?;
+        if let Some(wheels) = turn(odometry) {
+            rec.log(
+                "metrics/turn_deg/wheels_error",
+                &rerun::Scalars::single(error(wheels)),
+            )?;
+        }
     }
     for r in &s.online.resolves {
         let c = &r.odometry_calibration;

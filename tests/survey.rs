@@ -179,6 +179,8 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         "/map/hough",
         "/landmarks/tag_0/covariance",
         "/metrics/position_error_m/offline",
+        "/metrics/turn_deg/visual_error",
+        "/metrics/turn_deg/wheels_error",
         "/events/online_resolve",
         "/report",
     ] {
