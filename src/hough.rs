@@ -31,6 +31,7 @@ use crate::grid::OccupancyMap;
 use crate::run::{pose_at, StampedPose};
 use crate::sonar::PlacedReading;
 use crate::walls::{place_peak, PeakPlace};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Settings of the Hough transform. Defaults are the paper's office experiment.
@@ -358,8 +359,9 @@ pub fn features_online(
         travel.push(s);
         turn.push(a);
     }
-    let mut acc = Accumulator::new(config);
-    let mut found = Vec::new();
+    // The windows first (each starts half a window after the last), then their peaks, each
+    // window on its own accumulator and in parallel: they share nothing.
+    let mut windows = Vec::new();
     let mut start = 0;
     while start < readings.len() {
         let within = |i: usize| {
@@ -368,22 +370,12 @@ pub fn features_online(
         };
         let mut end = start;
         while end < readings.len() && within(end) {
-            acc.vote(&readings[end], half_cone_rad, config.arc_sample_m);
             end += 1;
         }
-        let peaks = acc.peaks(config.threshold, config.peak_radius_cells);
-        found.extend(locate_features(
-            peaks,
-            &readings[..end],
-            half_cone_rad,
-            map,
-            config,
-        ));
-        acc.clear();
+        windows.push(start..end);
         if end >= readings.len() {
             break;
         }
-        // Next window starts half a window on.
         let mut next = start + 1;
         while next < end
             && travel[next] - travel[start] < 0.5 * config.window_travel_m
@@ -393,6 +385,21 @@ pub fn features_online(
         }
         start = next;
     }
+    let found: Vec<Vec<Feature>> = windows
+        .into_par_iter()
+        .map_init(
+            || Accumulator::new(config),
+            |acc, window| {
+                acc.clear();
+                for r in &readings[window.clone()] {
+                    acc.vote(r, half_cone_rad, config.arc_sample_m);
+                }
+                let peaks = acc.peaks(config.threshold, config.peak_radius_cells);
+                locate_features(peaks, &readings[..window.end], half_cone_rad, map, config)
+            },
+        )
+        .collect();
+    let found = found.into_iter().flatten().collect();
     merge_features(found, config.merge_radius_m)
 }
 

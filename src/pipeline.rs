@@ -112,26 +112,44 @@ pub fn map_trajectory(
         })
         .fold((0, 0), |(n, off), is_off| (n + 1, off + is_off as usize));
 
-    let t = Instant::now();
-    let mut log_odds = LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
-    log_odds.insert_all(&readings);
-    let log_odds = log_odds.map();
-    timings_s.insert("grid_log_odds".into(), t.elapsed().as_secs_f64());
-
+    // The log-odds grid, the two Hough passes and the walls read the same placed readings and
+    // counting grid and nothing of each other: the online Hough pass (the longest) runs on one
+    // core, the rest on the other. Each stage's time is its own, taken while the others run.
     let half = 0.5 * layout.cone_rad;
-    let t = Instant::now();
-    let mut online = features_online(&readings, trajectory, half, &counting, &config.hough);
-    classify_features(&mut online, &counting);
-    timings_s.insert("hough_online".into(), t.elapsed().as_secs_f64());
-
-    let t = Instant::now();
-    let (mut offline, accumulator) = features_offline(&readings, half, &counting, &config.hough);
-    classify_features(&mut offline, &counting);
-    timings_s.insert("hough_offline".into(), t.elapsed().as_secs_f64());
-
-    let t = Instant::now();
-    let walls = map_walls(&readings, half, layout.max_range_m, &counting);
-    timings_s.insert("walls".into(), t.elapsed().as_secs_f64());
+    let timed = |name: &str, timings: &mut Vec<(String, f64)>, t: Instant| {
+        timings.push((name.to_owned(), t.elapsed().as_secs_f64()));
+    };
+    let ((online, mut stage_times), rest) = rayon::join(
+        || {
+            let mut times = Vec::new();
+            let t = Instant::now();
+            let mut online = features_online(&readings, trajectory, half, &counting, &config.hough);
+            classify_features(&mut online, &counting);
+            timed("hough_online", &mut times, t);
+            (online, times)
+        },
+        || -> Result<_, PipelineError> {
+            let mut times = Vec::new();
+            let t = Instant::now();
+            let mut log_odds =
+                LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+            log_odds.insert_all(&readings);
+            let log_odds = log_odds.map();
+            timed("grid_log_odds", &mut times, t);
+            let t = Instant::now();
+            let (mut offline, accumulator) =
+                features_offline(&readings, half, &counting, &config.hough);
+            classify_features(&mut offline, &counting);
+            timed("hough_offline", &mut times, t);
+            let t = Instant::now();
+            let walls = map_walls(&readings, half, layout.max_range_m, &counting);
+            timed("walls", &mut times, t);
+            Ok((log_odds, offline, accumulator, walls, times))
+        },
+    );
+    let (log_odds, offline, accumulator, walls, times) = rest?;
+    stage_times.extend(times);
+    timings_s.extend(stage_times);
     timings_s.insert("total".into(), start.elapsed().as_secs_f64());
 
     Ok(SonarMap {

@@ -330,26 +330,29 @@ fn from_level(p: Point2<f64>, level: u32) -> Point2<f64> {
 }
 
 /// A separable 5-tap binomial blur ([1 4 6 4 1] / 16 each way, sigma 1 px), borders clamped.
+/// Worked in integers (16 times the value after the rows, 256 times after the columns, at most
+/// 65280), which gives exactly the floating-point sums and lets the compiler use wide vectors.
 fn blur(src: &[u8], w: usize, h: usize) -> Vec<f32> {
-    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    // Along the rows, each padded by two clamped pixels at both ends.
-    let mut padded = vec![0.0f32; w + 4];
-    let mut rows: Vec<f32> = Vec::with_capacity(w * h);
-    for y in 0..h {
-        let row = &src[y * w..(y + 1) * w];
-        for (p, &v) in padded[2..w + 2].iter_mut().zip(row) {
-            *p = v as f32;
+    let taps = |a: u16, b: u16, c: u16, d: u16, e: u16| a + e + 4 * (b + d) + 6 * c;
+    let mut rows = vec![0u16; w * h];
+    for (out, row) in rows.chunks_exact_mut(w).zip(src.chunks_exact(w)) {
+        let at = |x: usize| row[x.saturating_sub(2).min(w - 1)] as u16;
+        // Pixel `x` reads `at(x)` to `at(x + 4)`: source pixels `x - 2` to `x + 2`, clamped.
+        let clamped = |x: usize| taps(at(x), at(x + 1), at(x + 2), at(x + 3), at(x + 4));
+        let interior = if w >= 5 { 2..w - 2 } else { 0..0 };
+        for x in (0..w).filter(|x| !interior.contains(x)) {
+            out[x] = clamped(x);
         }
-        let (first, last) = (row[0] as f32, row[w - 1] as f32);
-        padded[..2].fill(first);
-        padded[w + 2..].fill(last);
-        rows.extend(
-            padded
-                .windows(5)
-                .map(|t| K[0] * (t[0] + t[4]) + K[1] * (t[1] + t[3]) + K[2] * t[2]),
-        );
+        for (o, t) in out[interior].iter_mut().zip(row.windows(5)) {
+            *o = taps(
+                t[0] as u16,
+                t[1] as u16,
+                t[2] as u16,
+                t[3] as u16,
+                t[4] as u16,
+            );
+        }
     }
-    // Along the columns, the nearest rows standing in beyond the top and bottom.
     let mut out: Vec<f32> = Vec::with_capacity(w * h);
     for y in 0..h {
         let row = |k: usize| {
@@ -357,7 +360,7 @@ fn blur(src: &[u8], w: usize, h: usize) -> Vec<f32> {
             &rows[yy * w..(yy + 1) * w]
         };
         let (r0, r1, r2, r3, r4) = (row(0), row(1), row(2), row(3), row(4));
-        out.extend((0..w).map(|x| K[0] * (r0[x] + r4[x]) + K[1] * (r1[x] + r3[x]) + K[2] * r2[x]));
+        out.extend((0..w).map(|x| taps(r0[x], r1[x], r2[x], r3[x], r4[x]) as f32 * (1.0 / 256.0)));
     }
     out
 }
@@ -494,31 +497,41 @@ fn corner_response(level: &Level) -> Vec<f32> {
     let mut gyy = vec![0.0f32; w * h];
     let mut gxy = vec![0.0f32; w * h];
     for y in 1..h.saturating_sub(1) {
-        for x in 1..w - 1 {
-            let at = |dx: usize, dy: usize| s[(y + dy - 1) * w + x + dx - 1];
-            let gx =
-                (at(2, 0) + 2.0 * at(2, 1) + at(2, 2)) - (at(0, 0) + 2.0 * at(0, 1) + at(0, 2));
+        let (up, mid, down) = (
+            &s[(y - 1) * w..y * w],
+            &s[y * w..(y + 1) * w],
+            &s[(y + 1) * w..(y + 2) * w],
+        );
+        let row = y * w..(y + 1) * w;
+        let products = gxx[row.clone()]
+            .iter_mut()
+            .zip(&mut gyy[row.clone()])
+            .zip(&mut gxy[row]);
+        for (x, ((xx, yy), xy)) in products.enumerate().take(w - 1).skip(1) {
+            let gx = (up[x + 1] + 2.0 * mid[x + 1] + down[x + 1])
+                - (up[x - 1] + 2.0 * mid[x - 1] + down[x - 1]);
             let gy =
-                (at(0, 2) + 2.0 * at(1, 2) + at(2, 2)) - (at(0, 0) + 2.0 * at(1, 0) + at(2, 0));
-            let i = y * w + x;
-            gxx[i] = gx * gx;
-            gyy[i] = gy * gy;
-            gxy[i] = gx * gy;
+                (down[x - 1] + 2.0 * down[x] + down[x + 1]) - (up[x - 1] + 2.0 * up[x] + up[x + 1]);
+            *xx = gx * gx;
+            *yy = gy * gy;
+            *xy = gx * gy;
         }
     }
-    // 5 x 5 box sums: along rows, then along columns.
+    // 5 x 5 box sums: along rows, then along columns (each sum in the same order as a plain
+    // loop over the window, left to right and top to bottom).
     let box5 = |v: &[f32]| -> Vec<f32> {
         let mut rows = vec![0.0f32; w * h];
-        for y in 0..h {
-            let r = &v[y * w..(y + 1) * w];
-            for x in 2..w.saturating_sub(2) {
-                rows[y * w + x] = r[x - 2] + r[x - 1] + r[x] + r[x + 1] + r[x + 2];
+        for (out, r) in rows.chunks_exact_mut(w).zip(v.chunks_exact(w)) {
+            for (o, t) in out.iter_mut().skip(2).zip(r.windows(5)) {
+                *o = t[0] + t[1] + t[2] + t[3] + t[4];
             }
         }
         let mut out = vec![0.0f32; w * h];
         for y in 2..h.saturating_sub(2) {
-            for x in 0..w {
-                out[y * w + x] = (y - 2..=y + 2).map(|yy| rows[yy * w + x]).sum();
+            let r = |k: usize| &rows[(y + k - 2) * w..(y + k - 1) * w];
+            let (r0, r1, r2, r3, r4) = (r(0), r(1), r(2), r(3), r(4));
+            for (x, o) in out[y * w..(y + 1) * w].iter_mut().enumerate() {
+                *o = r0[x] + r1[x] + r2[x] + r3[x] + r4[x];
             }
         }
         out
@@ -1103,6 +1116,101 @@ mod tests {
     use crate::render::{RenderConfig, Renderer};
     use crate::run::StampedPose;
     use std::path::Path;
+
+    /// The blur in floating point, tap by tap, as it reads.
+    fn float_blur(src: &[u8], w: usize, h: usize) -> Vec<f32> {
+        const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+        let at = |x: i64, y: i64| {
+            src[(y.clamp(0, h as i64 - 1) as usize) * w + x.clamp(0, w as i64 - 1) as usize] as f32
+        };
+        let rows: Vec<f32> = (0..h as i64)
+            .flat_map(|y| (0..w as i64).map(move |x| (y, x)))
+            .map(|(y, x)| (0..5).map(|k| K[k] * at(x + k as i64 - 2, y)).sum())
+            .collect();
+        let row = |x: i64, y: i64| rows[(y.clamp(0, h as i64 - 1) as usize) * w + x as usize];
+        (0..h as i64)
+            .flat_map(|y| (0..w as i64).map(move |x| (y, x)))
+            .map(|(y, x)| (0..5).map(|k| K[k] * row(x, y + k as i64 - 2)).sum())
+            .collect()
+    }
+
+    #[test]
+    fn the_integer_blur_is_the_floating_point_one_exactly() {
+        let mut state = 12345u32;
+        for (w, h) in [(1, 1), (2, 3), (4, 4), (5, 7), (17, 9), (64, 48)] {
+            let src: Vec<u8> = (0..w * h)
+                .map(|i| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    // Extremes too: all-white rows reach the integer sums' largest value.
+                    if i % 7 == 0 {
+                        255
+                    } else {
+                        (state >> 24) as u8
+                    }
+                })
+                .collect();
+            assert_eq!(blur(&src, w, h), float_blur(&src, w, h), "{w} x {h}");
+        }
+        let white = vec![255u8; 30 * 20];
+        assert!(blur(&white, 30, 20).iter().all(|&v| v == 255.0));
+    }
+
+    /// The corner response as first written, pixel by pixel.
+    fn plain_corner_response(level: &Level) -> Vec<f32> {
+        let (w, h) = (level.image.width(), level.image.height());
+        let s = level.image.as_slice();
+        let mut gxx = vec![0.0f32; w * h];
+        let mut gyy = vec![0.0f32; w * h];
+        let mut gxy = vec![0.0f32; w * h];
+        for y in 1..h.saturating_sub(1) {
+            for x in 1..w - 1 {
+                let at = |dx: usize, dy: usize| s[(y + dy - 1) * w + x + dx - 1];
+                let gx =
+                    (at(2, 0) + 2.0 * at(2, 1) + at(2, 2)) - (at(0, 0) + 2.0 * at(0, 1) + at(0, 2));
+                let gy =
+                    (at(0, 2) + 2.0 * at(1, 2) + at(2, 2)) - (at(0, 0) + 2.0 * at(1, 0) + at(2, 0));
+                let i = y * w + x;
+                gxx[i] = gx * gx;
+                gyy[i] = gy * gy;
+                gxy[i] = gx * gy;
+            }
+        }
+        // 5 x 5 box sums: along rows, then along columns.
+        let box5 = |v: &[f32]| -> Vec<f32> {
+            let mut rows = vec![0.0f32; w * h];
+            for y in 0..h {
+                let r = &v[y * w..(y + 1) * w];
+                for x in 2..w.saturating_sub(2) {
+                    rows[y * w + x] = r[x - 2] + r[x - 1] + r[x] + r[x + 1] + r[x + 2];
+                }
+            }
+            let mut out = vec![0.0f32; w * h];
+            for y in 2..h.saturating_sub(2) {
+                for x in 0..w {
+                    out[y * w + x] = (y - 2..=y + 2).map(|yy| rows[yy * w + x]).sum();
+                }
+            }
+            out
+        };
+        let (a, b, c) = (box5(&gxx), box5(&gyy), box5(&gxy));
+        a.iter()
+            .zip(&b)
+            .zip(&c)
+            .map(|((a, b), c)| 0.5 * (a + b) - (0.25 * (a - b) * (a - b) + c * c).sqrt())
+            .collect()
+    }
+
+    #[test]
+    fn the_corner_response_is_the_plain_one_exactly() {
+        let (world, rig) = office_and_rig();
+        let pair = Renderer::new(&rig)
+            .render(&world, Pose2::new(2.0, 2.0, 0.7), &RenderConfig::default())
+            .unwrap();
+        let image = VoImage::new(&pair.left);
+        for level in [&image.half, &image.quarter] {
+            assert_eq!(corner_response(level), plain_corner_response(level));
+        }
+    }
 
     fn office_and_rig() -> (crate::world::World, StereoRig) {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
