@@ -136,3 +136,39 @@ fn rig_export_writes_opencv_and_ros_files() {
     let back = load_rig(&out.join("camchain.yaml")).unwrap();
     assert!((back.baseline_m() - 0.12).abs() < 1e-12);
 }
+
+/// Outside the repository (an installed binary, another working directory) the default rig
+/// comes from the copy built into the binary, the same rig as the repository's file.
+#[test]
+fn the_default_rig_is_built_in_outside_the_repository() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::root().join("samples/office/world.yaml");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .current_dir(tmp.path())
+        .args(["render", "--world", world.to_str().unwrap()])
+        .args(["--pose", "1.2,5.8,2.3", "--out", "pair"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("using the copy built into stereotag"),
+        "{stderr}"
+    );
+    assert!(tmp.path().join("pair/left.png").exists());
+    // A rig named explicitly is never replaced: a missing one is an error naming it.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .current_dir(tmp.path())
+        .args([
+            "render",
+            "--world",
+            world.to_str().unwrap(),
+            "--rig",
+            "mine.yaml",
+        ])
+        .args(["--pose", "1.2,5.8,2.3", "--out", "pair2"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("mine.yaml"));
+}

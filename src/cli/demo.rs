@@ -28,7 +28,7 @@ impl Demo {
         let force = self.force || self.out == Path::new("out");
         let dir = OutputDir::create(&self.out, force)?;
         let run_dir = dir.path("run");
-        let rig = Path::new("calibration/rigs/default.yaml");
+        let rig = Path::new(super::DEFAULT_RIG);
         let policy = stereotag::render::CapturePolicy::default();
         let sim = simulate_world(
             &self.world,

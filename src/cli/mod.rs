@@ -185,6 +185,20 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
     bar
 }
 
+/// The stereo rig `simulate`, `render` and `demo` use unless told otherwise (repo-relative).
+pub(crate) const DEFAULT_RIG: &str = "calibration/rigs/default.yaml";
+
+/// Loads a `--rig` file; the default one, when it is not there (stereotag run outside its
+/// repository, or installed), from the copy built into the binary, and says so.
+pub(crate) fn load_rig_arg(path: &Path) -> anyhow::Result<stereotag::camera::StereoRig> {
+    if path == Path::new(DEFAULT_RIG) && !path.exists() {
+        tracing::info!("{DEFAULT_RIG} is not here: using the copy built into stereotag");
+        let text = include_str!("../../calibration/rigs/default.yaml");
+        return Ok(stereotag::io::parse_rig(path, text)?);
+    }
+    Ok(stereotag::io::load_rig(path)?)
+}
+
 /// Loads a run directory and warns about each odometry jump in it (a reset or glitch in a log:
 /// everything after it is placed with it).
 pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunDataset> {

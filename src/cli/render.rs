@@ -11,7 +11,7 @@ pub struct Render {
     #[arg(long, required_unless_present = "calibration_sequence")]
     world: Option<PathBuf>,
     /// Stereo rig file (Kalibr camchain).
-    #[arg(long, default_value = "calibration/rigs/default.yaml")]
+    #[arg(long, default_value = super::DEFAULT_RIG)]
     rig: PathBuf,
     /// Robot pose `x,y,theta` (metres, radians): one pair.
     #[arg(
@@ -147,7 +147,7 @@ impl Render {
         let [x, y, theta] =
             parse_pose("--pose", self.pose.as_deref().unwrap_or_default()).map_err(UsageError)?;
         let loaded = io::load_world(world)?;
-        let rig = io::load_rig(&self.rig)?;
+        let rig = super::load_rig_arg(&self.rig)?;
         let config = self.config(self.seed);
         let start = std::time::Instant::now();
         let pair = self
@@ -180,7 +180,7 @@ impl Render {
     ) -> anyhow::Result<()> {
         let poses = io::read_poses(poses_path)?;
         let loaded = io::load_world(world)?;
-        let rig = io::load_rig(&self.rig)?;
+        let rig = super::load_rig_arg(&self.rig)?;
         let renderer = self.renderer(&rig);
         let dir = OutputDir::create(&self.out, self.force)?;
         std::fs::create_dir_all(dir.path("left"))?;
@@ -235,7 +235,7 @@ impl Render {
     ) -> anyhow::Result<()> {
         use stereotag::board::{calibration_poses, Board};
         let target = io::load_target(target_path)?;
-        let rig = io::load_rig(&self.rig)?;
+        let rig = super::load_rig_arg(&self.rig)?;
         let board = match &target {
             io::Target::Aprilgrid(g) => {
                 Board::aprilgrid(g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing)?

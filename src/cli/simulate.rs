@@ -33,7 +33,7 @@ pub struct Simulate {
     paper_exploration: bool,
     /// Stereo rig of the pictures (taken whenever a tag is in view, and every 0.3 m or 20
     /// degrees in between for the visual odometry).
-    #[arg(long, default_value = "calibration/rigs/default.yaml")]
+    #[arg(long, default_value = super::DEFAULT_RIG)]
     rig: PathBuf,
     /// Take no stereo pictures (sonar and odometry only).
     #[arg(long)]
@@ -153,7 +153,7 @@ fn take_pictures(
     quiet: bool,
 ) -> anyhow::Result<()> {
     use stereotag::render::{plan_captures, RenderConfig, Renderer};
-    let rig = io::load_rig(rig_path)?;
+    let rig = super::load_rig_arg(rig_path)?;
     let truth = output.run.ground_truth.clone().unwrap_or_default();
     let config = RenderConfig::default();
     let plan = plan_captures(world, &rig, &truth, policy, &config)?;

@@ -19,8 +19,8 @@ pub use maps::{
 };
 pub use output::OutputDir;
 pub use rig::{
-    load_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig, Camchain,
-    KalibrCamera,
+    load_rig, parse_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig,
+    Camchain, KalibrCamera,
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
 pub use survey::{

@@ -179,7 +179,12 @@ pub fn robot_from_forward_camera(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64>
 /// Reads a Kalibr camchain YAML file as a stereo rig. Without `stereotag.robot_from_left` the
 /// left camera is taken to look straight ahead from the robot centre, 0.3 m up.
 pub fn load_rig(path: &Path) -> Result<StereoRig, IoError> {
-    let chain: Camchain = parse_yaml(path, &read_text(path)?)?;
+    parse_rig(path, &read_text(path)?)
+}
+
+/// [`load_rig`] of a camchain's text already read (`path` names it in errors).
+pub fn parse_rig(path: &Path, text: &str) -> Result<StereoRig, IoError> {
+    let chain: Camchain = parse_yaml(path, text)?;
     let left = camera_from(path, "cam0", &chain.cam0)?;
     let right = camera_from(path, "cam1", &chain.cam1)?;
     let t =
