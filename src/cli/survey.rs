@@ -147,6 +147,18 @@ pub(crate) enum KeptPair {
 /// detectors), so memory stays bounded whatever the run's length.
 const KEPT_DECODED_BYTES: usize = 1 << 30;
 
+/// Whether stereo pair `frame` goes into the recording: every pair a tag was found in, and one in
+/// [`RECORD_EVERY`] of the others (the pictures taken for the visual odometry alone, more than
+/// half of the office demo's). Compressing the pairs is most of what a recording costs; between
+/// two recorded pairs the viewer shows the earlier one.
+fn recorded(frame: usize, tag_found: bool) -> bool {
+    tag_found || frame % RECORD_EVERY == 0
+}
+
+/// One in how many pairs without a tag the recording keeps (ours: 3, about every metre of
+/// travel or 60 degrees of turn: the office demo's recording then costs under 20% of its survey).
+const RECORD_EVERY: usize = 3;
+
 /// Whether a run's pairs, `pairs` of `pixels` each image, are too many to keep decoded.
 fn compress_while_detecting(pairs: usize, pixels: usize) -> bool {
     pairs.saturating_mul(2 * pixels) > KEPT_DECODED_BYTES
@@ -447,6 +459,7 @@ pub(crate) fn detect_run(
                         &known,
                         &stereo_config,
                     )?;
+                    let tag_found = !sightings.is_empty() || !rejected.is_empty();
                     for r in rejected {
                         tracing::debug!(
                             "pair {frame} (t = {:.1} s): tag {} rejected: {}",
@@ -473,7 +486,7 @@ pub(crate) fn detect_run(
                             from = Some((frame, here, VoImage::for_stereo_matching(&right), to));
                         }
                     }
-                    let kept = match (job.keep_images, compress_now) {
+                    let kept = match (job.keep_images && recorded(frame, tag_found), compress_now) {
                         (false, _) => None,
                         (true, false) => Some(KeptPair::Decoded((left, right))),
                         (true, true) => jpeg_pair(&left, &right).map(|(l, r)| KeptPair::Jpeg(l, r)),
@@ -710,6 +723,13 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every pair with a tag is recorded, one in three of the others.
+    #[test]
+    fn the_recording_keeps_every_tag_pair_and_a_third_of_the_others() {
+        assert!((0..30).all(|k| recorded(k, true)));
+        assert_eq!((0..30).filter(|&k| recorded(k, false)).count(), 10);
+    }
 
     /// The museum's 468 pairs of 640x480 (288 MB decoded) are kept decoded; a run of hours is
     /// compressed as it is detected, so the recording never holds more than 1 GiB of pixels.
