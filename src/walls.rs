@@ -156,13 +156,11 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
     }
     let mut walls: Vec<LocalWall> = Vec::new();
     while walls.len() < MAX_WALLS {
-        let Some((best, &v)) = votes
-            .iter()
-            .enumerate()
-            .max_by_key(|(i, &v)| (v, usize::MAX - i))
-        else {
+        // The most votes, the first cell with them on a tie.
+        let Some(&v) = votes.iter().max() else {
             break;
         };
+        let best = votes.iter().position(|&x| x == v).unwrap_or(0);
         if v < MIN_WALL_VOTES {
             break;
         }
@@ -204,12 +202,20 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
             offset_m: offset,
             votes: v,
         });
-        // Suppress the wall's neighbourhood (both representations near 0 / 180 degrees).
-        for (i, v) in votes.iter_mut().enumerate() {
-            let a = (i / n_dist) as f64 * step;
-            let o = -reach + ((i % n_dist) as f64 + 0.5) * DIST_STEP_M;
-            if same_wall(a, o, normal, offset) {
-                *v = 0;
+        // Suppress the wall's neighbourhood (both representations near 0 / 180 degrees), row by
+        // row of angle, skipping the rows too far round to hold any of it.
+        let suppress = SUPPRESS_ANGLE_DEG.to_radians();
+        for (ia, row) in votes.chunks_exact_mut(n_dist).enumerate() {
+            let a = ia as f64 * step;
+            let da = (a - normal).abs();
+            if da > suppress && std::f64::consts::PI - da > suppress {
+                continue;
+            }
+            for (id, v) in row.iter_mut().enumerate() {
+                let o = -reach + (id as f64 + 0.5) * DIST_STEP_M;
+                if same_wall(a, o, normal, offset) {
+                    *v = 0;
+                }
             }
         }
     }
