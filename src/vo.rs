@@ -196,71 +196,138 @@ impl Level {
         }
     }
 
-    /// Correlations of a reference with the patches centred on the `(2 r + 1)²` pixels around
-    /// `(cx, cy)`, `R = 2 r + 1` (`NEG_INFINITY` where a patch leaves the image or is flat); the
-    /// patches' sums come from a local integral image of the region they cover.
-    fn correlate_around<const R: usize>(
+    /// Correlations of a zero-mean, unit-norm reference with the patches centred on integer
+    /// `positions` (`NEG_INFINITY` where a patch leaves the image or is flat). Positions that
+    /// follow each other along a row are worked together ([`Level::correlate_row`]).
+    fn correlate_at(&self, reference: &[f32], positions: &[(i64, i64)], half: i64) -> Vec<f32> {
+        let mut out = Vec::with_capacity(positions.len());
+        let mut columns = Vec::new();
+        let mut rest = positions;
+        while let Some(&(x, y)) = rest.first() {
+            // Along the row either way (a right image's epipolar line runs right to left).
+            let run = |step: i64| {
+                1 + rest
+                    .windows(2)
+                    .take_while(|p| p[1] == (p[0].0 + step, p[0].1))
+                    .count()
+            };
+            let (forward, backward) = (run(1), run(-1));
+            let n = forward.max(backward);
+            if forward >= backward {
+                self.correlate_row(reference, (x, y), n, half, &mut columns, &mut out);
+            } else {
+                let start = out.len();
+                let first = x - (n as i64 - 1);
+                self.correlate_row(reference, (first, y), n, half, &mut columns, &mut out);
+                out[start..].reverse();
+            }
+            rest = &rest[n..];
+        }
+        out
+    }
+
+    /// [`Level::correlate_at`] the `n` pixels from `(x, y)` to `(x + n - 1, y)`, appended to
+    /// `out`: the products are summed for eight positions at once, a reference pixel times eight
+    /// image pixels at a time, which the compiler keeps in vector registers. `columns` is room
+    /// for the column sums of a level without integral images.
+    fn correlate_row(
         &self,
         reference: &[f32],
-        (cx, cy): (i64, i64),
+        (x, y): (i64, i64),
+        n: usize,
         half: i64,
-    ) -> [[f32; R]; R] {
-        let r = (R / 2) as i64;
-        let mut out = [[f32::NEG_INFINITY; R]; R];
-        let (x0, y0) = (cx - r - half, cy - r - half);
-        let span = (R as i64 - 1 + 2 * half + 1) as usize;
-        if x0 < 0 || y0 < 0 || x0 + span as i64 > self.width() || y0 + span as i64 > self.height() {
-            for (j, row) in out.iter_mut().enumerate() {
-                for (i, cell) in row.iter_mut().enumerate() {
-                    let (x, y) = (cx + i as i64 - r, cy + j as i64 - r);
-                    if let Some(s) = self.correlate(reference, x, y, half) {
-                        *cell = s;
+        columns: &mut Vec<(f64, f64)>,
+        out: &mut Vec<f32>,
+    ) {
+        let last = x + n as i64 - 1;
+        if !(self.inside(x, y, half) && self.inside(last, y, half)) {
+            out.extend((x..=last).map(|x| {
+                self.correlate(reference, x, y, half)
+                    .unwrap_or(f32::NEG_INFINITY)
+            }));
+            return;
+        }
+        let side = (2 * half + 1) as usize;
+        let w = self.image.width();
+        let (left, top) = ((x - half) as usize, (y - half) as usize);
+        // Each lane of eight positions reads eight pixels past the first of its patches' rows:
+        // past the last position, those of the image that follow, or zeros at its very end.
+        let lanes = n.div_ceil(LANES);
+        let reach = top * w + (side - 1) * w + left + lanes * LANES + side - 1;
+        let data = self.image.as_slice();
+        let padded;
+        let (data, stride, origin) = if reach <= data.len() {
+            (data, w, top * w + left)
+        } else {
+            let width = lanes * LANES + side - 1;
+            let mut rows = vec![0.0f32; side * width];
+            for (copy, row) in rows.chunks_exact_mut(width).zip(data[top * w..].chunks(w)) {
+                copy[..n + side - 1].copy_from_slice(&row[left..left + n + side - 1]);
+            }
+            padded = rows;
+            (&padded[..], width, 0)
+        };
+        let sums = self.box_sums_row((x, y), n, half, columns);
+        let count = (side * side) as f64;
+        for l in 0..lanes {
+            let mut acc = [0.0f32; LANES];
+            for (k, patch_row) in reference.chunks_exact(side).enumerate() {
+                let row = &data[origin + k * stride + l * LANES..];
+                for (c, &r) in patch_row.iter().enumerate() {
+                    let v: &[f32; LANES] = row[c..c + LANES].try_into().expect("eight pixels");
+                    for (a, &v) in acc.iter_mut().zip(v) {
+                        *a += r * v;
                     }
                 }
             }
-            return out;
-        }
-        let w = self.image.width();
-        let data = self.image.as_slice();
-        let (x0, y0) = (x0 as usize, y0 as usize);
-        let mut sum = vec![0.0f64; (span + 1) * (span + 1)];
-        let mut sum2 = vec![0.0f64; (span + 1) * (span + 1)];
-        for y in 0..span {
-            let (mut row, mut row2) = (0.0, 0.0);
-            for x in 0..span {
-                let v = data[(y0 + y) * w + x0 + x] as f64;
-                row += v;
-                row2 += v * v;
-                sum[(y + 1) * (span + 1) + x + 1] = sum[y * (span + 1) + x + 1] + row;
-                sum2[(y + 1) * (span + 1) + x + 1] = sum2[y * (span + 1) + x + 1] + row2;
+            let first = l * LANES;
+            for (&dot, &(s, s2)) in acc.iter().zip(&sums[first..(first + LANES).min(n)]) {
+                let spread = (s2 - s * s / count).max(0.0).sqrt();
+                out.push(if spread < 1e-3 * count {
+                    f32::NEG_INFINITY
+                } else {
+                    (dot as f64 / spread) as f32
+                });
             }
+        }
+    }
+
+    /// [`Level::box_sums`] of the `n` squares centred from `(x, y)` to `(x + n - 1, y)` (all
+    /// inside): from the integral images, or without them from the column sums (in `columns`)
+    /// of the rows the squares cover, slid along.
+    fn box_sums_row(
+        &self,
+        (x, y): (i64, i64),
+        n: usize,
+        half: i64,
+        columns: &mut Vec<(f64, f64)>,
+    ) -> Vec<(f64, f64)> {
+        if self.sums.is_some() {
+            return (x..x + n as i64)
+                .map(|x| self.box_sums(x, y, half))
+                .collect();
         }
         let side = (2 * half + 1) as usize;
-        let n = (side * side) as f64;
-        for (j, row) in out.iter_mut().enumerate() {
-            for (i, cell) in row.iter_mut().enumerate() {
-                let at = |v: &[f64], xx: usize, yy: usize| v[yy * (span + 1) + xx];
-                let box_of = |v: &[f64]| {
-                    at(v, i + side, j + side) - at(v, i, j + side) - at(v, i + side, j)
-                        + at(v, i, j)
-                };
-                let (s, s2) = (box_of(&sum), box_of(&sum2));
-                let spread = (s2 - s * s / n).max(0.0).sqrt();
-                if spread < 1e-3 * n {
-                    continue;
-                }
-                let mut dot = 0.0f32;
-                for k in 0..side {
-                    let start = (y0 + j + k) * w + x0 + i;
-                    dot += dot_product(
-                        &data[start..start + side],
-                        &reference[k * side..(k + 1) * side],
-                    );
-                }
-                *cell = (dot as f64 / spread) as f32;
+        let w = self.image.width();
+        let (left, top) = ((x - half) as usize, (y - half) as usize);
+        let span = n + side - 1;
+        columns.clear();
+        columns.resize(span, (0.0, 0.0));
+        for row in self.image.as_slice()[top * w..].chunks_exact(w).take(side) {
+            for (c, &v) in columns.iter_mut().zip(&row[left..left + span]) {
+                let v = v as f64;
+                c.0 += v;
+                c.1 += v * v;
             }
         }
-        out
+        columns
+            .windows(side)
+            .map(|window| {
+                window
+                    .iter()
+                    .fold((0.0, 0.0), |(s, s2), c| (s + c.0, s2 + c.1))
+            })
+            .collect()
     }
 
     /// Correlation of a zero-mean, unit-norm reference with the patch at integer `(x, y)`.
@@ -289,6 +356,9 @@ impl Level {
     }
 }
 
+/// Positions or products summed side by side in one vector register.
+const LANES: usize = 8;
+
 /// `a · b` in eight lanes (the compiler keeps them in one vector register).
 fn dot_product(a: &[f32], b: &[f32]) -> f32 {
     let mut lanes = [0.0f32; 8];
@@ -305,6 +375,13 @@ fn dot_product(a: &[f32], b: &[f32]) -> f32 {
         }
     }
     lanes.iter().sum::<f32>() + tail
+}
+
+/// The offsets of a square of half-width `r`, row by row.
+fn square(r: i64) -> Vec<(i64, i64)> {
+    (-r..=r)
+        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+        .collect()
 }
 
 /// The vertex offset of a parabola through three samples one step apart, within half a step.
@@ -493,55 +570,76 @@ fn patch_scaled(level: &Level, x: i64, y: i64, half: i64, step: f64) -> Option<V
 fn corner_response(level: &Level) -> Vec<f32> {
     let (w, h) = (level.image.width(), level.image.height());
     let s = level.image.as_slice();
-    let mut gxx = vec![0.0f32; w * h];
-    let mut gyy = vec![0.0f32; w * h];
-    let mut gxy = vec![0.0f32; w * h];
-    for y in 1..h.saturating_sub(1) {
-        let (up, mid, down) = (
-            &s[(y - 1) * w..y * w],
-            &s[y * w..(y + 1) * w],
-            &s[(y + 1) * w..(y + 2) * w],
-        );
-        let row = y * w..(y + 1) * w;
-        let products = gxx[row.clone()]
+    let mut out = vec![0.0f32; w * h];
+    if w < 5 || h < 5 {
+        return out;
+    }
+    // Row by row, the 5-wide sums of the gradient products (xx, yy, xy) of the last five rows
+    // kept in a ring, then summed down the columns: each sum in the same order as a plain loop
+    // over the window, left to right and top to bottom; a row or column without a whole window
+    // is zero. One array per product, so that the loops run in vector registers.
+    let mut ring = [
+        vec![0.0f32; 5 * w],
+        vec![0.0f32; 5 * w],
+        vec![0.0f32; 5 * w],
+    ];
+    let mut products = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
+    let mut window = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
+    for y in 0..h {
+        let [xx, yy, xy] = &mut products;
+        if y > 0 && y + 1 < h {
+            let (up, mid, down) = (
+                &s[(y - 1) * w..y * w],
+                &s[y * w..(y + 1) * w],
+                &s[(y + 1) * w..(y + 2) * w],
+            );
+            for x in 1..w - 1 {
+                let gx = (up[x + 1] + 2.0 * mid[x + 1] + down[x + 1])
+                    - (up[x - 1] + 2.0 * mid[x - 1] + down[x - 1]);
+                let gy = (down[x - 1] + 2.0 * down[x] + down[x + 1])
+                    - (up[x - 1] + 2.0 * up[x] + up[x + 1]);
+                (xx[x], yy[x], xy[x]) = (gx * gx, gy * gy, gx * gy);
+            }
+        } else {
+            for p in [xx, yy, xy] {
+                p.fill(0.0);
+            }
+        }
+        for (ring, p) in ring.iter_mut().zip(&products) {
+            let sums = &mut ring[(y % 5) * w..(y % 5 + 1) * w];
+            sum5(
+                [&p[..], &p[1..], &p[2..], &p[3..], &p[4..]],
+                &mut sums[2..w - 2],
+            );
+        }
+        if y < 4 {
+            continue;
+        }
+        // Row `y - 2`, whose window is rows `y - 4` to `y`.
+        for (ring, total) in ring.iter().zip(&mut window) {
+            let r = |k: usize| &ring[((y - 4 + k) % 5) * w..((y - 4 + k) % 5 + 1) * w];
+            sum5([r(0), r(1), r(2), r(3), r(4)], total);
+        }
+        let [a, b, c] = &window;
+        let row = out[(y - 2) * w..(y - 1) * w]
             .iter_mut()
-            .zip(&mut gyy[row.clone()])
-            .zip(&mut gxy[row]);
-        for (x, ((xx, yy), xy)) in products.enumerate().take(w - 1).skip(1) {
-            let gx = (up[x + 1] + 2.0 * mid[x + 1] + down[x + 1])
-                - (up[x - 1] + 2.0 * mid[x - 1] + down[x - 1]);
-            let gy =
-                (down[x - 1] + 2.0 * down[x] + down[x + 1]) - (up[x - 1] + 2.0 * up[x] + up[x + 1]);
-            *xx = gx * gx;
-            *yy = gy * gy;
-            *xy = gx * gy;
+            .zip(a)
+            .zip(b)
+            .zip(c);
+        for (((o, &a), &b), &c) in row {
+            *o = 0.5 * (a + b) - (0.25 * (a - b) * (a - b) + c * c).sqrt();
         }
     }
-    // 5 x 5 box sums: along rows, then along columns (each sum in the same order as a plain
-    // loop over the window, left to right and top to bottom).
-    let box5 = |v: &[f32]| -> Vec<f32> {
-        let mut rows = vec![0.0f32; w * h];
-        for (out, r) in rows.chunks_exact_mut(w).zip(v.chunks_exact(w)) {
-            for (o, t) in out.iter_mut().skip(2).zip(r.windows(5)) {
-                *o = t[0] + t[1] + t[2] + t[3] + t[4];
-            }
-        }
-        let mut out = vec![0.0f32; w * h];
-        for y in 2..h.saturating_sub(2) {
-            let r = |k: usize| &rows[(y + k - 2) * w..(y + k - 1) * w];
-            let (r0, r1, r2, r3, r4) = (r(0), r(1), r(2), r(3), r(4));
-            for (x, o) in out[y * w..(y + 1) * w].iter_mut().enumerate() {
-                *o = r0[x] + r1[x] + r2[x] + r3[x] + r4[x];
-            }
-        }
-        out
-    };
-    let (a, b, c) = (box5(&gxx), box5(&gyy), box5(&gxy));
-    a.iter()
-        .zip(&b)
-        .zip(&c)
-        .map(|((a, b), c)| 0.5 * (a + b) - (0.25 * (a - b) * (a - b) + c * c).sqrt())
-        .collect()
+    out
+}
+
+/// `out[x] = rows[0][x] + rows[1][x] + ... + rows[4][x]`, summed in that order.
+fn sum5(rows: [&[f32]; 5], out: &mut [f32]) {
+    let n = out.len();
+    let [r0, r1, r2, r3, r4] = rows.map(|r| &r[..n]);
+    for x in 0..n {
+        out[x] = r0[x] + r1[x] + r2[x] + r3[x] + r4[x];
+    }
 }
 
 /// The strongest corner of each grid cell, found at half resolution, in full-resolution pixels.
@@ -611,21 +709,25 @@ fn epipolar_match(
     }
     let reference = patch_at(&left.quarter, ax, ay, HALF)?;
     let steps = (span_px / 4.0).ceil().max(2.0) as usize;
-    let mut scores: Vec<(f64, Point2<f64>, f32)> = Vec::with_capacity(steps + 1);
-    for k in 0..=steps {
-        let inverse_depth = far + (near - far) * k as f64 / steps as f64;
-        let Some(q) = right_px(inverse_depth) else {
-            continue;
-        };
-        let c = to_level(q, 2);
-        if let Some(s) =
-            right
-                .quarter
-                .correlate(&reference, c.x.round() as i64, c.y.round() as i64, HALF)
-        {
-            scores.push((inverse_depth, q, s));
-        }
-    }
+    let along: Vec<(f64, Point2<f64>)> = (0..=steps)
+        .filter_map(|k| {
+            let inverse_depth = far + (near - far) * k as f64 / steps as f64;
+            Some((inverse_depth, right_px(inverse_depth)?))
+        })
+        .collect();
+    let at: Vec<(i64, i64)> = along
+        .iter()
+        .map(|(_, q)| {
+            let c = to_level(*q, 2);
+            (c.x.round() as i64, c.y.round() as i64)
+        })
+        .collect();
+    let scores: Vec<(f64, Point2<f64>, f32)> = along
+        .iter()
+        .zip(right.quarter.correlate_at(&reference, &at, HALF))
+        .filter(|(_, s)| s.is_finite())
+        .map(|(&(inverse_depth, q), s)| (inverse_depth, q, s))
+        .collect();
     let &(best_rho, best_px, best) = scores.iter().max_by(|a, b| a.2.total_cmp(&b.2))?;
     if best < config.min_correlation {
         return None;
@@ -643,15 +745,19 @@ fn epipolar_match(
     let (px, py) = (p.x.round() as i64, p.y.round() as i64);
     let reference = patch_at(&left.full, px, py, 5)?;
     let per_px = (near - far) / span_px.max(1e-9);
-    let fine: Vec<(f64, f32)> = (-6..=6)
+    let along: Vec<(f64, (i64, i64))> = (-6..=6)
         .filter_map(|k| {
             let rho = best_rho + per_px * k as f64;
             let q = right_px(rho).filter(|_| rho > 0.0)?;
-            let s = right
-                .full
-                .correlate(&reference, q.x.round() as i64, q.y.round() as i64, 5)?;
-            Some((rho, s))
+            Some((rho, (q.x.round() as i64, q.y.round() as i64)))
         })
+        .collect();
+    let at: Vec<(i64, i64)> = along.iter().map(|a| a.1).collect();
+    let fine: Vec<(f64, f32)> = along
+        .iter()
+        .zip(right.full.correlate_at(&reference, &at, 5))
+        .filter(|(_, s)| s.is_finite())
+        .map(|(&(rho, _), s)| (rho, s))
         .collect();
     let (i, &(rho, peak)) = fine
         .iter()
@@ -684,14 +790,14 @@ fn track(
     let g = to_level(guess, 2);
     let (gx, gy) = (g.x.round() as i64, g.y.round() as i64);
     let r = (config.search_radius_px / 4.0).ceil() as i64;
-    let mut scores = Vec::with_capacity(((2 * r + 1) * (2 * r + 1)) as usize);
-    for dy in -r..=r {
-        for dx in -r..=r {
-            if let Some(s) = b.quarter.correlate(&reference, gx + dx, gy + dy, 3) {
-                scores.push((dx, dy, s));
-            }
-        }
-    }
+    let offsets = square(r);
+    let at: Vec<(i64, i64)> = offsets.iter().map(|&(dx, dy)| (gx + dx, gy + dy)).collect();
+    let scores: Vec<(i64, i64, f32)> = offsets
+        .iter()
+        .zip(b.quarter.correlate_at(&reference, &at, 3))
+        .filter(|(_, s)| s.is_finite())
+        .map(|(&(dx, dy), s)| (dx, dy, s))
+        .collect();
     let &(bx, by, best) = scores.iter().max_by(|a, b| a.2.total_cmp(&b.2))?;
     if best < config.min_correlation {
         return None;
@@ -715,14 +821,14 @@ fn track(
         1,
     );
     let (hx, hy) = (centre.x.round() as i64, centre.y.round() as i64);
+    let at: Vec<(i64, i64)> = square(2)
+        .into_iter()
+        .map(|(dx, dy)| (hx + dx, hy + dy))
+        .collect();
     let (mut best, mut bx, mut by) = (f32::NEG_INFINITY, hx, hy);
-    for y in hy - 2..=hy + 2 {
-        for x in hx - 2..=hx + 2 {
-            if let Some(s) = b.half.correlate(&reference, x, y, HALF) {
-                if s > best {
-                    (best, bx, by) = (s, x, y);
-                }
-            }
+    for (&(x, y), s) in at.iter().zip(b.half.correlate_at(&reference, &at, HALF)) {
+        if s > best {
+            (best, bx, by) = (s, x, y);
         }
     }
     if best < config.min_correlation {
@@ -734,7 +840,12 @@ fn track(
         + (p - from_level(Point2::new(ax as f64, ay as f64), 1));
     let (cx, cy) = (coarse.x.round() as i64, coarse.y.round() as i64);
     let reference = patch_scaled(&a.full, p.x.round() as i64, p.y.round() as i64, 7, step)?;
-    let grid: [[f32; 7]; 7] = b.full.correlate_around(&reference, (cx, cy), 7);
+    let at: Vec<(i64, i64)> = square(3)
+        .into_iter()
+        .map(|(dx, dy)| (cx + dx, cy + dy))
+        .collect();
+    let scores = b.full.correlate_at(&reference, &at, 7);
+    let grid: Vec<&[f32]> = scores.chunks_exact(7).collect();
     let (peak, i, j) = (0..7).flat_map(|j| (0..7).map(move |i| (i, j))).fold(
         (f32::NEG_INFINITY, 3, 3),
         |top, (i, j)| {
