@@ -201,7 +201,7 @@ impl Level {
     /// follow each other along a row are worked together ([`Level::correlate_row`]).
     fn correlate_at(&self, reference: &[f32], positions: &[(i64, i64)], half: i64) -> Vec<f32> {
         let mut out = Vec::with_capacity(positions.len());
-        let mut columns = Vec::new();
+        let mut columns = Columns::default();
         let mut rest = positions;
         while let Some(&(x, y)) = rest.first() {
             // Along the row either way (a right image's epipolar line runs right to left).
@@ -228,15 +228,15 @@ impl Level {
 
     /// [`Level::correlate_at`] the `n` pixels from `(x, y)` to `(x + n - 1, y)`, appended to
     /// `out`: the products are summed for eight positions at once, a reference pixel times eight
-    /// image pixels at a time, which the compiler keeps in vector registers. `columns` is room
-    /// for the column sums of a level without integral images.
+    /// image pixels at a time, which the compiler keeps in vector registers. `columns` holds the
+    /// column sums of a level without integral images, from one run to the next.
     fn correlate_row(
         &self,
         reference: &[f32],
         (x, y): (i64, i64),
         n: usize,
         half: i64,
-        columns: &mut Vec<(f64, f64)>,
+        columns: &mut Columns,
         out: &mut Vec<f32>,
     ) {
         let last = x + n as i64 - 1;
@@ -293,14 +293,15 @@ impl Level {
     }
 
     /// [`Level::box_sums`] of the `n` squares centred from `(x, y)` to `(x + n - 1, y)` (all
-    /// inside): from the integral images, or without them from the column sums (in `columns`)
-    /// of the rows the squares cover, slid along.
+    /// inside): from the integral images, or without them from the column sums of the rows the
+    /// squares cover (in `columns`: moved down a row when the last run was the same one a row
+    /// higher), slid along.
     fn box_sums_row(
         &self,
         (x, y): (i64, i64),
         n: usize,
         half: i64,
-        columns: &mut Vec<(f64, f64)>,
+        columns: &mut Columns,
     ) -> Vec<(f64, f64)> {
         if self.sums.is_some() {
             return (x..x + n as i64)
@@ -311,23 +312,43 @@ impl Level {
         let w = self.image.width();
         let (left, top) = ((x - half) as usize, (y - half) as usize);
         let span = n + side - 1;
-        columns.clear();
-        columns.resize(span, (0.0, 0.0));
-        for row in self.image.as_slice()[top * w..].chunks_exact(w).take(side) {
-            for (c, &v) in columns.iter_mut().zip(&row[left..left + span]) {
-                let v = v as f64;
-                c.0 += v;
-                c.1 += v * v;
+        let data = self.image.as_slice();
+        let row = |r: usize| &data[r * w + left..r * w + left + span];
+        if columns.run == Some((x, y - 1, n, half)) {
+            for ((c, &out), &new) in columns
+                .sums
+                .iter_mut()
+                .zip(row(top - 1))
+                .zip(row(top + side - 1))
+            {
+                let (out, new) = (out as f64, new as f64);
+                c.0 += new - out;
+                c.1 += new * new - out * out;
+            }
+        } else {
+            columns.sums.clear();
+            columns.sums.resize(span, (0.0, 0.0));
+            for r in top..top + side {
+                for (c, &v) in columns.sums.iter_mut().zip(row(r)) {
+                    let v = v as f64;
+                    c.0 += v;
+                    c.1 += v * v;
+                }
             }
         }
-        columns
-            .windows(side)
-            .map(|window| {
-                window
-                    .iter()
-                    .fold((0.0, 0.0), |(s, s2), c| (s + c.0, s2 + c.1))
-            })
-            .collect()
+        columns.run = Some((x, y, n, half));
+        let c = &columns.sums;
+        let mut window = c[..side]
+            .iter()
+            .fold((0.0, 0.0), |(s, s2), c| (s + c.0, s2 + c.1));
+        let mut out = Vec::with_capacity(n);
+        out.push(window);
+        for i in 1..n {
+            let (old, new) = (c[i - 1], c[i + side - 1]);
+            window = (window.0 + new.0 - old.0, window.1 + new.1 - old.1);
+            out.push(window);
+        }
+        out
     }
 
     /// Correlation of a zero-mean, unit-norm reference with the patch at integer `(x, y)`.
@@ -354,6 +375,14 @@ impl Level {
         }
         Some((dot as f64 / spread) as f32)
     }
+}
+
+/// The column sums (of values and of squares) of the rows a run of patches covers, and which run
+/// (first position, length, half-width) they are for.
+#[derive(Default)]
+struct Columns {
+    run: Option<(i64, i64, usize, i64)>,
+    sums: Vec<(f64, f64)>,
 }
 
 /// Positions or products summed side by side in one vector register.
