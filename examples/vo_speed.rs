@@ -25,14 +25,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let config = VoConfig::default();
     let (mut prep, mut motion, mut ok) = (0.0, 0.0, 0);
     let t = Instant::now();
-    let mut last = (
-        VoImage::new(&grays[0].0),
-        VoImage::for_stereo_matching(&grays[0].1),
-    );
+    let mut last = (VoImage::new(&grays[0].0), VoImage::new(&grays[0].1));
     prep += t.elapsed().as_secs_f64();
     for (k, (left, right)) in grays.iter().enumerate().skip(1) {
         let t = Instant::now();
-        let next = (VoImage::new(left), VoImage::for_stereo_matching(right));
+        let next = (VoImage::new(left), VoImage::new(right));
         prep += t.elapsed().as_secs_f64();
         let (a, b) = (&run.stereo[k - 1], &run.stereo[k]);
         let prior = pose_at(&run.odometry, a.t_s)

@@ -498,18 +498,10 @@ pub struct VoImage {
 }
 
 impl VoImage {
-    /// From an 8-bit grey image.
+    /// From an 8-bit grey image. Only the quarter resolution gets integral images: the searches
+    /// there cover many positions (a whole epipolar line, the tracking radius); the few at half
+    /// and full resolution sum the columns of their own patches ([`Level::box_sums_row`]).
     pub fn new(gray: &image::GrayImage) -> Self {
-        Self::with_half_sums(gray, true)
-    }
-
-    /// From an 8-bit grey image only ever searched along epipolar lines (a right camera's): the
-    /// same, less the integral images at half resolution, which only tracking uses.
-    pub fn for_stereo_matching(gray: &image::GrayImage) -> Self {
-        Self::with_half_sums(gray, false)
-    }
-
-    fn with_half_sums(gray: &image::GrayImage, half_sums: bool) -> Self {
         let (w, h) = (gray.width() as usize, gray.height() as usize);
         let full = blur(gray.as_raw(), w, h);
         let (half, hw, hh) = halve(&full, w, h);
@@ -520,7 +512,7 @@ impl VoImage {
         };
         Self {
             full: level(full, w, h, false),
-            half: level(half, hw, hh, half_sums),
+            half: level(half, hw, hh, false),
             quarter: level(quarter, qw, qh, true),
         }
     }
@@ -1380,10 +1372,7 @@ mod tests {
                     },
                 )
                 .unwrap();
-            (
-                VoImage::new(&pair.left),
-                VoImage::for_stereo_matching(&pair.right),
-            )
+            (VoImage::new(&pair.left), VoImage::new(&pair.right))
         };
         let config = VoConfig::default();
         let mut squares = 0.0;

@@ -483,7 +483,7 @@ pub(crate) fn detect_run(
                             out[a - first].2 = t;
                         }
                         if let Some(to) = next[frame] {
-                            from = Some((frame, here, VoImage::for_stereo_matching(&right), to));
+                            from = Some((frame, here, VoImage::new(&right), to));
                         }
                     }
                     let kept = match (job.keep_images && recorded(frame, tag_found), compress_now) {
