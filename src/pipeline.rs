@@ -94,12 +94,12 @@ pub fn map_trajectory(
     let layout = &run.meta.robot.sonar;
     let mut timings_s = BTreeMap::new();
     let start = Instant::now();
-    let readings = run.placed_readings(trajectory);
-    timings_s.insert("place_readings".into(), start.elapsed().as_secs_f64());
-
-    let t = Instant::now();
-    let counting = counting_map(run, &readings, config)?;
-    timings_s.insert("grid_counting".into(), t.elapsed().as_secs_f64());
+    let readings = timed("place_readings", &mut timings_s, || {
+        run.placed_readings(trajectory)
+    });
+    let counting = timed("grid_counting", &mut timings_s, || {
+        counting_map(run, &readings, config)
+    })?;
     let (echoes, echoes_off_grid) = readings
         .iter()
         .filter_map(|r| {
@@ -116,40 +116,40 @@ pub fn map_trajectory(
     // counting grid and nothing of each other: the online Hough pass (the longest) runs on one
     // core, the rest on the other. Each stage's time is its own, taken while the others run.
     let half = 0.5 * layout.cone_rad;
-    let timed = |name: &str, timings: &mut Vec<(String, f64)>, t: Instant| {
-        timings.push((name.to_owned(), t.elapsed().as_secs_f64()));
-    };
-    let ((online, mut stage_times), rest) = rayon::join(
+    let ((online, online_times), rest) = rayon::join(
         || {
-            let mut times = Vec::new();
-            let t = Instant::now();
-            let mut online = features_online(&readings, trajectory, half, &counting, &config.hough);
-            classify_features(&mut online, &counting);
-            timed("hough_online", &mut times, t);
+            let mut times = BTreeMap::new();
+            let online = timed("hough_online", &mut times, || {
+                let mut online =
+                    features_online(&readings, trajectory, half, &counting, &config.hough);
+                classify_features(&mut online, &counting);
+                online
+            });
             (online, times)
         },
         || -> Result<_, PipelineError> {
-            let mut times = Vec::new();
-            let t = Instant::now();
-            let mut log_odds =
-                LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
-            log_odds.insert_all(&readings);
-            let log_odds = log_odds.map();
-            timed("grid_log_odds", &mut times, t);
-            let t = Instant::now();
-            let (mut offline, accumulator) =
-                features_offline(&readings, half, &counting, &config.hough);
-            classify_features(&mut offline, &counting);
-            timed("hough_offline", &mut times, t);
-            let t = Instant::now();
-            let walls = map_walls(&readings, half, layout.max_range_m, &counting);
-            timed("walls", &mut times, t);
+            let mut times = BTreeMap::new();
+            let log_odds = timed("grid_log_odds", &mut times, || {
+                let mut grid =
+                    LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+                grid.insert_all(&readings);
+                Ok::<_, PipelineError>(grid.map())
+            })?;
+            let (offline, accumulator) = timed("hough_offline", &mut times, || {
+                let (mut offline, accumulator) =
+                    features_offline(&readings, half, &counting, &config.hough);
+                classify_features(&mut offline, &counting);
+                (offline, accumulator)
+            });
+            let walls = timed("walls", &mut times, || {
+                map_walls(&readings, half, layout.max_range_m, &counting)
+            });
             Ok((log_odds, offline, accumulator, walls, times))
         },
     );
-    let (log_odds, offline, accumulator, walls, times) = rest?;
-    stage_times.extend(times);
-    timings_s.extend(stage_times);
+    let (log_odds, offline, accumulator, walls, rest_times) = rest?;
+    timings_s.extend(online_times);
+    timings_s.extend(rest_times);
     timings_s.insert("total".into(), start.elapsed().as_secs_f64());
 
     Ok(SonarMap {
@@ -164,6 +164,14 @@ pub fn map_trajectory(
         echoes_off_grid,
         timings_s,
     })
+}
+
+/// Runs `f`, noting its wall-clock time under `name`.
+fn timed<T>(name: &str, timings: &mut BTreeMap<String, f64>, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let out = f();
+    timings.insert(name.to_owned(), t.elapsed().as_secs_f64());
+    out
 }
 
 /// Detects and triangulates the tags of one stereo pair and moves them into the robot frame.
@@ -238,33 +246,34 @@ pub fn survey(
     calibration: Option<OdometryCalibration>,
 ) -> Result<Survey, PipelineError> {
     let mut timings_s = BTreeMap::new();
-    let t = Instant::now();
-    let raw = map_trajectory(run, &run.odometry, mapping)?;
-    timings_s.insert("map_raw".into(), t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let online = run_online_calibrated(
-        &run.odometry,
-        visual,
-        sightings,
-        &raw.features_online,
-        fuse,
-        calibration,
-    );
-    timings_s.insert("fuse_online".into(), t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let online_map = counting_map(run, &run.placed_readings(&online.trajectory), mapping)?;
-    timings_s.insert("map_online".into(), t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let mut offline = run_offline(&run.odometry, visual, sightings, &online, fuse);
-    timings_s.insert("fuse_offline".into(), t.elapsed().as_secs_f64());
+    let times = &mut timings_s;
+    let raw = timed("map_raw", times, || {
+        map_trajectory(run, &run.odometry, mapping)
+    })?;
+    let online = timed("fuse_online", times, || {
+        run_online_calibrated(
+            &run.odometry,
+            visual,
+            sightings,
+            &raw.features_online,
+            fuse,
+            calibration,
+        )
+    });
+    let online_map = timed("map_online", times, || {
+        counting_map(run, &run.placed_readings(&online.trajectory), mapping)
+    })?;
+    let mut offline = timed("fuse_offline", times, || {
+        run_offline(&run.odometry, visual, sightings, &online, fuse)
+    });
     if fuse.hold_tail_to_walls {
-        let t = Instant::now();
-        hold_tail(run, sightings, visual, &online, &mut offline, mapping, fuse)?;
-        timings_s.insert("fuse_tail".into(), t.elapsed().as_secs_f64());
+        timed("fuse_tail", times, || {
+            hold_tail(run, sightings, visual, &online, &mut offline, mapping, fuse)
+        })?;
     }
-    let t = Instant::now();
-    let corrected = map_trajectory(run, &offline.trajectory, mapping)?;
-    timings_s.insert("map_corrected".into(), t.elapsed().as_secs_f64());
+    let corrected = timed("map_corrected", times, || {
+        map_trajectory(run, &offline.trajectory, mapping)
+    })?;
     let landmarks = offline
         .landmarks
         .iter()
