@@ -1,8 +1,9 @@
 //! Speed of a whole survey (issue 5: the museum run in <= 2 s on two cores, reading its images
 //! included, rendering not). The museum is simulated and rendered once (seed 1, about 40 s), then
 //! `stereotag survey --no-rerun` is timed as a user runs it, process start to exit; the references
-//! in the same group are the same survey with the C library's own `min_white_black_diff` (5), and
-//! without the visual odometry (`visual_odometry: false`, tag sightings and wheels only).
+//! in the same group are the same survey with the C library's own `min_white_black_diff` (5),
+//! without the visual odometry (`visual_odometry: false`, tag sightings and wheels only), and with
+//! the C library decimating by 1.5 (`--decimate 1.5`: faster, misses some far tags).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::path::Path;
@@ -49,6 +50,11 @@ fn survey(c: &mut Criterion) {
             "min_contrast_30, no visual odometry (reference)",
             "30",
             &["--config", no_vo.as_str()][..],
+        ),
+        (
+            "min_contrast_30, decimate 1.5 (faster, fewer far tags)",
+            "30",
+            &["--decimate", "1.5"][..],
         ),
         ("min_contrast_30 (survey default)", "30", &[][..]),
     ] {

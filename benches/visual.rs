@@ -107,7 +107,7 @@ fn test_photos(c: &mut Criterion) {
         .map(|p| stereotag::io::load_gray(p).expect("test photo"))
         .collect();
     let settings = DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         refine_edges: false,
         subpixel: false,
         ..DetectorConfig::default()

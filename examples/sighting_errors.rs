@@ -14,7 +14,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let rig = io::load_rig(&dir.join(run.meta.robot.rig.as_ref().ok_or("no rig")?))?;
     let rect = rig.rectify();
     let mut det = CDetector::new(DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         ..DetectorConfig::default()
     })?;
     let truth = run.ground_truth.as_ref().ok_or("no truth")?;

@@ -7,7 +7,7 @@ use stereotag::tags::{CDetector, DetectorConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: RUN_DIR")?);
-    let decimate: u32 = std::env::args().nth(2).map_or(Ok(1), |s| s.parse())?;
+    let decimate: f32 = std::env::args().nth(2).map_or(Ok(1.0), |s| s.parse())?;
     let min_contrast: u8 = std::env::args().nth(3).map_or(Ok(5), |s| s.parse())?;
     let run = io::load_run(&dir)?;
     let t = Instant::now();

@@ -185,8 +185,9 @@ pub struct DetectorConfig {
     /// Families to look for (default: tag36h11).
     pub families: Vec<TagFamily>,
     /// Decimation of the image before quad detection (the C library's `quad_decimate`;
-    /// default 2, both libraries' default).
-    pub decimate: u32,
+    /// default 2, both libraries' default). The C library also takes fractions (1.5 resamples
+    /// 3 x 3 pixels to 2 x 2); kornia-apriltag only whole factors.
+    pub decimate: f32,
     /// Refine the quad edges on the full image after decimation (default: on, both libraries').
     pub refine_edges: bool,
     /// Sharpening of the decoded bits (default 0.25, both libraries').
@@ -209,7 +210,7 @@ impl Default for DetectorConfig {
     fn default() -> Self {
         Self {
             families: vec![TagFamily::Tag36h11],
-            decimate: 2,
+            decimate: 2.0,
             refine_edges: true,
             sharpening: 0.25,
             max_hamming: 2,
@@ -366,10 +367,17 @@ impl KorniaDetector {
     }
 
     fn check(config: &DetectorConfig) -> Result<(), TagError> {
-        if config.families.is_empty() || config.decimate == 0 {
+        if config.families.is_empty() || !valid_decimation(config.decimate) {
             return Err(TagError::Invalid(
                 "needs at least one family and a decimation >= 1".into(),
             ));
+        }
+        if config.decimate.fract() != 0.0 {
+            return Err(TagError::Invalid(format!(
+                "decimation {}: kornia-apriltag decimates by whole factors (fractions need the \
+                 C library's backend, apriltag-c)",
+                config.decimate
+            )));
         }
         Ok(())
     }
@@ -380,7 +388,7 @@ impl KorniaDetector {
         image: &GrayImage,
     ) -> Result<Vec<TagDetection>, TagError> {
         let settings = crate::tagquads::QuadSettings {
-            decimate: self.config.decimate,
+            decimate: self.config.decimate as u32,
             refine_edges: self.config.refine_edges,
             sharpening: self.config.sharpening,
             min_contrast: self.config.min_contrast,
@@ -503,7 +511,7 @@ unsafe impl Send for CDetector {}
 impl CDetector {
     /// A detector with the given settings.
     pub fn new(config: DetectorConfig) -> Result<Self, TagError> {
-        if config.families.is_empty() || config.decimate == 0 {
+        if config.families.is_empty() || !valid_decimation(config.decimate) {
             return Err(TagError::Invalid(
                 "needs at least one family and a decimation >= 1".into(),
             ));
@@ -538,7 +546,7 @@ impl CDetector {
         };
         // SAFETY: `raw` was created by `apriltag_detector_create` above.
         let mut detector = unsafe { apriltag::Detector::from_raw(raw) };
-        detector.set_decimation(config.decimate as f32);
+        detector.set_decimation(config.decimate);
         detector.set_refine_edges(config.refine_edges);
         detector.set_shapening(config.sharpening);
         detector.set_thread_number(1);
@@ -546,7 +554,7 @@ impl CDetector {
             detector: Some(detector),
             owned,
             subpixel: config.subpixel,
-            decimate: config.decimate as f32,
+            decimate: config.decimate,
         })
     }
 }
@@ -619,7 +627,7 @@ pub const APRILGRID_BORDER_CELLS: i32 = 10;
 impl AprilGridDetector {
     /// A detector at the given decimation (1 = full resolution) with edge refinement on or off.
     pub fn new(decimate: f32, refine_edges: bool) -> Result<Self, TagError> {
-        if !(decimate >= 1.0 && decimate.is_finite()) {
+        if !valid_decimation(decimate) {
             return Err(TagError::Invalid(format!(
                 "decimate {decimate}: must be >= 1"
             )));
@@ -660,6 +668,11 @@ impl Drop for AprilGridDetector {
             apriltag_sys::tag36h11_destroy(self.family);
         }
     }
+}
+
+/// Whether a decimation factor is one the detectors take: finite and at least 1.
+pub fn valid_decimation(decimate: f32) -> bool {
+    decimate >= 1.0 && decimate.is_finite()
 }
 
 /// Smallest image side, in pixels after decimation, handed to the C library: its thresholding
@@ -882,7 +895,7 @@ mod tests {
     fn both_backends_read_every_family_alike() {
         let config = |family| DetectorConfig {
             families: vec![family],
-            decimate: 1,
+            decimate: 1.0,
             subpixel: false,
             ..DetectorConfig::default()
         };

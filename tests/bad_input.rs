@@ -324,6 +324,28 @@ fn detect_prints_the_design_json() {
 }
 
 #[test]
+fn a_fractional_decimation_is_the_c_librarys_alone() {
+    let Some(photo) = common::shared("apriltag_test/34139872896_defdb2f8d9_c.jpg") else {
+        return;
+    };
+    let photo = photo.to_str().unwrap();
+    let (code, err) = stereotag(&["detect", "--decimate", "0.5", photo]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--decimate 0.5: must be at least 1"), "{err}");
+    let (code, err) = stereotag(&["detect", "--backend", "kornia", "--decimate", "1.5", photo]);
+    assert_eq!(code, 2);
+    assert!(err.contains("whole factors"), "{err}");
+    // The C library at 1.5 finds most of the photo's tags (8 of the 10 at full resolution).
+    let out = Command::new(env!("CARGO_BIN_EXE_stereotag"))
+        .args(["detect", "--decimate", "1.5", photo])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["detections"].as_array().unwrap().len() >= 8);
+}
+
+#[test]
 fn stereo_detect_checks_the_rig_against_the_images() {
     let Some(photo) = common::shared("apriltag_test/34139872896_defdb2f8d9_c.jpg") else {
         return;

@@ -151,7 +151,7 @@ fn score(
 
 fn regression_settings() -> DetectorConfig {
     DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         refine_edges: false,
         // The C library's own output, without our refinement.
         subpixel: false,
@@ -243,7 +243,7 @@ fn kornia_backend_matches_the_c_library_at_every_setting() {
         .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
         .collect();
     photos.sort();
-    for decimate in [1, 2, 3] {
+    for decimate in [1.0, 2.0, 3.0] {
         for refine_edges in [false, true] {
             let config = DetectorConfig {
                 decimate,

@@ -58,7 +58,7 @@ fn an_empty_image_finds_no_tag() {
     std::fs::write(&path, b"\x50\x34\x30\x0c\x34\x0c\x42\x73\x73\x73\x73\x0e\x80\x00\x00\x00\x00\x00\x00\x73\x00\x00\x00\x00\x73\xff\xff\xd8\xff\xd0\x31").unwrap();
     let image = stereotag::io::load_gray(&path).unwrap();
     assert_eq!(image.width() * image.height(), 0);
-    for decimate in [1, 2] {
+    for decimate in [1.0, 2.0] {
         let config = DetectorConfig {
             decimate,
             ..DetectorConfig::default()

@@ -21,7 +21,7 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 /// backend's corners alone.
 fn settings() -> DetectorConfig {
     DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         subpixel: std::env::var("NO_SUBPIXEL").is_err(),
         ..DetectorConfig::default()
     }

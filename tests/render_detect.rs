@@ -51,7 +51,7 @@ fn both_backends_find_rendered_tags_where_the_truth_says() {
     let rig = load_rig(&common::root().join("calibration/rigs/default.yaml")).unwrap();
     let rect = rig.rectify();
     let config = DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         ..DetectorConfig::default()
     };
     let mut backends: Vec<Box<dyn TagDetector>> = vec![
@@ -151,7 +151,7 @@ fn motion_blur_smears_the_tag_around_its_mid_exposure_pose() {
     assert_eq!(mild.tags[0].left_corners_px, still.tags[0].left_corners_px);
     // A 2 px smear: still found, corners near the mid-exposure truth.
     let mut det = CDetector::new(DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         ..DetectorConfig::default()
     })
     .unwrap();
@@ -183,7 +183,7 @@ fn the_contrast_floor_skips_texture_and_keeps_tags() {
     for kornia in [false, true] {
         let detect = |min_contrast: u8| {
             let config = DetectorConfig {
-                decimate: 1,
+                decimate: 1.0,
                 min_contrast,
                 ..DetectorConfig::default()
             };

@@ -22,7 +22,7 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
         let _ = k.detect(&image);
     }
     let decimate_1 = DetectorConfig {
-        decimate: 1,
+        decimate: 1.0,
         ..DetectorConfig::default()
     };
     if let Ok(mut k) = KorniaDetector::new(decimate_1.clone()) {

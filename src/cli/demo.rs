@@ -55,7 +55,7 @@ impl Demo {
                     keep_images: false,
                     backend: Backend::ApriltagC,
                     families: &[],
-                    decimate: 1,
+                    decimate: 1.0,
                     min_contrast: super::survey::DEFAULT_MIN_CONTRAST,
                     tag_size_m: None,
                     quiet,

@@ -38,8 +38,8 @@ pub struct Detect {
     #[arg(long, default_value = "tag36h11")]
     family: Vec<String>,
     /// Decimation before quad detection (1 = full resolution).
-    #[arg(long, default_value_t = 2)]
-    decimate: u32,
+    #[arg(long, default_value_t = 2.0)]
+    decimate: f32,
     /// Turn edge refinement off.
     #[arg(long)]
     no_refine_edges: bool,
@@ -69,8 +69,10 @@ impl Detect {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        if self.decimate == 0 {
-            return Err(UsageError("--decimate must be at least 1".into()).into());
+        if !stereotag::tags::valid_decimation(self.decimate) {
+            return Err(
+                UsageError(format!("--decimate {}: must be at least 1", self.decimate)).into(),
+            );
         }
         let config = DetectorConfig {
             families,

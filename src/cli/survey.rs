@@ -52,9 +52,10 @@ pub struct DetectArgs {
     /// Tag families to look for (default: the world's or the survey's, else tag36h11).
     #[arg(long)]
     family: Vec<String>,
-    /// Decimation before quad detection (1 = full resolution, the most accurate corners).
-    #[arg(long, default_value_t = 1)]
-    decimate: u32,
+    /// Decimation before quad detection (1 = full resolution, the most accurate corners; the C
+    /// library also takes 1.5: a faster survey that misses some far tags).
+    #[arg(long, default_value_t = 1.0)]
+    decimate: f32,
     /// Edge length of the tags in metres when no world gives it (enables the size check).
     #[arg(long)]
     tag_size_m: Option<f64>,
@@ -123,7 +124,7 @@ pub(crate) struct DetectOptions<'a> {
     pub keep_images: bool,
     pub backend: Backend,
     pub families: &'a [String],
-    pub decimate: u32,
+    pub decimate: f32,
     pub min_contrast: u8,
     pub tag_size_m: Option<f64>,
     pub quiet: bool,
@@ -360,8 +361,8 @@ pub(crate) fn detect_run(
     rig: &StereoRig,
     world: Option<&World>,
 ) -> anyhow::Result<Detected> {
-    if job.decimate == 0 {
-        return Err(UsageError("--decimate must be at least 1".into()).into());
+    if !stereotag::tags::valid_decimation(job.decimate) {
+        return Err(UsageError(format!("--decimate {}: must be at least 1", job.decimate)).into());
     }
     let rect = rig.rectify();
     let mut names: Vec<String> = job.families.to_vec();
