@@ -69,11 +69,7 @@ impl Detect {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        if !stereotag::tags::valid_decimation(self.decimate) {
-            return Err(
-                UsageError(format!("--decimate {}: must be at least 1", self.decimate)).into(),
-            );
-        }
+        super::check_decimate(self.decimate)?;
         let config = DetectorConfig {
             families,
             decimate: self.decimate,

@@ -185,6 +185,17 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
     bar
 }
 
+/// A `--decimate` the detectors take (finite, at least 1), or the usage error naming it.
+pub(crate) fn check_decimate(decimate: f32) -> Result<(), UsageError> {
+    if stereotag::tags::valid_decimation(decimate) {
+        Ok(())
+    } else {
+        Err(UsageError(format!(
+            "--decimate {decimate}: must be at least 1"
+        )))
+    }
+}
+
 /// The stereo rig `simulate`, `render` and `demo` use unless told otherwise (repo-relative).
 pub(crate) const DEFAULT_RIG: &str = "calibration/rigs/default.yaml";
 

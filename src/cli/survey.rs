@@ -361,9 +361,7 @@ pub(crate) fn detect_run(
     rig: &StereoRig,
     world: Option<&World>,
 ) -> anyhow::Result<Detected> {
-    if !stereotag::tags::valid_decimation(job.decimate) {
-        return Err(UsageError(format!("--decimate {}: must be at least 1", job.decimate)).into());
-    }
+    super::check_decimate(job.decimate)?;
     let rect = rig.rectify();
     let mut names: Vec<String> = job.families.to_vec();
     if names.is_empty() {
