@@ -406,10 +406,10 @@ fn dot_product(a: &[f32], b: &[f32]) -> f32 {
     lanes.iter().sum::<f32>() + tail
 }
 
-/// The offsets of a square of half-width `r`, row by row.
-fn square(r: i64) -> Vec<(i64, i64)> {
+/// The pixels of the square of half-width `r` around `(cx, cy)`, row by row.
+fn square((cx, cy): (i64, i64), r: i64) -> Vec<(i64, i64)> {
     (-r..=r)
-        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+        .flat_map(|dy| (-r..=r).map(move |dx| (cx + dx, cy + dy)))
         .collect()
 }
 
@@ -811,13 +811,12 @@ fn track(
     let g = to_level(guess, 2);
     let (gx, gy) = (g.x.round() as i64, g.y.round() as i64);
     let r = (config.search_radius_px / 4.0).ceil() as i64;
-    let offsets = square(r);
-    let at: Vec<(i64, i64)> = offsets.iter().map(|&(dx, dy)| (gx + dx, gy + dy)).collect();
-    let scores: Vec<(i64, i64, f32)> = offsets
+    let at = square((gx, gy), r);
+    let scores: Vec<(i64, i64, f32)> = at
         .iter()
         .zip(b.quarter.correlate_at(&reference, &at, 3))
         .filter(|(_, s)| s.is_finite())
-        .map(|(&(dx, dy), s)| (dx, dy, s))
+        .map(|(&(x, y), s)| (x - gx, y - gy, s))
         .collect();
     let &(bx, by, best) = scores.iter().max_by(|a, b| a.2.total_cmp(&b.2))?;
     if best < config.min_correlation {
@@ -842,10 +841,7 @@ fn track(
         1,
     );
     let (hx, hy) = (centre.x.round() as i64, centre.y.round() as i64);
-    let at: Vec<(i64, i64)> = square(2)
-        .into_iter()
-        .map(|(dx, dy)| (hx + dx, hy + dy))
-        .collect();
+    let at = square((hx, hy), 2);
     let (mut best, mut bx, mut by) = (f32::NEG_INFINITY, hx, hy);
     for (&(x, y), s) in at.iter().zip(b.half.correlate_at(&reference, &at, HALF)) {
         if s > best {
@@ -861,11 +857,7 @@ fn track(
         + (p - from_level(Point2::new(ax as f64, ay as f64), 1));
     let (cx, cy) = (coarse.x.round() as i64, coarse.y.round() as i64);
     let reference = patch_scaled(&a.full, p.x.round() as i64, p.y.round() as i64, 7, step)?;
-    let at: Vec<(i64, i64)> = square(3)
-        .into_iter()
-        .map(|(dx, dy)| (cx + dx, cy + dy))
-        .collect();
-    let scores = b.full.correlate_at(&reference, &at, 7);
+    let scores = b.full.correlate_at(&reference, &square((cx, cy), 3), 7);
     let grid: Vec<&[f32]> = scores.chunks_exact(7).collect();
     let (peak, i, j) = (0..7).flat_map(|j| (0..7).map(move |i| (i, j))).fold(
         (f32::NEG_INFINITY, 3, 3),
@@ -1330,6 +1322,43 @@ mod tests {
             .zip(&c)
             .map(|((a, b), c)| 0.5 * (a + b) - (0.25 * (a - b) * (a - b) + c * c).sqrt())
             .collect()
+    }
+
+    /// Correlations worked a row at a time are the position-by-position ones, whichever way the
+    /// positions run, on every level, with and without integral images, and at the borders.
+    #[test]
+    fn correlations_a_row_at_a_time_are_the_single_ones() {
+        let (world, rig) = office_and_rig();
+        let pair = Renderer::new(&rig)
+            .render(&world, Pose2::new(2.0, 2.0, 0.7), &RenderConfig::default())
+            .unwrap();
+        let image = VoImage::new(&pair.left);
+        for (level, half) in [
+            (&image.full, 7),
+            (&image.full, 5),
+            (&image.half, 4),
+            (&image.quarter, 3),
+        ] {
+            let (w, h) = (level.width(), level.height());
+            let reference = patch_at(level, w / 2, h / 2, half).unwrap();
+            let forward: Vec<(i64, i64)> = (0..w).map(|x| (x, h / 3)).collect();
+            let backward: Vec<(i64, i64)> =
+                forward.iter().rev().map(|&(x, _)| (x, h / 2)).collect();
+            let grid = square((w / 3, h / 2), 6);
+            let corner = square((half, half), 3);
+            let scattered = vec![(5, 5), (40, 9), (39, 9), (38, 10), (w - 1, h - 1), (12, 12)];
+            for positions in [forward, backward, grid, corner, scattered] {
+                let many = level.correlate_at(&reference, &positions, half);
+                assert_eq!(many.len(), positions.len());
+                for (&(x, y), s) in positions.iter().zip(many) {
+                    match level.correlate(&reference, x, y, half) {
+                        // The same products, summed in another order in f32.
+                        Some(one) => assert!((one - s).abs() < 1e-4, "({x}, {y}): {one} vs {s}"),
+                        None => assert_eq!(s, f32::NEG_INFINITY, "({x}, {y})"),
+                    }
+                }
+            }
+        }
     }
 
     #[test]
