@@ -234,22 +234,26 @@ pub struct Survey {
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// Runs the survey over a run, its tag sightings and the turns its cameras measured: raw map,
-/// online filter (predicting with `calibration` until it finds the run's own, when an earlier
-/// survey of the robot gives one), offline pass, and the map rebuilt from the corrected poses.
+/// The raw map: the grid and features with the odometry's poses. It needs no pictures, so a
+/// survey builds it while the tags are being detected.
+pub fn raw_map(run: &RunDataset, mapping: &MappingConfig) -> Result<SonarMap, PipelineError> {
+    map_trajectory(run, &run.odometry, mapping)
+}
+
+/// Runs the survey over a run, its [`raw_map`], its tag sightings and the turns its cameras
+/// measured: online filter (predicting with `calibration` until it finds the run's own, when an
+/// earlier survey of the robot gives one), offline pass, and the map rebuilt from the corrected
+/// poses.
 pub fn survey(
     run: &RunDataset,
-    sightings: &[TagSighting],
-    visual: &[VisualTurn],
+    raw: SonarMap,
+    (sightings, visual): (&[TagSighting], &[VisualTurn]),
     mapping: &MappingConfig,
     fuse: &FuseConfig,
     calibration: Option<OdometryCalibration>,
 ) -> Result<Survey, PipelineError> {
     let mut timings_s = BTreeMap::new();
     let times = &mut timings_s;
-    let raw = timed("map_raw", times, || {
-        map_trajectory(run, &run.odometry, mapping)
-    })?;
     let online = timed("fuse_online", times, || {
         run_online_calibrated(
             &run.odometry,

@@ -346,6 +346,23 @@ fn a_fractional_decimation_is_the_c_librarys_alone() {
 }
 
 #[test]
+fn the_demo_refuses_a_bad_decimation_before_simulating() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("demo");
+    let (code, err) = stereotag(&[
+        "demo",
+        "--decimate",
+        "0.5",
+        "--no-rerun",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--decimate 0.5: must be at least 1"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
 fn stereo_detect_checks_the_rig_against_the_images() {
     let Some(photo) = common::shared("apriltag_test/34139872896_defdb2f8d9_c.jpg") else {
         return;
@@ -497,9 +514,20 @@ fn survey_names_a_missing_image_and_a_rig_that_does_not_fit() {
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");
     run_with_pair(&run);
-    // The pair surveys.
+    // The pair surveys, with the C library (decimating by 1.5 by default) and with kornia,
+    // whose default is 1: it decimates by whole factors only.
     let (code, err) = survey(&run, &tmp.path().join("ok"));
     assert_eq!(code, 0, "{err}");
+    let (code, err) = survey_with(&run, &tmp.path().join("kornia"), &["--backend", "kornia"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, err) = survey_with(
+        &run,
+        &tmp.path().join("kornia_1.5"),
+        &["--backend", "kornia", "--decimate", "1.5"],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("whole factors"), "{err}");
+    assert!(!tmp.path().join("kornia_1.5").exists());
 
     std::fs::remove_file(run.join("stereo/r.png")).unwrap();
     let out = tmp.path().join("missing");

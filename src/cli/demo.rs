@@ -16,6 +16,13 @@ pub struct Demo {
     /// Random seed of the simulation (default: the world file's).
     #[arg(long)]
     seed: Option<u64>,
+    /// The tag detector's decimation (default 1.5, the survey's; 1 = full resolution, slower,
+    /// finds the farthest tags as well).
+    #[arg(long)]
+    decimate: Option<f32>,
+    /// The tag detector's contrast floor (default 40, the survey's; `survey --help` says more).
+    #[arg(long)]
+    min_contrast: Option<u8>,
     /// Replace the output directory if it exists (the demo replaces its own default `out`).
     #[arg(long)]
     force: bool,
@@ -25,6 +32,9 @@ pub struct Demo {
 
 impl Demo {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        if let Some(d) = self.decimate {
+            super::check_decimate(d)?; // before the simulation, not after it
+        }
         let force = self.force || self.out == Path::new("out");
         let dir = OutputDir::create(&self.out, force)?;
         let run_dir = dir.path("run");
@@ -55,8 +65,12 @@ impl Demo {
                     keep_images: false,
                     backend: Backend::ApriltagC,
                     families: &[],
-                    decimate: 1.0,
-                    min_contrast: super::survey::DEFAULT_MIN_CONTRAST,
+                    decimate: self
+                        .decimate
+                        .unwrap_or(super::survey::default_decimate(Backend::ApriltagC)),
+                    min_contrast: self
+                        .min_contrast
+                        .unwrap_or(super::survey::DEFAULT_MIN_CONTRAST),
                     tag_size_m: None,
                     quiet,
                     visual_odometry: true,

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use stereotag::camera::StereoRig;
 use stereotag::fuse::{FuseConfig, TagSighting};
 use stereotag::io::{self, LandmarkRecord, LandmarksFile, OutputDir, Trajectories};
-use stereotag::pipeline::{score_survey, sightings_from_pair, survey, survey_metrics, Survey};
+use stereotag::pipeline::{
+    raw_map, score_survey, sightings_from_pair, survey, survey_metrics, Survey,
+};
 use stereotag::run::{pose_at, RunDataset};
 use stereotag::stereo::StereoConfig;
 use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
@@ -52,10 +54,11 @@ pub struct DetectArgs {
     /// Tag families to look for (default: the world's or the survey's, else tag36h11).
     #[arg(long)]
     family: Vec<String>,
-    /// Decimation before quad detection (1 = full resolution, the most accurate corners; the C
-    /// library also takes 1.5: a faster survey that misses some far tags).
-    #[arg(long, default_value_t = 1.0)]
-    decimate: f32,
+    /// Decimation before quad detection [default: 1.5 with the C library, 1 with kornia]. 1 is
+    /// full resolution: about 25% slower, and finds the farthest tags 1.5 misses; the C library
+    /// still decodes and refines the corners at full resolution either way.
+    #[arg(long)]
+    decimate: Option<f32>,
     /// Edge length of the tags in metres when no world gives it (enables the size check).
     #[arg(long)]
     tag_size_m: Option<f64>,
@@ -67,9 +70,19 @@ pub struct DetectArgs {
     min_contrast: u8,
 }
 
+/// The survey's default `--decimate` for a backend: 1.5 for the C library (the museum survey in
+/// 2 s on two cores, README *Speed*), 1 for kornia-apriltag, which decimates by whole factors.
+pub(crate) fn default_decimate(backend: Backend) -> f32 {
+    match backend {
+        Backend::ApriltagC => 1.5,
+        Backend::Kornia | Backend::KorniaLibrary => 1.0,
+    }
+}
+
 /// The survey's default `--min-contrast`: a printed tag's black border on white is far above
-/// it even when dim, sensor noise and wall texture mostly below.
-pub(crate) const DEFAULT_MIN_CONTRAST: u8 = 30;
+/// it even when dim, sensor noise and wall texture mostly below (30 and 60 find the same tags
+/// on the ten office and museum runs, 40 the same 47 in the C library's test photos as 5).
+pub(crate) const DEFAULT_MIN_CONTRAST: u8 = 40;
 
 impl DetectArgs {
     /// The options these flags give; `default_families` when no `--family` is given.
@@ -86,7 +99,7 @@ impl DetectArgs {
             } else {
                 &self.family
             },
-            decimate: self.decimate,
+            decimate: self.decimate.unwrap_or(default_decimate(self.backend)),
             min_contrast: self.min_contrast,
             tag_size_m: self.tag_size_m,
             quiet,
@@ -226,10 +239,19 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
         visual_odometry: fuse.visual_odometry,
         ..job.detect.clone()
     };
-    let (sightings, images, visual) = match &rig {
-        Some(rig) => detect_run(&options, job.run_dir, &run, rig, world.as_ref())?,
-        None => (Vec::new(), Vec::new(), Vec::new()),
-    };
+    // The raw map needs no pictures: it is built on whichever core the detectors leave it.
+    let (detected, (raw, map_raw_s)) = rayon::join(
+        || match &rig {
+            Some(rig) => detect_run(&options, job.run_dir, &run, rig, world.as_ref()),
+            None => Ok((Vec::new(), Vec::new(), Vec::new())),
+        },
+        || {
+            let t = std::time::Instant::now();
+            (raw_map(&run, &mapping), t.elapsed().as_secs_f64())
+        },
+    );
+    let (sightings, images, visual) = detected?;
+    let raw = raw?;
     let detect_s = detect_start.elapsed().as_secs_f64();
 
     // The pairs are compressed for the recording while the survey runs: it is mostly one thread
@@ -239,7 +261,10 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
             let t = std::time::Instant::now();
             (compress_pairs(images), t.elapsed().as_secs_f64())
         },
-        || survey(&run, &sightings, &visual, &mapping, &fuse, calibration),
+        || {
+            let sighted = (&sightings[..], &visual[..]);
+            survey(&run, raw, sighted, &mapping, &fuse, calibration)
+        },
     );
     let result = result?;
     let mut metrics = survey_metrics(&result, sightings.len());
@@ -251,7 +276,9 @@ pub(crate) fn survey_into(job: &SurveyJob<'_>, dir: &OutputDir) -> anyhow::Resul
         metrics.extend(score_survey(&result, &run, w, &mapping)?);
     }
     let mut timings = result.timings_s.clone();
+    // Both alongside each other: "detect" is their wall time, "map_raw" the map's alone.
     timings.insert("detect".into(), detect_s);
+    timings.insert("map_raw".into(), map_raw_s);
     if recorder.is_some() {
         // Alongside the survey's stages above, which it slows down on a two-core machine.
         timings.insert("record_compress".into(), compress_s);
