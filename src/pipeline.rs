@@ -386,8 +386,9 @@ pub fn score_survey(
         corrected.occupied_recall,
     );
     if let Some(truth) = &run.ground_truth {
-        let gt_map = map_trajectory(run, truth, mapping)?;
-        let gt = score_map(&gt_map.counting, world);
+        // Only its counting grid is scored: not the Hough passes and walls a full map builds.
+        let gt_map = counting_map(run, &run.placed_readings(truth), mapping)?;
+        let gt = score_map(&gt_map, world);
         m.insert(
             "map_ground_truth.occupied_precision".into(),
             gt.occupied_precision,
