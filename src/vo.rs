@@ -686,13 +686,15 @@ fn corners(image: &VoImage, config: &VoConfig) -> Vec<Point2<f64>> {
                 border + gy * span_y / rows,
                 border + (gy + 1) * span_y / rows,
             );
+            // The first strongest pixel in reading order: each row's maximum (a vectorised
+            // fold), and its first position only when it beats the rows before.
             let mut top = (floor, None);
             for y in y0..y1 {
-                for x in x0..x1 {
-                    let v = r[y * w + x];
-                    if v > top.0 {
-                        top = (v, Some((x, y)));
-                    }
+                let row = &r[y * w + x0..y * w + x1];
+                let most = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                if most > top.0 {
+                    let x = row.iter().position(|&v| v == most).unwrap_or(0);
+                    top = (most, Some((x0 + x, y)));
                 }
             }
             if let Some((x, y)) = top.1 {
