@@ -265,7 +265,7 @@ pub fn survey(
         )
     });
     let online_map = timed("map_online", times, || {
-        counting_map(run, &run.placed_readings(&online.trajectory), mapping)
+        counting_map_along(run, &online.trajectory, mapping)
     })?;
     let mut offline = timed("fuse_offline", times, || {
         run_offline(&run.odometry, visual, sightings, &online, fuse)
@@ -300,6 +300,16 @@ pub fn survey(
         visual: visual.to_vec(),
         timings_s,
     })
+}
+
+/// The counting grid of the run's sonar readings placed along `trajectory` (the grid alone, not
+/// the Hough passes and walls of [`map_trajectory`]).
+fn counting_map_along(
+    run: &RunDataset,
+    trajectory: &[StampedPose],
+    mapping: &MappingConfig,
+) -> Result<OccupancyMap, PipelineError> {
+    counting_map(run, &run.placed_readings(trajectory), mapping)
 }
 
 /// The counting grid of sonar readings of the run, placed.
@@ -387,7 +397,7 @@ pub fn score_survey(
     );
     if let Some(truth) = &run.ground_truth {
         // Only its counting grid is scored: not the Hough passes and walls a full map builds.
-        let gt_map = counting_map(run, &run.placed_readings(truth), mapping)?;
+        let gt_map = counting_map_along(run, truth, mapping)?;
         let gt = score_map(&gt_map, world);
         m.insert(
             "map_ground_truth.occupied_precision".into(),

@@ -80,8 +80,9 @@ pub(crate) fn default_decimate(backend: Backend) -> f32 {
 }
 
 /// The survey's default `--min-contrast`: a printed tag's black border on white is far above
-/// it even when dim, sensor noise and wall texture mostly below (30 and 60 find the same tags
-/// on the ten office and museum runs, 40 the same 47 in the C library's test photos as 5).
+/// it even when dim, sensor noise and wall texture mostly below (30 and 40 find the same tags
+/// on the ten office and museum runs, 60 on office and museum seed 1; 40 finds the same 47 in
+/// the C library's test photos as 5).
 pub(crate) const DEFAULT_MIN_CONTRAST: u8 = 40;
 
 impl DetectArgs {
