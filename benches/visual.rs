@@ -7,8 +7,8 @@ use std::hint::black_box;
 use std::path::Path;
 use stereotag::geometry::Pose2;
 use stereotag::render::{render_pair, RenderConfig, Renderer};
-use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
-use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
+use stereotag::visual::stereo::{detect_pair, triangulate_tags, StereoConfig};
+use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
 
 fn visual(c: &mut Criterion) {
     let world =

@@ -1,6 +1,6 @@
 //! Diagnostic: AprilGrid tags found in an image at a decimation, with and without edge refinement.
 //! Usage: cargo run --release --example aprilgrid_counts -- IMAGE...
-use stereotag::tags::{AprilGridDetector, TagDetector};
+use stereotag::visual::tags::{AprilGridDetector, TagDetector};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     for path in std::env::args().skip(1) {

@@ -15,7 +15,7 @@ fn main() -> anyhow::Result<()> {
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json"))?)?;
     let target: Target = serde_json::from_value(truth["target"].clone())?;
-    let mut grid = stereotag::tags::AprilGridMultiScale::new()?;
+    let mut grid = stereotag::visual::tags::AprilGridMultiScale::new()?;
     let (mut errors, mut raw_errors, mut expected) = (Vec::new(), Vec::new(), 0usize);
     for frame in truth["frames"].as_array().into_iter().flatten() {
         for side in ["left", "right"] {
@@ -35,15 +35,15 @@ fn main() -> anyhow::Result<()> {
             expected += want.len();
             let (found, raw): (Points, Points) = match &target {
                 Target::Aprilgrid(g) => {
-                    use stereotag::tags::TagDetector;
+                    use stereotag::visual::tags::TagDetector;
                     let raw = grid.detect(&image)?;
-                    let refined = stereotag::chessboard::refine_aprilgrid(
+                    let refined = stereotag::calib::chessboard::refine_aprilgrid(
                         &image,
                         &raw,
                         g.tag_cols,
                         g.tag_spacing,
                     );
-                    let ids = |d: &[stereotag::tags::TagDetection]| {
+                    let ids = |d: &[stereotag::visual::tags::TagDetection]| {
                         d.iter()
                             .flat_map(|t| {
                                 (0..4).map(move |k| (t.id * 4 + k as u32, t.corners_px[k]))
@@ -53,7 +53,7 @@ fn main() -> anyhow::Result<()> {
                     (refined, ids(&raw))
                 }
                 Target::Checkerboard(c) => {
-                    let found = stereotag::chessboard::detect_chessboard(
+                    let found = stereotag::calib::chessboard::detect_chessboard(
                         &image,
                         c.target_cols,
                         c.target_rows,

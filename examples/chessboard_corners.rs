@@ -13,7 +13,7 @@ fn main() -> anyhow::Result<()> {
     for path in images {
         let image = stereotag::io::load_gray(std::path::Path::new(path))?;
         let started = std::time::Instant::now();
-        let found = stereotag::chessboard::detect_chessboard(&image, cols, rows);
+        let found = stereotag::calib::chessboard::detect_chessboard(&image, cols, rows);
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let line = match found {
             Ok(corners) => serde_json::json!({"image": path, "ms": ms, "corners": corners}),

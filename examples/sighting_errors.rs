@@ -1,11 +1,11 @@
 //! Diagnostic: each tag sighting of a simulated run against the truth (position and yaw error
 //! in sigmas). Usage: cargo run --release --example sighting_errors -- RUN_DIR
-use stereotag::fuse::TagSighting;
+use stereotag::fusion::TagSighting;
 use stereotag::io;
 use stereotag::pipeline::sightings_from_pair;
-use stereotag::run::pose_at;
-use stereotag::stereo::StereoConfig;
-use stereotag::tags::{CDetector, DetectorConfig};
+use stereotag::dataset::pose_at;
+use stereotag::visual::stereo::StereoConfig;
+use stereotag::visual::tags::{CDetector, DetectorConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: RUN_DIR")?);

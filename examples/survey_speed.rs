@@ -2,8 +2,8 @@
 //! Usage: cargo run --release --example survey_speed -- RUN_DIR [DECIMATE] [MIN_CONTRAST]
 use std::time::Instant;
 use stereotag::io;
-use stereotag::stereo::detect_pair;
-use stereotag::tags::{CDetector, DetectorConfig};
+use stereotag::visual::stereo::detect_pair;
+use stereotag::visual::tags::{CDetector, DetectorConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: RUN_DIR")?);

@@ -4,8 +4,8 @@ use rayon::prelude::*;
 use stereotag::geometry::wrap_angle;
 use stereotag::io;
 use stereotag::render::{RenderConfig, Renderer};
-use stereotag::run::pose_at;
-use stereotag::vo::{relative_motion, VoConfig, VoImage};
+use stereotag::dataset::pose_at;
+use stereotag::visual::vo::{relative_motion, VoConfig, VoImage};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

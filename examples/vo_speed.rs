@@ -2,8 +2,8 @@
 //! Usage: cargo run --release --example vo_speed -- RUN_DIR
 use std::time::Instant;
 use stereotag::io;
-use stereotag::run::pose_at;
-use stereotag::vo::{relative_motion, VoConfig, VoImage};
+use stereotag::dataset::pose_at;
+use stereotag::visual::vo::{relative_motion, VoConfig, VoImage};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: RUN_DIR")?);

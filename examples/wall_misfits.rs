@@ -6,9 +6,9 @@
 //! (the face longer than the wall) a long positive one.
 //!
 //! Usage: cargo run --release --example wall_misfits -- SURVEY_DIR RUN_DIR
-use stereotag::fuse::{wall_in_beam, SonarInput};
+use stereotag::fusion::{wall_in_beam, SonarInput};
 use stereotag::io;
-use stereotag::run::pose_at;
+use stereotag::dataset::pose_at;
 
 /// A range whose misfit is over this is counted apart: 5 cm (2.5 sigma of a range and a wall).
 const FAR_M: f64 = 0.05;

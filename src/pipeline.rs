@@ -3,23 +3,23 @@
 //! → fusion with odometry and corners → corrected trajectory and map → scores. Takes and returns values; [`crate::io`] does files.
 
 use crate::camera::{Rectification, StereoRig};
-use crate::fuse::{
+use crate::fusion::{
     align_se2, associate, ate_m, hold_tail_to_walls, run_offline, run_online_calibrated,
     FuseConfig, Landmark, OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
     TagSighting,
 };
 use crate::geometry::Pose2;
-use crate::grid::{
+use crate::sonar::grid::{
     CountingGrid, GridError, LogOddsGrid, MappingConfig, OccupancyGrid, OccupancyMap,
 };
-use crate::hough::{classify_features, features_offline, features_online, Accumulator, Feature};
-use crate::run::{PoseSource, RunDataset, StampedPose};
-use crate::score::{score_features, score_map, FeatureScore, MapScore};
+use crate::sonar::hough::{classify_features, features_offline, features_online, Accumulator, Feature};
+use crate::dataset::{PoseSource, RunDataset, StampedPose};
+use crate::metrics::map::{score_features, score_map, FeatureScore, MapScore};
 use crate::sonar::PlacedReading;
-use crate::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
-use crate::tags::{TagDetector, TagError};
-use crate::vo::VisualTurn;
-use crate::wallmap::{map_walls, WallSegment};
+use crate::visual::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig};
+use crate::visual::tags::{TagDetector, TagError};
+use crate::visual::vo::VisualTurn;
+use crate::sonar::walls::{map_walls, WallSegment};
 use crate::world::World;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -469,8 +469,8 @@ pub fn score_survey(
             .visual
             .iter()
             .filter_map(|v| {
-                let a = crate::run::pose_at(truth, v.from_t_s)?;
-                let b = crate::run::pose_at(truth, v.to_t_s)?;
+                let a = crate::dataset::pose_at(truth, v.from_t_s)?;
+                let b = crate::dataset::pose_at(truth, v.to_t_s)?;
                 let e = crate::geometry::wrap_angle(v.turn_rad - (b.theta - a.theta));
                 Some((e, v.sigma_rad))
             })

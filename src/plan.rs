@@ -16,9 +16,9 @@
 //! cameras between sightings (`localize`'s default); [`PlanConfig::wheels_only`] for one that
 //! does not.
 
-use crate::grid::OccupancyMap;
-use crate::hough::{Feature, FeatureKind};
-use crate::wallmap::WallSegment;
+use crate::sonar::grid::OccupancyMap;
+use crate::sonar::hough::{Feature, FeatureKind};
+use crate::sonar::walls::WallSegment;
 use serde::Serialize;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -415,7 +415,7 @@ fn relax(map: &OccupancyMap, cost: &mut [u64], step: impl Fn(usize) -> u64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::GridGeometry;
+    use crate::sonar::grid::GridGeometry;
 
     /// Two 4 m x 4 m rooms side by side (0.1 m cells), joined by a door in the middle wall.
     fn two_rooms() -> (OccupancyMap, Vec<Feature>) {

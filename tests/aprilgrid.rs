@@ -4,7 +4,7 @@
 
 use std::process::Command;
 use stereotag::io::load_gray;
-use stereotag::tags::{AprilGridMultiScale, TagDetector};
+use stereotag::visual::tags::{AprilGridMultiScale, TagDetector};
 
 fn detect(name: &str) -> Vec<u32> {
     let img =

@@ -8,7 +8,7 @@
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use stereotag::calibrate::{calibrate_stereo, CalibConfig, Corner, ViewCorners};
+use stereotag::calib::{calibrate_stereo, CalibConfig, Corner, ViewCorners};
 use stereotag::camera::{Camera, Distortion};
 
 const FOCAL_TOLERANCE: f64 = 0.002;

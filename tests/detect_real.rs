@@ -4,7 +4,7 @@
 
 mod common;
 
-use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetection, TagDetector};
+use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetection, TagDetector};
 
 /// One expected detection: id and corners.
 type Expected = (u32, [[f64; 2]; 4]);
@@ -39,7 +39,7 @@ enum Metric {
 /// Largest corner difference between an expected tag and a detection, corners in the same
 /// order. The expected file is the C library's own output, in its pixel-corner convention.
 fn corner_error(e: &[[f64; 2]; 4], d: &TagDetection, metric: Metric) -> f64 {
-    let shift = stereotag::tags::LIBRARY_TO_CENTRE_PX;
+    let shift = stereotag::visual::tags::LIBRARY_TO_CENTRE_PX;
     (0..4)
         .map(|i| {
             let (dx, dy) = (

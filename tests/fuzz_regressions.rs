@@ -2,7 +2,7 @@
 //! regression tests. Each must give a clean result, not a crash.
 
 use image::GrayImage;
-use stereotag::tags::{
+use stereotag::visual::tags::{
     AprilGridMultiScale, CDetector, DetectorConfig, KorniaDetector, TagDetector,
 };
 
@@ -15,8 +15,8 @@ fn detect_everything(image: &GrayImage) {
     let mut grid = AprilGridMultiScale::new().unwrap();
     let found = grid.detect(image).unwrap();
     assert!(found.is_empty());
-    assert!(stereotag::chessboard::refine_aprilgrid(image, &found, 6, 0.3).is_empty());
-    assert!(stereotag::chessboard::detect_chessboard(image, 9, 6).is_err());
+    assert!(stereotag::calib::chessboard::refine_aprilgrid(image, &found, 6, 0.3).is_empty());
+    assert!(stereotag::calib::chessboard::detect_chessboard(image, 9, 6).is_err());
 }
 
 /// image_detect: a 256 x 8 image at decimation 3 is under one of the C library's 4-pixel

@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, Point2, Translation3, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use stereotag::camera::{Camera, Distortion, StereoRig};
 use stereotag::geometry::{wrap_angle, Pose2};
-use stereotag::stereo::triangulate_point;
+use stereotag::visual::stereo::triangulate_point;
 
 /// Round trips must agree to this, pixels.
 const ROUND_TRIP_PX: f64 = 1e-6;

@@ -9,8 +9,8 @@ use rand::{Rng, SeedableRng};
 use stereotag::geometry::Pose2;
 use stereotag::io::{load_rig, load_world};
 use stereotag::render::{visible_tags, RenderConfig, Renderer};
-use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
-use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
+use stereotag::visual::stereo::{detect_pair, triangulate_tags, StereoConfig};
+use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
 
 fn percentile(v: &mut [f64], q: f64) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -145,10 +145,10 @@ fn measure(det: &mut dyn TagDetector) {
             .corners_world_m
             .map(|c| left_from_world * nalgebra::Point3::from(c))
             .map(|p| p.coords);
-        let true_normal = stereotag::stereo::fit_square(&true_corners, tag.size_m).normal;
+        let true_normal = stereotag::visual::stereo::fit_square(&true_corners, tag.size_m).normal;
         let angle = |n: &Vector3<f64>| n.angle(&true_normal).to_degrees();
         stereo_normal_err.push(angle(&Vector3::from(t.normal_in_left)));
-        if let Some(v) = stereotag::stereo::pnp_square(&rig.left, &t.corners_px, tag.size_m) {
+        if let Some(v) = stereotag::visual::stereo::pnp_square(&rig.left, &t.corners_px, tag.size_m) {
             pnp_normal_err.push(angle(&-(v.rotation * Vector3::z())));
         }
         let e = Vector3::from(t.position_in_left_m) - Vector3::from(truth.centre_in_left_m);

@@ -6,8 +6,8 @@ use nalgebra::Vector3;
 use stereotag::geometry::Pose2;
 use stereotag::io::{load_rig, load_world};
 use stereotag::render::{render_pair, RenderConfig};
-use stereotag::stereo::{triangulate_tags, StereoConfig};
-use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
+use stereotag::visual::stereo::{triangulate_tags, StereoConfig};
+use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector};
 
 #[test]
 fn rendered_pairs_are_deterministic() {

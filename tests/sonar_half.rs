@@ -4,7 +4,7 @@ mod common;
 
 use stereotag::io::load_world;
 use stereotag::pipeline::{map_run, score_sonar_map};
-use stereotag::run::PoseSource;
+use stereotag::dataset::PoseSource;
 use stereotag::sim::simulate;
 
 /// Occupied precision with ground-truth poses on the office (issue 2: 0.85).

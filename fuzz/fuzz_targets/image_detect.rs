@@ -5,7 +5,7 @@
 #![no_main]
 mod common;
 
-use stereotag::tags::{AprilGridMultiScale, CDetector, DetectorConfig, KorniaDetector, TagDetector};
+use stereotag::visual::tags::{AprilGridMultiScale, CDetector, DetectorConfig, KorniaDetector, TagDetector};
 
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let path = common::write("image.bin", data);
@@ -33,8 +33,8 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     }
     if let Ok(mut grid) = AprilGridMultiScale::new() {
         if let Ok(found) = grid.detect(&image) {
-            let _ = stereotag::chessboard::refine_aprilgrid(&image, &found, 6, 0.3);
+            let _ = stereotag::calib::chessboard::refine_aprilgrid(&image, &found, 6, 0.3);
         }
     }
-    let _ = stereotag::chessboard::detect_chessboard(&image, 9, 6);
+    let _ = stereotag::calib::chessboard::detect_chessboard(&image, 9, 6);
 });

@@ -1,6 +1,6 @@
 use super::UsageError;
 use std::path::PathBuf;
-use stereotag::calibrate::{calibrate_stereo, CalibConfig};
+use stereotag::calib::{calibrate_stereo, CalibConfig};
 use stereotag::io::{self, OutputDir, Target};
 
 /// Arguments of `stereotag calibrate`.
@@ -87,8 +87,8 @@ impl Calibrate {
         let detect_s = started.elapsed().as_secs_f64();
         let mut config = CalibConfig {
             model: match self.model {
-                Model::Radtan => stereotag::calibrate::LensModel::Radtan,
-                Model::Equidistant => stereotag::calibrate::LensModel::Equidistant,
+                Model::Radtan => stereotag::calib::LensModel::Radtan,
+                Model::Equidistant => stereotag::calib::LensModel::Equidistant,
             },
             ..CalibConfig::default()
         };
@@ -119,7 +119,7 @@ impl Calibrate {
             }
         };
         let calib = calibrate_stereo(&left, &right, resolution, &config).inspect_err(|e| {
-            if matches!(e, stereotag::calibrate::CalibError::TooFewViews { .. }) {
+            if matches!(e, stereotag::calib::CalibError::TooFewViews { .. }) {
                 for m in &misses {
                     tracing::warn!("no usable board in {m}");
                 }
@@ -296,8 +296,8 @@ type ViewImages = std::collections::BTreeMap<String, (Vec<u8>, Vec<u8>)>;
 /// Corners detected in the images of both cameras, with the image size, why views were lost and
 /// the images for the recording.
 struct Detected {
-    left: stereotag::calibrate::ViewCorners,
-    right: stereotag::calibrate::ViewCorners,
+    left: stereotag::calib::ViewCorners,
+    right: stereotag::calib::ViewCorners,
     resolution: (u32, u32),
     misses: Vec<String>,
     images: ViewImages,
@@ -312,8 +312,8 @@ fn detect_views(
     keep_images: bool,
 ) -> anyhow::Result<Detected> {
     use rayon::prelude::*;
-    use stereotag::calibrate::{aprilgrid_corners, chessboard_board_corners, Corner};
-    use stereotag::tags::TagDetector;
+    use stereotag::calib::{aprilgrid_corners, chessboard_board_corners, Corner};
+    use stereotag::visual::tags::TagDetector;
     let (lf, rf) = (glob(left)?, glob(right)?);
     if lf.len() != rf.len() {
         return Err(UsageError(format!(
@@ -326,17 +326,17 @@ fn detect_views(
     let bar = super::progress(lf.len() as u64, "detect", quiet);
     // One AprilGrid detector per worker thread (the C detector is not shared).
     let init = || match target {
-        Target::Aprilgrid(_) => stereotag::tags::AprilGridMultiScale::new().map(Some),
+        Target::Aprilgrid(_) => stereotag::visual::tags::AprilGridMultiScale::new().map(Some),
         Target::Checkerboard(_) => Ok(None),
     };
     type Found = (Vec<Corner>, Option<String>);
-    let detect = |grid: &mut Option<stereotag::tags::AprilGridMultiScale>,
+    let detect = |grid: &mut Option<stereotag::visual::tags::AprilGridMultiScale>,
                   image: &image::GrayImage|
      -> anyhow::Result<Found> {
         Ok(match (target, grid) {
             (Target::Aprilgrid(g), Some(detector)) => {
                 let found = detector.detect(image)?;
-                let points = stereotag::chessboard::refine_aprilgrid(
+                let points = stereotag::calib::chessboard::refine_aprilgrid(
                     image,
                     &found,
                     g.tag_cols,
@@ -348,7 +348,7 @@ fn detect_views(
                 (corners, Some(note).filter(|_| found.is_empty()))
             }
             (Target::Checkerboard(c), _) => {
-                match stereotag::chessboard::detect_chessboard(image, c.target_cols, c.target_rows)
+                match stereotag::calib::chessboard::detect_chessboard(image, c.target_cols, c.target_rows)
                 {
                     Ok(px) => (
                         chessboard_board_corners(

@@ -11,9 +11,9 @@ pub struct Config {
 impl Config {
     pub fn run(&self) -> anyhow::Result<()> {
         let text = match self.kind.as_str() {
-            "mapping" => serde_yaml_ng::to_string(&stereotag::grid::MappingConfig::default())?,
+            "mapping" => serde_yaml_ng::to_string(&stereotag::sonar::grid::MappingConfig::default())?,
             "simulation" => serde_yaml_ng::to_string(&stereotag::sim::SimConfig::default())?,
-            "fuse" => serde_yaml_ng::to_string(&stereotag::fuse::FuseConfig::default())?,
+            "fuse" => serde_yaml_ng::to_string(&stereotag::fusion::FuseConfig::default())?,
             "plan" => serde_yaml_ng::to_string(&stereotag::plan::PlanConfig::default())?,
             other => {
                 return Err(UsageError(format!(

@@ -1,8 +1,8 @@
 use super::UsageError;
 use std::path::PathBuf;
 use stereotag::io;
-use stereotag::stereo::{detect_pair, triangulate_tags, StereoConfig};
-use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
+use stereotag::visual::stereo::{detect_pair, triangulate_tags, StereoConfig};
+use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
 
 /// Which detector.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]

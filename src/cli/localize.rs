@@ -1,7 +1,7 @@
 use super::survey::{detect_run, load_fuse_config, load_run_rig, DetectOptions};
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use stereotag::fuse::{ate_m, error_growth, localize, SonarInput};
+use stereotag::fusion::{ate_m, error_growth, localize, SonarInput};
 use stereotag::io::{self, OutputDir};
 
 /// Arguments of `stereotag localize`.
@@ -134,7 +134,7 @@ impl Localize {
         );
         for (i, (o, p)) in run.odometry.iter().zip(&result.trajectory).enumerate() {
             let gt = truth
-                .and_then(|t| stereotag::run::pose_at(t, o.t_s))
+                .and_then(|t| stereotag::dataset::pose_at(t, o.t_s))
                 .map_or(",,".to_string(), |g| {
                     format!("{:.5},{:.5},{:.6}", g.x, g.y, g.theta)
                 });
@@ -223,7 +223,7 @@ impl Localize {
             tracing::warn!(
                 "lost at t = {t:.1} s: {} sightings in a row were gated out and agreed among \
                  themselves; started again from them",
-                stereotag::fuse::RELOCALISE_AFTER
+                stereotag::fusion::RELOCALISE_AFTER
             );
         }
         if !walls.is_empty() {

@@ -1,10 +1,10 @@
 use super::UsageError;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use stereotag::grid::MappingConfig;
+use stereotag::sonar::grid::MappingConfig;
 use stereotag::io::{self, OutputDir};
 use stereotag::pipeline::{map_run, score_sonar_map, SonarMap};
-use stereotag::run::{PoseSource, RunDataset};
+use stereotag::dataset::{PoseSource, RunDataset};
 
 /// Which trajectory places the readings.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]

@@ -102,13 +102,13 @@ enum Command {
 fn is_input_error(err: &anyhow::Error) -> bool {
     err.chain().any(|e| {
         e.is::<stereotag::io::IoError>()
-            || e.is::<stereotag::grid::GridError>()
+            || e.is::<stereotag::sonar::grid::GridError>()
             || e.is::<stereotag::pipeline::PipelineError>()
             || e.is::<stereotag::sim::SimError>()
             || e.is::<UsageError>()
-            || e.is::<stereotag::tags::TagError>()
+            || e.is::<stereotag::visual::tags::TagError>()
             || e.is::<stereotag::render::RenderError>()
-            || e.is::<stereotag::calibrate::CalibError>()
+            || e.is::<stereotag::calib::CalibError>()
             || is_viz_input_error(e)
     })
 }
@@ -187,7 +187,7 @@ pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::Progress
 
 /// A `--decimate` the detectors take (finite, at least 1), or the usage error naming it.
 pub(crate) fn check_decimate(decimate: f32) -> Result<(), UsageError> {
-    if stereotag::tags::valid_decimation(decimate) {
+    if stereotag::visual::tags::valid_decimation(decimate) {
         Ok(())
     } else {
         Err(UsageError(format!(
@@ -212,9 +212,9 @@ pub(crate) fn load_rig_arg(path: &Path) -> anyhow::Result<stereotag::camera::Ste
 
 /// Loads a run directory and warns about each odometry jump in it (a reset or glitch in a log:
 /// everything after it is placed with it).
-pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunDataset> {
+pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::dataset::RunDataset> {
     let run = stereotag::io::load_run(run_dir)?;
-    let jumps = stereotag::run::odometry_jumps(&run.odometry);
+    let jumps = stereotag::dataset::odometry_jumps(&run.odometry);
     if jumps.is_empty() {
         return Ok(run);
     }
@@ -236,7 +236,7 @@ pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunData
             lines.get(j.index).copied().unwrap_or(j.index + 2),
             j.distance_m,
             j.t_s,
-            stereotag::run::JUMP_SPEED_MPS
+            stereotag::dataset::JUMP_SPEED_MPS
         );
     }
     if jumps.len() > 3 {
@@ -253,7 +253,7 @@ pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::run::RunData
 pub(crate) fn world_of_run(
     given: Option<&Path>,
     run_dir: &Path,
-    run: &stereotag::run::RunDataset,
+    run: &stereotag::dataset::RunDataset,
 ) -> Option<PathBuf> {
     given.map(Path::to_path_buf).or_else(|| {
         run.meta

@@ -1,5 +1,5 @@
 use std::path::PathBuf;
-use stereotag::grid::OccupancyMap;
+use stereotag::sonar::grid::OccupancyMap;
 use stereotag::io::{self, OutputDir};
 use stereotag::plan::{plan_tags, predict, PlanConfig};
 

@@ -233,7 +233,7 @@ impl Render {
         target_path: &std::path::Path,
         quiet: bool,
     ) -> anyhow::Result<()> {
-        use stereotag::board::{calibration_poses, Board};
+        use stereotag::render::board::{calibration_poses, Board};
         let target = io::load_target(target_path)?;
         let rig = super::load_rig_arg(&self.rig)?;
         let board = match &target {

@@ -176,7 +176,7 @@ fn take_pictures(
         );
         io::save_camera_png(&dir.path(&left), &pair.left)?;
         io::save_camera_png(&dir.path(&right), &pair.right)?;
-        output.run.stereo.push(stereotag::run::StereoEntry {
+        output.run.stereo.push(stereotag::dataset::StereoEntry {
             t_s: p.t_s,
             left,
             right,

@@ -4,15 +4,15 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use stereotag::camera::StereoRig;
-use stereotag::fuse::{FuseConfig, TagSighting};
+use stereotag::fusion::{FuseConfig, TagSighting};
 use stereotag::io::{self, LandmarkRecord, LandmarksFile, OutputDir, Trajectories};
 use stereotag::pipeline::{
     raw_map, score_survey, sightings_from_pair, survey, survey_metrics, Survey,
 };
-use stereotag::run::{pose_at, RunDataset};
-use stereotag::stereo::StereoConfig;
-use stereotag::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
-use stereotag::vo::{frame_pairs, relative_motion, VisualTurn, VoConfig, VoImage};
+use stereotag::dataset::{pose_at, RunDataset};
+use stereotag::visual::stereo::StereoConfig;
+use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
+use stereotag::visual::vo::{frame_pairs, relative_motion, VisualTurn, VoConfig, VoImage};
 use stereotag::world::World;
 
 /// Arguments of `stereotag survey`.
@@ -142,7 +142,7 @@ pub(crate) struct DetectOptions<'a> {
     pub min_contrast: u8,
     pub tag_size_m: Option<f64>,
     pub quiet: bool,
-    /// Measure the turns between pictures ([`stereotag::vo`]) as well.
+    /// Measure the turns between pictures ([`stereotag::visual::vo`]) as well.
     pub visual_odometry: bool,
 }
 
@@ -418,7 +418,7 @@ pub(crate) fn detect_run(
         min_contrast: job.min_contrast,
         ..DetectorConfig::default()
     };
-    let make = || -> Result<Box<dyn TagDetector + Send>, stereotag::tags::TagError> {
+    let make = || -> Result<Box<dyn TagDetector + Send>, stereotag::visual::tags::TagError> {
         Ok(match job.backend {
             Backend::Kornia => Box::new(KorniaDetector::new(config.clone())?),
             Backend::KorniaLibrary => Box::new(KorniaDetector::library(config.clone())?),
@@ -614,7 +614,7 @@ fn write_outputs(
         &run.odometry,
         run.ground_truth.as_deref(),
     )?;
-    let planned = |l: &stereotag::fuse::Landmark| {
+    let planned = |l: &stereotag::fusion::Landmark| {
         world
             .and_then(|w| w.tags.iter().find(|t| t.id == l.id && t.family == l.family))
             .map(|t| t.position_m)

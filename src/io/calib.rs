@@ -1,7 +1,7 @@
 //! Calibration inputs: Kalibr target YAML and corners already detected (the EuRoC / yac CSV).
 
 use super::{parse_yaml, read_text, IoError};
-use crate::calibrate::{Corner, ViewCorners};
+use crate::calib::{Corner, ViewCorners};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

@@ -2,9 +2,9 @@
 //! accumulator image, `corners.csv` and `walls.csv`.
 
 use super::{csv_rows, parse_yaml, read_text, to_yaml, write_file, IoError};
-use crate::grid::OccupancyMap;
-use crate::hough::{Accumulator, Feature};
-use crate::wallmap::WallSegment;
+use crate::sonar::grid::OccupancyMap;
+use crate::sonar::hough::{Accumulator, Feature};
+use crate::sonar::walls::WallSegment;
 use crate::world::Raster;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -194,7 +194,7 @@ pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
         occupancy[(h - 1 - y as usize) * w + x as usize] = Some(occ);
     }
     Ok(OccupancyMap {
-        geometry: crate::grid::GridGeometry {
+        geometry: crate::sonar::grid::GridGeometry {
             width: w,
             height: h,
             resolution_m: meta.resolution,
@@ -245,9 +245,9 @@ pub fn load_features_csv(path: &Path) -> Result<Vec<Feature>, IoError> {
         .into_iter()
         .map(|(line_no, f)| {
             let kind = match f[3] {
-                "corner" => crate::hough::FeatureKind::Corner,
-                "edge" => crate::hough::FeatureKind::Edge,
-                "unknown" => crate::hough::FeatureKind::Unknown,
+                "corner" => crate::sonar::hough::FeatureKind::Corner,
+                "edge" => crate::sonar::hough::FeatureKind::Edge,
+                "unknown" => crate::sonar::hough::FeatureKind::Unknown,
                 other => {
                     return Err(IoError::line(
                         path,

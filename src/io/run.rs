@@ -3,7 +3,7 @@
 
 use super::{csv_rows, parse_yaml, read_text, to_yaml, write_file, IoError};
 use crate::geometry::Pose2;
-use crate::run::{RunDataset, RunMeta, StampedPose, StereoEntry, RUN_FORMAT};
+use crate::dataset::{RunDataset, RunMeta, StampedPose, StereoEntry, RUN_FORMAT};
 use crate::sonar::SonarReading;
 use std::fmt::Write as _;
 use std::path::Path;

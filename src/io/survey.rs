@@ -2,8 +2,8 @@
 //! `visual_turns.csv` (ours).
 
 use super::{read_text, write_file, IoError};
-use crate::fuse::{Landmark, OdometryCalibration};
-use crate::run::{pose_at, StampedPose};
+use crate::fusion::{Landmark, OdometryCalibration};
+use crate::dataset::{pose_at, StampedPose};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -162,11 +162,11 @@ pub const VISUAL_TURNS_HEADER: &str =
 /// known) over the same frames.
 pub fn save_visual_turns_csv(
     path: &Path,
-    turns: &[crate::vo::VisualTurn],
-    odometry: &[crate::run::StampedPose],
-    ground_truth: Option<&[crate::run::StampedPose]>,
+    turns: &[crate::visual::vo::VisualTurn],
+    odometry: &[crate::dataset::StampedPose],
+    ground_truth: Option<&[crate::dataset::StampedPose]>,
 ) -> Result<(), IoError> {
-    let turn_of = |trajectory: &[crate::run::StampedPose], v: &crate::vo::VisualTurn| match (
+    let turn_of = |trajectory: &[crate::dataset::StampedPose], v: &crate::visual::vo::VisualTurn| match (
         pose_at(trajectory, v.from_t_s),
         pose_at(trajectory, v.to_t_s),
     ) {

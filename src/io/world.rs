@@ -3,7 +3,7 @@
 
 use super::{load_ros_map, parse_yaml, read_text, IoError};
 use crate::geometry::{Pose2, Segment};
-use crate::grid::MappingConfig;
+use crate::sonar::grid::MappingConfig;
 use crate::sim::SimConfig;
 use crate::world::{
     walls_from_raster, Person, PlacedTarget, Tag, Wall, World, DEFAULT_WALL_HEIGHT_M,

@@ -9,6 +9,8 @@
 //! in both cameras: `π(K, D, right_from_left · left_from_board · P) − x`. Parameter sigmas come from
 //! `(JᵀJ)⁻¹` scaled by the residual variance, with `J` taken by central differences at the solution.
 
+pub mod chessboard;
+
 use crate::camera::{Camera, Distortion, StereoRig};
 use nalgebra::{
     DMatrix, DVector, Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3,
@@ -444,7 +446,7 @@ pub fn aprilgrid_corners(
         .collect()
 }
 
-/// Board corners of a chessboard found by [`crate::chessboard::detect_chessboard`] (index
+/// Board corners of a chessboard found by [`crate::calib::chessboard::detect_chessboard`] (index
 /// `r · cols + c`; layout: [`chessboard_board_point`]).
 pub fn chessboard_board_corners(
     px: &[[f64; 2]],

@@ -57,7 +57,7 @@ pub struct RunMeta {
     pub world: Option<String>,
     /// Mapping settings suggested for this run (grid and Hough), if any.
     #[serde(default)]
-    pub mapping: Option<crate::grid::MappingConfig>,
+    pub mapping: Option<crate::sonar::grid::MappingConfig>,
     /// Free text.
     #[serde(default)]
     pub notes: String,

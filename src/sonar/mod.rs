@@ -4,6 +4,11 @@
 //! the first echo, or nothing. Mapping treats a reading as an arc: somewhere on the arc of radius
 //! `range_m` across the cone there is an obstacle, and the cone before the arc is free.
 
+pub mod corners;
+pub mod grid;
+pub mod hough;
+pub mod walls;
+
 use crate::geometry::Pose2;
 use serde::{Deserialize, Serialize};
 

@@ -4,11 +4,11 @@
 //! mirror the stages (`world/walls`, `world/robot/left/image`, `world/sonar/beams`, `map/grid`,
 //! `map/hough`, `landmarks/tag_7`, `metrics/...`), and sends a default layout with the recording.
 
-use crate::fuse::{GrowthBin, Landmark, LocalizeResult, TagSighting};
-use crate::grid::{CountingGrid, OccupancyGrid, OccupancyMap};
+use crate::fusion::{GrowthBin, Landmark, LocalizeResult, TagSighting};
+use crate::sonar::grid::{CountingGrid, OccupancyGrid, OccupancyMap};
 use crate::pipeline::Survey;
-use crate::run::{pose_at, RunDataset, StampedPose};
-use crate::wallmap::WallSegment;
+use crate::dataset::{pose_at, RunDataset, StampedPose};
+use crate::sonar::walls::WallSegment;
 use crate::world::World;
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
 use rerun::blueprint as bp;
@@ -194,7 +194,7 @@ pub struct SurveyScene<'a> {
     /// The report's figures.
     pub metrics: &'a BTreeMap<String, f64>,
     /// The mapping settings (the online grid is rebuilt with them).
-    pub mapping: &'a crate::grid::MappingConfig,
+    pub mapping: &'a crate::sonar::grid::MappingConfig,
     /// The stereo rig's cameras and mounting, when the run has pictures.
     pub rig: Option<&'a crate::camera::StereoRig>,
     /// Each stereo pair of the run as JPEG bytes (left, right) from [`jpeg_pair`], or `None`.
@@ -252,11 +252,11 @@ fn map_image(map: &OccupancyMap) -> rerun::Image {
 }
 
 /// The map as a ROS OccupancyGrid (0 free .. 100 occupied, 255 unknown) for the GridMap archetype.
-fn feature_color(kind: crate::hough::FeatureKind) -> rerun::Color {
+fn feature_color(kind: crate::sonar::hough::FeatureKind) -> rerun::Color {
     match kind {
-        crate::hough::FeatureKind::Corner => rerun::Color::from_rgb(255, 60, 200),
-        crate::hough::FeatureKind::Edge => rerun::Color::from_rgb(60, 160, 255),
-        crate::hough::FeatureKind::Unknown => rerun::Color::from_rgb(200, 200, 0),
+        crate::sonar::hough::FeatureKind::Corner => rerun::Color::from_rgb(255, 60, 200),
+        crate::sonar::hough::FeatureKind::Edge => rerun::Color::from_rgb(60, 160, 255),
+        crate::sonar::hough::FeatureKind::Unknown => rerun::Color::from_rgb(200, 200, 0),
     }
 }
 
@@ -1146,7 +1146,7 @@ pub const RESIDUAL_ARROW_SCALE: f32 = 20.0;
 /// per-view RMS; once, the cameras and coverage heat maps.
 pub fn log_calibration(
     recorder: &Recorder,
-    calib: &crate::calibrate::Calibration,
+    calib: &crate::calib::Calibration,
     report_markdown: &str,
     rectified_pair: Option<&image::GrayImage>,
     view_images: &std::collections::BTreeMap<String, (Vec<u8>, Vec<u8>)>,

@@ -14,9 +14,11 @@
 //! it and not hidden behind a wall, with the corners' pixel positions (C library corner order,
 //! pixel centres at integer coordinates) in both images and their 3D positions in the world.
 
+pub mod board;
+
 use crate::camera::{Camera, StereoRig};
 use crate::geometry::Pose2;
-use crate::tags::TagFamily;
+use crate::visual::tags::TagFamily;
 use crate::world::{Tag, World};
 use image::GrayImage;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
@@ -1325,16 +1327,16 @@ impl Default for CapturePolicy {
 pub fn plan_captures(
     world: &World,
     rig: &StereoRig,
-    trajectory: &[crate::run::StampedPose],
+    trajectory: &[crate::dataset::StampedPose],
     policy: &CapturePolicy,
     config: &RenderConfig,
-) -> Result<Vec<crate::run::StampedPose>, RenderError> {
+) -> Result<Vec<crate::dataset::StampedPose>, RenderError> {
     let paints = world
         .tags
         .iter()
         .map(tag_paint)
         .collect::<Result<Vec<_>, _>>()?;
-    let mut out: Vec<crate::run::StampedPose> = Vec::new();
+    let mut out: Vec<crate::dataset::StampedPose> = Vec::new();
     for p in trajectory {
         if let Some(last) = out.last() {
             let moved = (p.pose.x - last.pose.x).hypot(p.pose.y - last.pose.y);

@@ -23,8 +23,8 @@
 //! geometry) so that the run is about mapping, not about control; only the logged sonar is noisy.
 
 use crate::geometry::{wrap_angle, Pose2};
-use crate::grid::{CountingGrid, GridConfig, GridError, OccupancyGrid, OccupancyMap};
-use crate::run::{RobotDescription, RunDataset, RunMeta, StampedPose, RUN_FORMAT};
+use crate::sonar::grid::{CountingGrid, GridConfig, GridError, OccupancyGrid, OccupancyMap};
+use crate::dataset::{RobotDescription, RunDataset, RunMeta, StampedPose, RUN_FORMAT};
 use crate::sonar::{PlacedReading, SonarLayout, SonarReading};
 use crate::world::World;
 use nalgebra::{Point2, Vector2};

@@ -7,14 +7,14 @@
 //! reading of one wall votes for the same line, whatever the robot's position along it; the
 //! line's position is as precise as the ranges, not the 30 degree beam.
 //!
-//! The point Hough transform ([`crate::hough`]) finds *where* something reflects from many
+//! The point Hough transform ([`crate::sonar::hough`]) finds *where* something reflects from many
 //! directions; around a room corner its peak sits on one of the walls 0.2-0.6 m from the corner,
 //! because the robot rounds the corner close to both walls. [`place_peak`] looks for two walls
 //! near such a peak and, when they cross near it and both reach the crossing, moves the feature
 //! there. A peak on a wall where the grid shows free space on one side is the wall's end (a door
 //! jamb); one with the wall going on to both sides is dropped.
 
-use crate::grid::OccupancyMap;
+use crate::sonar::grid::OccupancyMap;
 use crate::sonar::PlacedReading;
 
 /// Tangent points farther than this from the candidate are ignored: 1.5 m.
@@ -434,7 +434,7 @@ fn occupied_near(map: &OccupancyMap, point: (f64, f64)) -> bool {
 mod tests {
     use super::*;
     use crate::geometry::Pose2;
-    use crate::grid::{CountingGrid, GridConfig, OccupancyGrid};
+    use crate::sonar::grid::{CountingGrid, GridConfig, OccupancyGrid};
 
     /// Readings of a wall `y = wall_y` taken from a robot driving along it at `standoff`.
     fn along_wall(wall_y: f64, standoff: f64, xs: std::ops::Range<i32>) -> Vec<PlacedReading> {

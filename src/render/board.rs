@@ -6,13 +6,13 @@
 //! Board frames follow the detectors: an AprilGrid as Kalibr lays it out (tag 0 at the origin,
 //! x along a row, y up the grid as printed, the camera on the +z side); a chessboard as OpenCV
 //! and Kalibr's checkerboard (x along `cols`, y along `rows`, the camera on the −z side). Corner
-//! ids are those of [`crate::calibrate::aprilgrid_corners`] and
-//! [`crate::calibrate::chessboard_board_corners`].
+//! ids are those of [`crate::calib::aprilgrid_corners`] and
+//! [`crate::calib::chessboard_board_corners`].
 
 use crate::camera::StereoRig;
 use crate::render::{texture, RenderConfig, RenderError, Renderer};
 use crate::render::{TAG_BLACK, TAG_WHITE};
-use crate::tags::TagFamily;
+use crate::visual::tags::TagFamily;
 use image::GrayImage;
 use nalgebra::{Isometry3, Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion};
 use nalgebra::{Vector2, Vector3};
@@ -89,7 +89,7 @@ impl Board {
 
     /// Board corners `(id, position on the board)`, as the calibration numbers and places them.
     pub fn corners(&self) -> Vec<(u32, [f64; 3])> {
-        use crate::calibrate::{aprilgrid_board_point, chessboard_board_point};
+        use crate::calib::{aprilgrid_board_point, chessboard_board_point};
         match self {
             Self::AprilGrid {
                 cols,

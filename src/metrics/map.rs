@@ -10,8 +10,8 @@
 //! * **Feature recall**: of the true corners that came within 1.5 m of a sonar with a clear line of
 //!   sight, the share with a feature within 15 cm.
 
-use crate::grid::{GridGeometry, OccupancyMap};
-use crate::hough::Feature;
+use crate::sonar::grid::{GridGeometry, OccupancyMap};
+use crate::sonar::hough::Feature;
 use crate::world::World;
 use nalgebra::Point2;
 use serde::Serialize;

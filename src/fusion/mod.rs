@@ -21,12 +21,12 @@
 //! interpolated by distance travelled.
 
 use crate::geometry::{wrap_angle, Pose2};
-use crate::hough::Feature;
-use crate::run::{pose_at, StampedPose};
+use crate::sonar::hough::Feature;
+use crate::dataset::{pose_at, StampedPose};
 use crate::sonar::{SonarLayout, SonarReading};
-use crate::stereo::StereoTag;
-use crate::vo::VisualTurn;
-use crate::wallmap::WallSegment;
+use crate::visual::stereo::StereoTag;
+use crate::visual::vo::VisualTurn;
+use crate::sonar::walls::WallSegment;
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix2, Matrix3, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -114,7 +114,7 @@ pub struct FuseConfig {
     /// Hold the survey's trajectory after its last sighting to the walls mapped before it
     /// ([`hold_tail_to_walls`]; ours: on).
     pub hold_tail_to_walls: bool,
-    /// Fuse the turns the cameras measure between frames ([`crate::vo`]) with the odometry,
+    /// Fuse the turns the cameras measure between frames ([`crate::visual::vo`]) with the odometry,
     /// online and offline (ours: on; they are used when the run's pictures give them).
     pub visual_odometry: bool,
     /// χ² gate of a visual turn against the filter, 1 dof (10.83: 99.9%).
@@ -2774,7 +2774,7 @@ mod tests {
             votes: 80,
             sightings: 1,
             spread_deg: 90.0,
-            kind: crate::hough::FeatureKind::Corner,
+            kind: crate::sonar::hough::FeatureKind::Corner,
         };
         let corners = vec![corner(4.95, 0.1), corner(2.5, 2.5)];
         let online = run_online(&odom, &sightings, &corners, &FuseConfig::default());

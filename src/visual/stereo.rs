@@ -13,7 +13,7 @@
 //! known tag size and the triangulated edge length differ by more than `max_size_error`.
 
 use crate::camera::{Camera, Rectification, StereoRig};
-use crate::tags::TagDetection;
+use crate::visual::tags::TagDetection;
 use nalgebra::{Isometry3, Matrix3, Point2, Rotation3, SMatrix, UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -135,7 +135,7 @@ pub fn pnp_square(
 ) -> Option<Isometry3<f64>> {
     let h = 0.5 * size_m;
     let model = [[-h, h], [h, h], [h, -h], [-h, -h]];
-    crate::calibrate::plane_pose(camera, model.into_iter().zip(corners_px.iter().copied()))
+    crate::calib::plane_pose(camera, model.into_iter().zip(corners_px.iter().copied()))
 }
 
 /// Why a left detection found no partner.
@@ -333,10 +333,10 @@ pub const EPIPOLAR_BAND_MARGIN_PX: u32 = 24;
 /// image where the left tags' epipolar lines run (the rig is horizontal, so corresponding points
 /// share rows up to distortion and calibration error).
 pub fn detect_pair(
-    detector: &mut dyn crate::tags::TagDetector,
+    detector: &mut dyn crate::visual::tags::TagDetector,
     left: &image::GrayImage,
     right: &image::GrayImage,
-) -> Result<(Vec<TagDetection>, Vec<TagDetection>), crate::tags::TagError> {
+) -> Result<(Vec<TagDetection>, Vec<TagDetection>), crate::visual::tags::TagError> {
     let in_left = detector.detect(left)?;
     let rows = in_left
         .iter()

@@ -13,7 +13,7 @@
 //! the accumulator. Around a room corner the strongest cells are on the walls 0.2-0.6 m from
 //! it (the robot rounds the corner close to both walls, and at 50 cm a sonar arc hugs a wall
 //! over +-26 degrees), so (3) each candidate is placed among the walls that the readings' arcs
-//! touch near it ([`crate::walls::place_peak`], a line Hough transform on the arcs' tangents):
+//! touch near it ([`crate::sonar::corners::place_peak`], a line Hough transform on the arcs' tangents):
 //! where two walls cross near it the feature moves to the crossing (a room corner, a T); on a
 //! wall that the grid shows ending beside it, onto the wall (a door jamb); in the middle of a
 //! wall, it is dropped. (4) A candidate with no wall through it (a pillar, clutter) is kept only
@@ -27,10 +27,10 @@
 //! window boundary is not cut in two; features found in several windows are merged. Offline, one
 //! accumulator collects the whole run.
 
-use crate::grid::OccupancyMap;
-use crate::run::{pose_at, StampedPose};
+use crate::sonar::grid::OccupancyMap;
+use crate::dataset::{pose_at, StampedPose};
 use crate::sonar::PlacedReading;
-use crate::walls::{place_peak, PeakPlace};
+use crate::sonar::corners::{place_peak, PeakPlace};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -17,6 +17,9 @@
 //! tag corners through its (rotation-aware) homography to get the C order (checked against the
 //! C library's own test photos in `tests/detect_real.rs`).
 
+pub(crate) mod edges;
+pub(crate) mod quads;
+
 use image::GrayImage;
 use serde::Serialize;
 
@@ -286,7 +289,7 @@ fn refine_all(image: &GrayImage, detections: &mut [TagDetection]) {
     if detections.is_empty() {
         return;
     }
-    let plane = crate::subpixel::Plane::from_gray(image);
+    let plane = crate::visual::tags::edges::Plane::from_gray(image);
     for d in detections.iter_mut() {
         let Some(cells) = border_cells(d.family) else {
             continue;
@@ -387,14 +390,14 @@ impl KorniaDetector {
         families: &[kornia_apriltag::family::TagFamily],
         image: &GrayImage,
     ) -> Result<Vec<TagDetection>, TagError> {
-        let settings = crate::tagquads::QuadSettings {
+        let settings = crate::visual::tags::quads::QuadSettings {
             decimate: self.config.decimate as u32,
             refine_edges: self.config.refine_edges,
             sharpening: self.config.sharpening,
             min_contrast: self.config.min_contrast,
         };
         let found =
-            crate::tagquads::detect(image, families, &settings).map_err(TagError::Kornia)?;
+            crate::visual::tags::quads::detect(image, families, &settings).map_err(TagError::Kornia)?;
         Ok(found
             .into_iter()
             .map(|d| TagDetection {
@@ -832,7 +835,7 @@ pub fn refine_corners(
     border_cells: f64,
 ) -> Option<[[f64; 2]; 4]> {
     refine_on(
-        &crate::subpixel::Plane::from_gray(image),
+        &crate::visual::tags::edges::Plane::from_gray(image),
         corners,
         border_cells,
     )
@@ -840,7 +843,7 @@ pub fn refine_corners(
 
 /// [`refine_corners`] on an image already converted to floats.
 fn refine_on(
-    plane: &crate::subpixel::Plane,
+    plane: &crate::visual::tags::edges::Plane,
     corners: &[[f64; 2]; 4],
     border_cells: f64,
 ) -> Option<[[f64; 2]; 4]> {
@@ -852,7 +855,7 @@ fn refine_on(
     if side / border_cells < MIN_CELL_PX {
         return None;
     }
-    let fitted = crate::subpixel::fit_quad(plane, corners, 1.0 / border_cells, None)?;
+    let fitted = crate::visual::tags::edges::fit_quad(plane, corners, 1.0 / border_cells, None)?;
     let limit = (0.1 * side).max(1.0);
     (0..4)
         .all(|k| dist(fitted[k], corners[k]) <= limit)

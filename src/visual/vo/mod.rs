@@ -24,7 +24,7 @@
 
 use crate::camera::StereoRig;
 use crate::geometry::Pose2;
-use crate::stereo::triangulate_point;
+use crate::visual::stereo::triangulate_point;
 use kornia_image::{Image, ImageSize};
 use nalgebra::{Isometry3, Matrix3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 
@@ -963,10 +963,10 @@ impl VisualMotion {
 /// farther apart than that is left out, and the chain starts again from its second frame.
 pub fn frame_pairs(
     times: &[f64],
-    odometry: &[crate::run::StampedPose],
+    odometry: &[crate::dataset::StampedPose],
     config: &VoConfig,
 ) -> Vec<(usize, usize)> {
-    let pose = |t: f64| crate::run::pose_at(odometry, t);
+    let pose = |t: f64| crate::dataset::pose_at(odometry, t);
     let apart = |a: usize, b: usize, (m, rad): (f64, f64)| match (pose(times[a]), pose(times[b])) {
         (Some(pa), Some(pb)) => {
             let d = pa.between(&pb);
@@ -1240,7 +1240,7 @@ fn solve_planar(
 mod tests {
     use super::*;
     use crate::render::{RenderConfig, Renderer};
-    use crate::run::StampedPose;
+    use crate::dataset::StampedPose;
     use std::path::Path;
 
     /// The blur in floating point, tap by tap, as it reads.

@@ -5,12 +5,12 @@
 //! coarse to hold a robot to a few centimetres. A flat wall is known far better than that: a sonar
 //! echo off it comes from the foot of the perpendicular, so every reading whose cone holds the
 //! wall's normal has `range = n . sensor - offset` exactly, up to the range noise. The walls are
-//! found with the same tangent-line Hough transform as [`crate::walls`] (every direction inside a
+//! found with the same tangent-line Hough transform as [`crate::sonar::corners`] (every direction inside a
 //! reading's cone votes for the line tangent to its arc there), over the whole map and with the
 //! side a wall was seen from kept, then each is split where the robot did not see it and refitted
 //! to its readings by least squares.
 
-use crate::grid::OccupancyMap;
+use crate::sonar::grid::OccupancyMap;
 use crate::sonar::PlacedReading;
 use serde::Serialize;
 use std::f64::consts::TAU;
@@ -413,7 +413,7 @@ fn fit(echoes: &[Echo], piece: &[usize], normal: f64, offset: f64) -> Option<Wal
 mod tests {
     use super::*;
     use crate::geometry::Pose2;
-    use crate::grid::{CountingGrid, GridConfig, OccupancyGrid};
+    use crate::sonar::grid::{CountingGrid, GridConfig, OccupancyGrid};
 
     /// Readings of the sensors of a robot driving along `y = 2` at 0.5 m, looking left and
     /// forward-left, plus a turn on the spot at the start.

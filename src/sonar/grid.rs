@@ -126,7 +126,7 @@ pub struct MappingConfig {
     /// Occupancy grid.
     pub grid: GridConfig,
     /// Hough corner features.
-    pub hough: crate::hough::HoughConfig,
+    pub hough: crate::sonar::hough::HoughConfig,
 }
 
 /// What a reading says about a cell.

@@ -23,7 +23,7 @@
 //!    solves `Σ w g gᵀ p = Σ w g gᵀ q`, iterated to 0.005 px. The window is sized from the local
 //!    square size (at most 23 x 23 px, OpenCV's usual 11 half-width).
 
-use crate::subpixel::{fit_quad, Plane};
+use crate::visual::tags::edges::{fit_quad, Plane};
 use image::GrayImage;
 use std::collections::{HashMap, VecDeque};
 
@@ -302,7 +302,7 @@ fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<
 /// tag loses them; the others stay).
 pub fn refine_aprilgrid(
     image: &GrayImage,
-    detections: &[crate::tags::TagDetection],
+    detections: &[crate::visual::tags::TagDetection],
     cols: u32,
     spacing: f64,
 ) -> Vec<(u32, [f64; 2])> {
@@ -311,7 +311,7 @@ pub fn refine_aprilgrid(
     let plane = sharp.blurred();
     // Board positions in tag edges (the homographies need no metres).
     let board = |tag: u32, k: usize| -> [f64; 2] {
-        let p = crate::calibrate::aprilgrid_board_point(tag * 4 + k as u32, cols, 1.0, spacing);
+        let p = crate::calib::aprilgrid_board_point(tag * 4 + k as u32, cols, 1.0, spacing);
         [p[0], p[1]]
     };
     let apply = |h: &nalgebra::Matrix3<f64>, b: [f64; 2]| {
@@ -331,7 +331,7 @@ pub fn refine_aprilgrid(
             .flat_map(|o| (0..4).map(move |k| (board(o.id, k), o.corners_px[k])))
             .collect();
         // Fit, drop the worst-fitting neighbours (their own bad corners), fit again.
-        let h = crate::calibrate::homography(&near).and_then(|h| {
+        let h = crate::calib::homography(&near).and_then(|h| {
             let mut kept: Vec<_> = near
                 .iter()
                 .filter(|(b, p)| dist(apply(&h, *b), *p) < 1.5)
@@ -340,7 +340,7 @@ pub fn refine_aprilgrid(
             if kept.len() < 8 {
                 kept = near.clone();
             }
-            crate::calibrate::homography(&kept)
+            crate::calib::homography(&kept)
         });
         let cp = &d.corners_px;
         let side = (0..4).map(|k| dist(cp[k], cp[(k + 1) % 4])).sum::<f64>() / 4.0;
