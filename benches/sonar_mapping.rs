@@ -4,13 +4,16 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use std::hint::black_box;
 use std::path::Path;
+use stereotag::dataset::PoseSource;
 use stereotag::sonar::grid::{CountingGrid, GridConfig, LogOddsGrid, OccupancyGrid};
 use stereotag::sonar::hough::{Accumulator, HoughConfig};
-use stereotag::pipeline::map_run;
-use stereotag::dataset::PoseSource;
+use stereotag::sonar::map::map_run;
 use stereotag::sonar::{PlacedReading, SonarLayout};
 
-fn museum_readings() -> (stereotag::dataset::RunDataset, stereotag::sonar::grid::MappingConfig) {
+fn museum_readings() -> (
+    stereotag::dataset::RunDataset,
+    stereotag::sonar::map::MappingConfig,
+) {
     let loaded =
         stereotag::io::load_world(Path::new("samples/museum/world.yaml")).expect("museum sample");
     let mut config = loaded.simulation.clone();

@@ -1,9 +1,9 @@
 //! Diagnostic: each tag sighting of a simulated run against the truth (position and yaw error
 //! in sigmas). Usage: cargo run --release --example sighting_errors -- RUN_DIR
 use stereotag::fusion::TagSighting;
+use stereotag::geometry::pose_at;
 use stereotag::io;
-use stereotag::pipeline::sightings_from_pair;
-use stereotag::dataset::pose_at;
+use stereotag::visual::sightings::sightings_from_pair;
 use stereotag::visual::stereo::StereoConfig;
 use stereotag::visual::tags::{CDetector, DetectorConfig};
 

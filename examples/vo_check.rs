@@ -1,10 +1,10 @@
 //! Diagnostic: visual odometry against the truth on frames rendered along a simulated run.
 //! Usage: cargo run --release --example vo_check -- RUN_DIR WORLD [SECONDS] [STEP_M] [STEP_DEG]
 use rayon::prelude::*;
+use stereotag::geometry::pose_at;
 use stereotag::geometry::wrap_angle;
 use stereotag::io;
 use stereotag::render::{RenderConfig, Renderer};
-use stereotag::dataset::pose_at;
 use stereotag::visual::vo::{relative_motion, VoConfig, VoImage};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -1,8 +1,8 @@
 //! Diagnostic: time of the visual odometry's stages on a run's stereo pairs.
 //! Usage: cargo run --release --example vo_speed -- RUN_DIR
 use std::time::Instant;
+use stereotag::geometry::pose_at;
 use stereotag::io;
-use stereotag::dataset::pose_at;
 use stereotag::visual::vo::{relative_motion, VoConfig, VoImage};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -7,8 +7,8 @@
 //!
 //! Usage: cargo run --release --example wall_misfits -- SURVEY_DIR RUN_DIR
 use stereotag::fusion::{wall_in_beam, SonarInput};
+use stereotag::geometry::pose_at;
 use stereotag::io;
-use stereotag::dataset::pose_at;
 
 /// A range whose misfit is over this is counted apart: 5 cm (2.5 sigma of a range and a wall).
 const FAR_M: f64 = 0.05;

@@ -14,7 +14,6 @@ pub mod fusion;
 pub mod geometry;
 pub mod io;
 pub mod metrics;
-pub mod pipeline;
 pub mod plan;
 pub mod render;
 pub mod sim;

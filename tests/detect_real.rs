@@ -4,7 +4,9 @@
 
 mod common;
 
-use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetection, TagDetector};
+use stereotag::visual::tags::{
+    CDetector, DetectorConfig, KorniaDetector, TagDetection, TagDetector,
+};
 
 /// One expected detection: id and corners.
 type Expected = (u32, [[f64; 2]; 4]);

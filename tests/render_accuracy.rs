@@ -148,7 +148,8 @@ fn measure(det: &mut dyn TagDetector) {
         let true_normal = stereotag::visual::stereo::fit_square(&true_corners, tag.size_m).normal;
         let angle = |n: &Vector3<f64>| n.angle(&true_normal).to_degrees();
         stereo_normal_err.push(angle(&Vector3::from(t.normal_in_left)));
-        if let Some(v) = stereotag::visual::stereo::pnp_square(&rig.left, &t.corners_px, tag.size_m) {
+        if let Some(v) = stereotag::visual::stereo::pnp_square(&rig.left, &t.corners_px, tag.size_m)
+        {
             pnp_normal_err.push(angle(&-(v.rotation * Vector3::z())));
         }
         let e = Vector3::from(t.position_in_left_m) - Vector3::from(truth.centre_in_left_m);

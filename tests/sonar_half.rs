@@ -2,10 +2,11 @@
 
 mod common;
 
-use stereotag::io::load_world;
-use stereotag::pipeline::{map_run, score_sonar_map};
 use stereotag::dataset::PoseSource;
+use stereotag::io::load_world;
+use stereotag::metrics::score_sonar_map;
 use stereotag::sim::simulate;
+use stereotag::sonar::map::map_run;
 
 /// Occupied precision with ground-truth poses on the office (issue 2: 0.85).
 const OCCUPIED_PRECISION_GT: f64 = 0.85;

@@ -348,8 +348,11 @@ fn detect_views(
                 (corners, Some(note).filter(|_| found.is_empty()))
             }
             (Target::Checkerboard(c), _) => {
-                match stereotag::calib::chessboard::detect_chessboard(image, c.target_cols, c.target_rows)
-                {
+                match stereotag::calib::chessboard::detect_chessboard(
+                    image,
+                    c.target_cols,
+                    c.target_rows,
+                ) {
                     Ok(px) => (
                         chessboard_board_corners(
                             &px,

@@ -11,7 +11,9 @@ pub struct Config {
 impl Config {
     pub fn run(&self) -> anyhow::Result<()> {
         let text = match self.kind.as_str() {
-            "mapping" => serde_yaml_ng::to_string(&stereotag::sonar::grid::MappingConfig::default())?,
+            "mapping" => {
+                serde_yaml_ng::to_string(&stereotag::sonar::map::MappingConfig::default())?
+            }
             "simulation" => serde_yaml_ng::to_string(&stereotag::sim::SimConfig::default())?,
             "fuse" => serde_yaml_ng::to_string(&stereotag::fusion::FuseConfig::default())?,
             "plan" => serde_yaml_ng::to_string(&stereotag::plan::PlanConfig::default())?,

@@ -1,8 +1,9 @@
 use super::survey::{detect_run, load_fuse_config, load_run_rig, DetectOptions};
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use stereotag::fusion::{ate_m, error_growth, localize, SonarInput};
+use stereotag::fusion::{localize, SonarInput};
 use stereotag::io::{self, OutputDir};
+use stereotag::metrics::{ate_m, error_growth};
 
 /// Arguments of `stereotag localize`.
 #[derive(Debug, clap::Args)]
@@ -134,7 +135,7 @@ impl Localize {
         );
         for (i, (o, p)) in run.odometry.iter().zip(&result.trajectory).enumerate() {
             let gt = truth
-                .and_then(|t| stereotag::dataset::pose_at(t, o.t_s))
+                .and_then(|t| stereotag::geometry::pose_at(t, o.t_s))
                 .map_or(",,".to_string(), |g| {
                     format!("{:.5},{:.5},{:.6}", g.x, g.y, g.theta)
                 });

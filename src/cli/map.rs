@@ -1,10 +1,12 @@
 use super::UsageError;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use stereotag::sonar::grid::MappingConfig;
-use stereotag::io::{self, OutputDir};
-use stereotag::pipeline::{map_run, score_sonar_map, SonarMap};
 use stereotag::dataset::{PoseSource, RunDataset};
+use stereotag::io::{self, OutputDir};
+use stereotag::metrics::score_sonar_map;
+use stereotag::sonar::map::map_run;
+use stereotag::sonar::map::MappingConfig;
+use stereotag::sonar::map::SonarMap;
 
 /// Which trajectory places the readings.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]

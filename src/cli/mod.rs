@@ -103,7 +103,7 @@ fn is_input_error(err: &anyhow::Error) -> bool {
     err.chain().any(|e| {
         e.is::<stereotag::io::IoError>()
             || e.is::<stereotag::sonar::grid::GridError>()
-            || e.is::<stereotag::pipeline::PipelineError>()
+            || e.is::<stereotag::sonar::map::MapError>()
             || e.is::<stereotag::sim::SimError>()
             || e.is::<UsageError>()
             || e.is::<stereotag::visual::tags::TagError>()
@@ -214,7 +214,7 @@ pub(crate) fn load_rig_arg(path: &Path) -> anyhow::Result<stereotag::camera::Ste
 /// everything after it is placed with it).
 pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::dataset::RunDataset> {
     let run = stereotag::io::load_run(run_dir)?;
-    let jumps = stereotag::dataset::odometry_jumps(&run.odometry);
+    let jumps = stereotag::geometry::odometry_jumps(&run.odometry);
     if jumps.is_empty() {
         return Ok(run);
     }
@@ -236,7 +236,7 @@ pub(crate) fn load_run(run_dir: &Path) -> anyhow::Result<stereotag::dataset::Run
             lines.get(j.index).copied().unwrap_or(j.index + 2),
             j.distance_m,
             j.t_s,
-            stereotag::dataset::JUMP_SPEED_MPS
+            stereotag::geometry::JUMP_SPEED_MPS
         );
     }
     if jumps.len() > 3 {

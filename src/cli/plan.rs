@@ -1,7 +1,7 @@
 use std::path::PathBuf;
-use stereotag::sonar::grid::OccupancyMap;
 use stereotag::io::{self, OutputDir};
 use stereotag::plan::{plan_tags, predict, PlanConfig};
+use stereotag::sonar::grid::OccupancyMap;
 
 /// Arguments of `stereotag plan`.
 #[derive(Debug, clap::Args)]

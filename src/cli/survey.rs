@@ -4,12 +4,16 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use stereotag::camera::StereoRig;
+use stereotag::dataset::RunDataset;
+use stereotag::fusion::survey;
+use stereotag::fusion::Survey;
 use stereotag::fusion::{FuseConfig, TagSighting};
+use stereotag::geometry::pose_at;
 use stereotag::io::{self, LandmarkRecord, LandmarksFile, OutputDir, Trajectories};
-use stereotag::pipeline::{
-    raw_map, score_survey, sightings_from_pair, survey, survey_metrics, Survey,
-};
-use stereotag::dataset::{pose_at, RunDataset};
+use stereotag::metrics::score_survey;
+use stereotag::metrics::survey_metrics;
+use stereotag::sonar::map::raw_map;
+use stereotag::visual::sightings::sightings_from_pair;
 use stereotag::visual::stereo::StereoConfig;
 use stereotag::visual::tags::{CDetector, DetectorConfig, KorniaDetector, TagDetector, TagFamily};
 use stereotag::visual::vo::{frame_pairs, relative_motion, VisualTurn, VoConfig, VoImage};

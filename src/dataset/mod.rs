@@ -3,21 +3,12 @@
 //! Poses are stamped `world_from_robot` transforms. Sonar readings are placed in the world by
 //! interpolating a trajectory at the reading's time and composing with the sensor's mount.
 
-use crate::geometry::Pose2;
-use crate::sonar::{PlacedReading, SonarLayout, SonarReading};
+use crate::geometry::StampedPose;
+use crate::sonar::{place_readings, PlacedReading, SonarLayout, SonarReading};
 use serde::{Deserialize, Serialize};
 
 /// Version tag written into `run.yaml`.
 pub const RUN_FORMAT: &str = "stereotag-run/1";
-
-/// A pose at a time.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StampedPose {
-    /// Time, seconds.
-    pub t_s: f64,
-    /// `world_from_robot`.
-    pub pose: Pose2,
-}
 
 /// One stereo pair of the run.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,7 +48,7 @@ pub struct RunMeta {
     pub world: Option<String>,
     /// Mapping settings suggested for this run (grid and Hough), if any.
     #[serde(default)]
-    pub mapping: Option<crate::sonar::grid::MappingConfig>,
+    pub mapping: Option<crate::sonar::map::MappingConfig>,
     /// Free text.
     #[serde(default)]
     pub notes: String,
@@ -87,61 +78,6 @@ pub struct RunDataset {
     pub ground_truth: Option<Vec<StampedPose>>,
 }
 
-/// Pose at time `t_s` by linear interpolation (clamped at the ends); `None` for an empty trajectory.
-pub fn pose_at(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
-    let first = trajectory.first()?;
-    let i = trajectory.partition_point(|p| p.t_s <= t_s);
-    if i == 0 {
-        return Some(first.pose);
-    }
-    let a = trajectory[i - 1];
-    let Some(b) = trajectory.get(i) else {
-        return Some(a.pose);
-    };
-    let span = b.t_s - a.t_s;
-    let f = if span > 0.0 {
-        (t_s - a.t_s) / span
-    } else {
-        0.0
-    };
-    Some(a.pose.lerp(&b.pose, f))
-}
-
-/// An odometry step longer than a robot could drive in its time: a reset or a glitch in a log.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OdometryJump {
-    /// Index of the sample the step ends on (0 is the first pose).
-    pub index: usize,
-    /// Time of that line, seconds.
-    pub t_s: f64,
-    /// Length of the step, metres.
-    pub distance_m: f64,
-}
-
-/// An odometry step is a jump when it is longer than this, metres ...
-pub const JUMP_MIN_M: f64 = 1.0;
-/// ... and faster than this, metres per second (a home robot drives at most 1-2 m/s).
-pub const JUMP_SPEED_MPS: f64 = 5.0;
-
-/// Steps of an odometry trajectory (as read from `odometry.csv`) longer than [`JUMP_MIN_M`] and
-/// faster than [`JUMP_SPEED_MPS`]: a survey places everything after one with it, so a user should
-/// hear of it.
-pub fn odometry_jumps(odometry: &[StampedPose]) -> Vec<OdometryJump> {
-    odometry
-        .windows(2)
-        .enumerate()
-        .filter_map(|(i, w)| {
-            let d = (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y);
-            let dt = w[1].t_s - w[0].t_s;
-            (d > JUMP_MIN_M && d > JUMP_SPEED_MPS * dt).then_some(OdometryJump {
-                index: i + 1,
-                t_s: w[1].t_s,
-                distance_m: d,
-            })
-        })
-        .collect()
-}
-
 impl RunDataset {
     /// The trajectory of a pose source, if the run has it.
     pub fn trajectory(&self, source: PoseSource) -> Option<&[StampedPose]> {
@@ -154,68 +90,5 @@ impl RunDataset {
     /// Every sonar reading placed in the world along the given trajectory.
     pub fn placed_readings(&self, trajectory: &[StampedPose]) -> Vec<PlacedReading> {
         place_readings(&self.sonar, &self.meta.robot.sonar, trajectory)
-    }
-}
-
-/// Places readings in the world along a trajectory.
-pub fn place_readings(
-    readings: &[SonarReading],
-    layout: &SonarLayout,
-    trajectory: &[StampedPose],
-) -> Vec<PlacedReading> {
-    readings
-        .iter()
-        .filter_map(|r| {
-            let sensor = layout.sensors.get(r.sensor)?;
-            let robot = pose_at(trajectory, r.t_s)?;
-            Some(PlacedReading {
-                t_s: r.t_s,
-                world_from_sensor: robot.compose(&sensor.robot_from_sensor()),
-                range_m: r.range_m,
-            })
-        })
-        .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn interpolates_between_stamps() {
-        let tr = vec![
-            StampedPose {
-                t_s: 0.0,
-                pose: Pose2::new(0.0, 0.0, 0.0),
-            },
-            StampedPose {
-                t_s: 2.0,
-                pose: Pose2::new(2.0, 0.0, 1.0),
-            },
-        ];
-        let p = pose_at(&tr, 1.0).unwrap();
-        assert!((p.x - 1.0).abs() < 1e-12 && (p.theta - 0.5).abs() < 1e-12);
-        assert_eq!(pose_at(&tr, 5.0).unwrap(), tr[1].pose);
-    }
-
-    #[test]
-    fn an_odometry_jump_is_found_with_its_line() {
-        let pose = |t: f64, x: f64| StampedPose {
-            t_s: t,
-            pose: Pose2::new(x, 0.0, 0.0),
-        };
-        // 0.1 m/s, then 100 km in a tenth of a second, then 0.1 m/s again; a slow log with 1.5 m
-        // steps at 1 s is no jump.
-        let odometry = vec![
-            pose(0.0, 0.0),
-            pose(0.1, 0.01),
-            pose(0.2, 1e5),
-            pose(0.3, 1e5 + 0.01),
-            pose(1.3, 1e5 + 1.5),
-        ];
-        let jumps = odometry_jumps(&odometry);
-        assert_eq!(jumps.len(), 1, "{jumps:?}");
-        assert_eq!(jumps[0].index, 2);
-        assert!((jumps[0].distance_m - 1e5).abs() < 1.0);
     }
 }

@@ -3,6 +3,12 @@
 //! Poses are `world_from_robot` transforms: a point `p_robot` maps to
 //! `p_world = R(theta) * p_robot + (x, y)`. Angles are radians, wrapped to (-pi, pi].
 
+mod trajectory;
+
+pub use trajectory::{
+    odometry_jumps, pose_at, OdometryJump, StampedPose, JUMP_MIN_M, JUMP_SPEED_MPS,
+};
+
 use nalgebra::{Point2, Vector2};
 use serde::{Deserialize, Serialize};
 

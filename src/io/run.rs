@@ -2,8 +2,9 @@
 //! `ground_truth.csv`.
 
 use super::{csv_rows, parse_yaml, read_text, to_yaml, write_file, IoError};
+use crate::dataset::{RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
 use crate::geometry::Pose2;
-use crate::dataset::{RunDataset, RunMeta, StampedPose, StereoEntry, RUN_FORMAT};
+use crate::geometry::StampedPose;
 use crate::sonar::SonarReading;
 use std::fmt::Write as _;
 use std::path::Path;

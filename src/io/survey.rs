@@ -3,7 +3,7 @@
 
 use super::{read_text, write_file, IoError};
 use crate::fusion::{Landmark, OdometryCalibration};
-use crate::dataset::{pose_at, StampedPose};
+use crate::geometry::{pose_at, StampedPose};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -163,10 +163,11 @@ pub const VISUAL_TURNS_HEADER: &str =
 pub fn save_visual_turns_csv(
     path: &Path,
     turns: &[crate::visual::vo::VisualTurn],
-    odometry: &[crate::dataset::StampedPose],
-    ground_truth: Option<&[crate::dataset::StampedPose]>,
+    odometry: &[crate::geometry::StampedPose],
+    ground_truth: Option<&[crate::geometry::StampedPose]>,
 ) -> Result<(), IoError> {
-    let turn_of = |trajectory: &[crate::dataset::StampedPose], v: &crate::visual::vo::VisualTurn| match (
+    let turn_of = |trajectory: &[crate::geometry::StampedPose],
+                   v: &crate::visual::vo::VisualTurn| match (
         pose_at(trajectory, v.from_t_s),
         pose_at(trajectory, v.to_t_s),
     ) {

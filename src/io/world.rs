@@ -3,8 +3,8 @@
 
 use super::{load_ros_map, parse_yaml, read_text, IoError};
 use crate::geometry::{Pose2, Segment};
-use crate::sonar::grid::MappingConfig;
 use crate::sim::SimConfig;
+use crate::sonar::map::MappingConfig;
 use crate::world::{
     walls_from_raster, Person, PlacedTarget, Tag, Wall, World, DEFAULT_WALL_HEIGHT_M,
 };

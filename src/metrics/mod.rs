@@ -1,4 +1,11 @@
 //! Figures: how well a map, its features, a trajectory and a survey match the truth, and the
-//! metrics a report holds.
+//! metrics a report holds. The one home of every score, so that a figure is computed one way.
 
+pub mod localize;
 pub mod map;
+pub mod survey;
+pub mod trajectory;
+
+pub use localize::{error_growth, GrowthBin, GROWTH_BANDS_M};
+pub use survey::{score_sonar_map, score_survey, survey_metrics, SonarScores};
+pub use trajectory::{align_se2, ate_m};

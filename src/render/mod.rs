@@ -1327,16 +1327,16 @@ impl Default for CapturePolicy {
 pub fn plan_captures(
     world: &World,
     rig: &StereoRig,
-    trajectory: &[crate::dataset::StampedPose],
+    trajectory: &[crate::geometry::StampedPose],
     policy: &CapturePolicy,
     config: &RenderConfig,
-) -> Result<Vec<crate::dataset::StampedPose>, RenderError> {
+) -> Result<Vec<crate::geometry::StampedPose>, RenderError> {
     let paints = world
         .tags
         .iter()
         .map(tag_paint)
         .collect::<Result<Vec<_>, _>>()?;
-    let mut out: Vec<crate::dataset::StampedPose> = Vec::new();
+    let mut out: Vec<crate::geometry::StampedPose> = Vec::new();
     for p in trajectory {
         if let Some(last) = out.last() {
             let moved = (p.pose.x - last.pose.x).hypot(p.pose.y - last.pose.y);

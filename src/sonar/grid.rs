@@ -119,16 +119,6 @@ impl GridConfig {
     }
 }
 
-/// Grid and Hough settings together: the `mapping:` section of a world or run file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(deny_unknown_fields, default)]
-pub struct MappingConfig {
-    /// Occupancy grid.
-    pub grid: GridConfig,
-    /// Hough corner features.
-    pub hough: crate::sonar::hough::HoughConfig,
-}
-
 /// What a reading says about a cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CellEvidence {

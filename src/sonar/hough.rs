@@ -27,10 +27,10 @@
 //! window boundary is not cut in two; features found in several windows are merged. Offline, one
 //! accumulator collects the whole run.
 
-use crate::sonar::grid::OccupancyMap;
-use crate::dataset::{pose_at, StampedPose};
-use crate::sonar::PlacedReading;
+use crate::geometry::{pose_at, StampedPose};
 use crate::sonar::corners::{place_peak, PeakPlace};
+use crate::sonar::grid::OccupancyMap;
+use crate::sonar::PlacedReading;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -7,9 +7,10 @@
 pub mod corners;
 pub mod grid;
 pub mod hough;
+pub mod map;
 pub mod walls;
 
-use crate::geometry::Pose2;
+use crate::geometry::{pose_at, Pose2, StampedPose};
 use serde::{Deserialize, Serialize};
 
 /// Beam width of the paper's sonars: 30 degrees.
@@ -158,4 +159,26 @@ pub struct PlacedReading {
     pub world_from_sensor: Pose2,
     /// Range, metres; `None` for no echo.
     pub range_m: Option<f64>,
+}
+
+/// Places readings in the world along a trajectory: each at the robot's pose interpolated at its
+/// time, composed with its sensor's mount. Readings of unknown sensors, or outside an empty
+/// trajectory, are left out.
+pub fn place_readings(
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+    trajectory: &[StampedPose],
+) -> Vec<PlacedReading> {
+    readings
+        .iter()
+        .filter_map(|r| {
+            let sensor = layout.sensors.get(r.sensor)?;
+            let robot = pose_at(trajectory, r.t_s)?;
+            Some(PlacedReading {
+                t_s: r.t_s,
+                world_from_sensor: robot.compose(&sensor.robot_from_sensor()),
+                range_m: r.range_m,
+            })
+        })
+        .collect()
 }

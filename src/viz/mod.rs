@@ -4,10 +4,12 @@
 //! mirror the stages (`world/walls`, `world/robot/left/image`, `world/sonar/beams`, `map/grid`,
 //! `map/hough`, `landmarks/tag_7`, `metrics/...`), and sends a default layout with the recording.
 
-use crate::fusion::{GrowthBin, Landmark, LocalizeResult, TagSighting};
+use crate::dataset::RunDataset;
+use crate::fusion::Survey;
+use crate::fusion::{Landmark, LocalizeResult, TagSighting};
+use crate::geometry::{pose_at, StampedPose};
+use crate::metrics::GrowthBin;
 use crate::sonar::grid::{CountingGrid, OccupancyGrid, OccupancyMap};
-use crate::pipeline::Survey;
-use crate::dataset::{pose_at, RunDataset, StampedPose};
 use crate::sonar::walls::WallSegment;
 use crate::world::World;
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
@@ -194,7 +196,7 @@ pub struct SurveyScene<'a> {
     /// The report's figures.
     pub metrics: &'a BTreeMap<String, f64>,
     /// The mapping settings (the online grid is rebuilt with them).
-    pub mapping: &'a crate::sonar::grid::MappingConfig,
+    pub mapping: &'a crate::sonar::map::MappingConfig,
     /// The stereo rig's cameras and mounting, when the run has pictures.
     pub rig: Option<&'a crate::camera::StereoRig>,
     /// Each stereo pair of the run as JPEG bytes (left, right) from [`jpeg_pair`], or `None`.

@@ -396,8 +396,8 @@ impl KorniaDetector {
             sharpening: self.config.sharpening,
             min_contrast: self.config.min_contrast,
         };
-        let found =
-            crate::visual::tags::quads::detect(image, families, &settings).map_err(TagError::Kornia)?;
+        let found = crate::visual::tags::quads::detect(image, families, &settings)
+            .map_err(TagError::Kornia)?;
         Ok(found
             .into_iter()
             .map(|d| TagDetection {

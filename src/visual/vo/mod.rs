@@ -963,10 +963,10 @@ impl VisualMotion {
 /// farther apart than that is left out, and the chain starts again from its second frame.
 pub fn frame_pairs(
     times: &[f64],
-    odometry: &[crate::dataset::StampedPose],
+    odometry: &[crate::geometry::StampedPose],
     config: &VoConfig,
 ) -> Vec<(usize, usize)> {
-    let pose = |t: f64| crate::dataset::pose_at(odometry, t);
+    let pose = |t: f64| crate::geometry::pose_at(odometry, t);
     let apart = |a: usize, b: usize, (m, rad): (f64, f64)| match (pose(times[a]), pose(times[b])) {
         (Some(pa), Some(pb)) => {
             let d = pa.between(&pb);
@@ -1239,8 +1239,8 @@ fn solve_planar(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::StampedPose;
     use crate::render::{RenderConfig, Renderer};
-    use crate::dataset::StampedPose;
     use std::path::Path;
 
     /// The blur in floating point, tap by tap, as it reads.

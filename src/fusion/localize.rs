@@ -1,0 +1,611 @@
+//! Localisation against a survey: the filter run over a later run with the surveyed landmarks
+//! held fixed and the sonar matched against the surveyed walls; and the survey's own tail held
+//! to its walls after the last sighting.
+
+use crate::fusion::ekf::Ekf;
+use crate::fusion::events::{events, Event};
+use crate::fusion::measurement::sighting_measurement;
+use crate::fusion::{FuseConfig, Landmark, OdometryCalibration};
+use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
+use crate::sonar::walls::WallSegment;
+use crate::sonar::{SonarLayout, SonarReading};
+use crate::visual::sightings::TagSighting;
+use crate::visual::vo::VisualTurn;
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+
+/// The result of localising a new run against a saved survey.
+#[derive(Debug, Clone)]
+pub struct LocalizeResult {
+    /// Filtered pose at each odometry time.
+    pub trajectory: Vec<StampedPose>,
+    /// Position sigma at each odometry time, metres.
+    pub sigma_m: Vec<f64>,
+    /// Distance travelled since the last fused sighting at each odometry time, metres.
+    pub since_sighting_m: Vec<f64>,
+    /// Sightings fused.
+    pub accepted: Vec<usize>,
+    /// Sightings gated out.
+    pub rejected: Vec<usize>,
+    /// Sightings of tags the survey does not hold.
+    pub unknown: Vec<usize>,
+    /// Each sonar range matched with a surveyed wall: its index in the run's readings, and whether
+    /// it was fused (else gated out: a person, a moved object, an echo off the cone's edge).
+    pub range_outcomes: Vec<(usize, bool)>,
+    /// Times the filter was found lost and started again from the sightings (seconds): see
+    /// [`RELOCALISE_AFTER`].
+    pub relocalised_t_s: Vec<f64>,
+    /// Visual turns fused.
+    pub visual_fused: usize,
+    /// Visual turns gated out.
+    pub visual_rejected: usize,
+}
+
+/// Gated-out sightings in a row, each putting the robot where the others do (within
+/// [`RELOCALISE_AGREE_M`] and [`RELOCALISE_AGREE_RAD`] once the odometry between them is
+/// accounted for), after which the filter takes itself for lost and starts again from the last
+/// of them (ours: 3; one or two can be blunders).
+pub const RELOCALISE_AFTER: usize = 3;
+/// How close the poses the gated-out sightings give must agree, metres.
+pub const RELOCALISE_AGREE_M: f64 = 0.3;
+/// How close their headings must agree, radians (about 6 degrees).
+pub const RELOCALISE_AGREE_RAD: f64 = 0.1;
+
+/// The robot pose a sighting of a surveyed landmark gives, with its covariance (the sighting's
+/// and the landmark's position noise, and the heading's carried over the distance to the tag).
+fn pose_from_sighting(s: &TagSighting, l: &Landmark, config: &FuseConfig) -> (Pose2, Matrix3<f64>) {
+    let (z, r) = sighting_measurement(s, config);
+    let theta = wrap_angle(l.yaw_rad - z.z);
+    let (st, ct) = theta.sin_cos();
+    let x = l.position_m[0] - (ct * z.x - st * z.y);
+    let y = l.position_m[1] - (st * z.x + ct * z.y);
+    let yaw_var = r[(2, 2)] + config.yaw_sigma_floor_rad.powi(2);
+    let c = &l.covariance_m2;
+    let pos_var =
+        0.5 * (r[(0, 0)] + r[(1, 1)] + c[0][0] + c[1][1]) + (z.x * z.x + z.y * z.y) * yaw_var;
+    (
+        Pose2::new(x, y, theta),
+        Matrix3::from_diagonal(&Vector3::new(pos_var, pos_var, yaw_var)),
+    )
+}
+
+impl LocalizeResult {
+    /// Sonar ranges fused against a surveyed wall.
+    pub fn ranges_fused(&self) -> usize {
+        self.range_outcomes.iter().filter(|r| r.1).count()
+    }
+
+    /// Sonar ranges matched with a surveyed wall that failed the gate.
+    pub fn ranges_gated_out(&self) -> usize {
+        self.range_outcomes.len() - self.ranges_fused()
+    }
+}
+
+/// A run's sonar and the surveyed walls its ranges are matched against when localising.
+#[derive(Debug, Clone, Copy)]
+pub struct SonarInput<'a> {
+    /// The run's readings.
+    pub readings: &'a [SonarReading],
+    /// Where the run's sonars sit.
+    pub layout: &'a SonarLayout,
+    /// The survey's walls (`walls_corrected.csv`).
+    pub walls: &'a [WallSegment],
+}
+
+/// A wall face is used only when its normal is this far inside the beam's half-cone: 2 degrees
+/// (outside the cone the echo comes off the cone's edge, longer than the perpendicular).
+pub const WALL_CONE_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// ... and the foot of the perpendicular this far inside the face's ends: 5 cm.
+pub const WALL_INSET_M: f64 = 0.05;
+
+/// A sonar range matched with a surveyed wall face.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallMatch {
+    /// The face's index in [`SonarInput::walls`].
+    pub wall: usize,
+    /// The range measured, metres.
+    pub range_m: f64,
+    /// The range expected off the face from the pose given, metres.
+    pub expected_m: f64,
+}
+
+/// The surveyed wall face a sonar range taken at `world_from_robot` is matched with, as
+/// [`localize`] matches it: the nearest face whose normal lies [`WALL_CONE_MARGIN_RAD`] inside
+/// the beam and whose foot of the perpendicular lies [`WALL_INSET_M`] inside its ends. `None`
+/// for no echo, an echo at the sensor's largest range, an unknown sensor, no face in the beam,
+/// or a nearest face beyond the sensor's largest range (it cannot have sent the echo).
+pub fn wall_in_beam(
+    sonar: &SonarInput<'_>,
+    reading: &SonarReading,
+    world_from_robot: Pose2,
+) -> Option<WallMatch> {
+    let range = reading.range_m?;
+    let sensor = sonar.layout.sensors.get(reading.sensor)?;
+    if range >= sonar.layout.max_range_m - 1e-6 {
+        return None;
+    }
+    let at = world_from_robot.compose(&sensor.robot_from_sensor());
+    let half = 0.5 * sonar.layout.cone_rad - WALL_CONE_MARGIN_RAD;
+    sonar
+        .walls
+        .iter()
+        .enumerate()
+        .filter_map(|(i, w)| {
+            w.expected_range([at.x, at.y], at.theta, half, WALL_INSET_M)
+                .map(|expected_m| WallMatch {
+                    wall: i,
+                    range_m: range,
+                    expected_m,
+                })
+        })
+        .min_by(|a, b| a.expected_m.total_cmp(&b.expected_m))
+        .filter(|m| m.expected_m < sonar.layout.max_range_m)
+}
+
+/// Fuses one sonar range against the nearest surveyed wall face in the beam; `Some(fused)` when
+/// a face is in the beam, `None` when there is none (or the filter already knows its distance to
+/// it better than the wall is known).
+fn fuse_range(
+    ekf: &mut Ekf,
+    reading: &SonarReading,
+    sonar: &SonarInput<'_>,
+    config: &FuseConfig,
+) -> Option<bool> {
+    let pose = ekf.pose();
+    let m = wall_in_beam(sonar, reading, pose)?;
+    let (range, expected) = (m.range_m, m.expected_m);
+    let wall = sonar.walls.get(m.wall)?;
+    let sensor = sonar.layout.sensors.get(reading.sensor)?;
+    // range = n . (p + R(theta) o) - offset.
+    let n = wall.normal();
+    let (st, ct) = pose.theta.sin_cos();
+    let (ox, oy) = (sensor.x_m, sensor.y_m);
+    let h = Vector3::new(
+        n[0],
+        n[1],
+        n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy),
+    );
+    let known = (h.transpose() * ekf.p.fixed_view::<3, 3>(0, 0) * h)[0];
+    if known < config.wall_sigma_m.powi(2) || known > config.sonar_max_range_sigma_m.powi(2) {
+        return None;
+    }
+    let r = (config.sonar_sigma_m + config.sonar_sigma_frac * range).powi(2)
+        + config.wall_sigma_m.powi(2);
+    Some(ekf.update_scalar(range - expected, &h, r, config.sonar_gate_chi2))
+}
+
+/// Tracks a run's pose against surveyed landmarks held fixed (their covariance is added to each
+/// sighting's) and, with `sonar`, its ranges against the surveyed walls (each range whose beam
+/// holds a wall face's normal measures the distance to it): the method's long-term use. The run
+/// starts at its odometry's first pose in the survey's frame (the robot leaves from the same
+/// place).
+pub fn localize(
+    odometry: &[StampedPose],
+    visual: &[VisualTurn],
+    sightings: &[TagSighting],
+    landmarks: &[Landmark],
+    sonar: Option<SonarInput<'_>>,
+    config: &FuseConfig,
+) -> LocalizeResult {
+    let (mut ekf, start) = Ekf::at_start(odometry);
+    let first_t = odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
+    let mut pending = events(sightings, visual, first_t, config)
+        .into_iter()
+        .peekable();
+    let mut cloned_for: Option<usize> = None;
+    let mut ranges: Vec<(usize, &SonarReading)> =
+        sonar.map_or(Vec::new(), |s| s.readings.iter().enumerate().collect());
+    ranges.sort_by(|a, b| a.1.t_s.total_cmp(&b.1.t_s));
+    let mut ranges = ranges.into_iter().peekable();
+    let mut out = LocalizeResult {
+        trajectory: Vec::with_capacity(odometry.len()),
+        sigma_m: Vec::with_capacity(odometry.len()),
+        since_sighting_m: Vec::with_capacity(odometry.len()),
+        accepted: Vec::new(),
+        rejected: Vec::new(),
+        unknown: Vec::new(),
+        range_outcomes: Vec::new(),
+        relocalised_t_s: Vec::new(),
+        visual_fused: 0,
+        visual_rejected: 0,
+    };
+    let mut last = start;
+    let mut travelled = 0.0;
+    // Gated-out sightings since the last fused one: the pose each gives and the odometry then.
+    let mut lost: Vec<(Pose2, Pose2)> = Vec::new();
+    for sample in odometry {
+        while let Some(&(t, event)) = pending.peek() {
+            if t > sample.t_s {
+                break;
+            }
+            pending.next();
+            let odom = pose_at(odometry, t).unwrap_or(sample.pose);
+            travelled += ekf.advance(&mut last, odom, config);
+            let k = match event {
+                Event::TurnStarts(j) => {
+                    ekf.clone_heading();
+                    cloned_for = Some(j);
+                    continue;
+                }
+                Event::TurnEnds(j) => {
+                    if cloned_for == Some(j) {
+                        let v = &visual[j];
+                        if ekf.update_turn(v.turn_rad, v.sigma_rad.powi(2), config.visual_gate_chi2)
+                        {
+                            out.visual_fused += 1;
+                        } else {
+                            out.visual_rejected += 1;
+                        }
+                    }
+                    ekf.drop_clone();
+                    cloned_for = None;
+                    continue;
+                }
+                Event::Sighting(k) => k,
+            };
+            // A sighting updates the pose alone: a heading copy is let go (the turn under way is
+            // not fused).
+            ekf.drop_clone();
+            cloned_for = None;
+            let s = &sightings[k];
+            let Some(l) = landmarks
+                .iter()
+                .find(|l| l.id == s.id && l.family == s.family)
+            else {
+                out.unknown.push(k);
+                continue;
+            };
+            // The landmark as a fixed state slot: a pose-only filter with the landmark's
+            // uncertainty moved into the measurement noise.
+            let mut full = Ekf {
+                x: DVector::from_vec(vec![
+                    ekf.x[0],
+                    ekf.x[1],
+                    ekf.x[2],
+                    l.position_m[0],
+                    l.position_m[1],
+                    l.yaw_rad,
+                ]),
+                p: DMatrix::zeros(6, 6),
+                slots: vec![(l.family.clone(), l.id)],
+            };
+            full.p
+                .fixed_view_mut::<3, 3>(0, 0)
+                .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
+            let c = &l.covariance_m2;
+            full.p[(3, 3)] = c[0][0];
+            full.p[(3, 4)] = c[0][1];
+            full.p[(4, 3)] = c[1][0];
+            full.p[(4, 4)] = c[1][1];
+            full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
+            let (z, r) = sighting_measurement(s, config);
+            let (y, sm, jac) = full.innovation(0, &z, &r);
+            let d2 = sm
+                .try_inverse()
+                .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
+            if d2 > config.gate_chi2 {
+                out.rejected.push(k);
+                let (pose, cov) = pose_from_sighting(s, l, config);
+                lost.push((pose, odom));
+                let agree = lost.len() >= RELOCALISE_AFTER
+                    && lost[lost.len() - RELOCALISE_AFTER..].iter().all(|(p, o)| {
+                        let moved = p.compose(&o.between(&odom));
+                        (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
+                            && wrap_angle(moved.theta - pose.theta).abs() <= RELOCALISE_AGREE_RAD
+                    });
+                if agree {
+                    ekf.x[0] = pose.x;
+                    ekf.x[1] = pose.y;
+                    ekf.x[2] = pose.theta;
+                    ekf.p.copy_from(&cov);
+                    out.relocalised_t_s.push(s.t_s);
+                    lost.clear();
+                    travelled = 0.0;
+                }
+                continue;
+            }
+            full.update(&y, &sm, &jac, &r);
+            ekf.x.copy_from(&full.x.rows(0, 3));
+            ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
+            out.accepted.push(k);
+            lost.clear();
+            travelled = 0.0;
+        }
+        travelled += ekf.advance(&mut last, sample.pose, config);
+        // The sonar sampled with this odometry pose (or before it).
+        while let Some((i, reading)) = ranges.next_if(|r| r.1.t_s <= sample.t_s) {
+            if let Some(fused) = sonar.and_then(|s| fuse_range(&mut ekf, reading, &s, config)) {
+                out.range_outcomes.push((i, fused));
+            }
+        }
+        out.trajectory.push(StampedPose {
+            t_s: sample.t_s,
+            pose: ekf.pose(),
+        });
+        out.sigma_m.push(ekf.position_sigma_m());
+        out.since_sighting_m.push(travelled);
+    }
+    out
+}
+
+/// Holds the end of a survey's offline trajectory, after its last fused sighting at `last_t_s`, to
+/// walls mapped from the readings before it: from the offline pose there, the filter of
+/// [`localize`] runs on the rest of the odometry (corrected with `calibration`, and then
+/// predicted with [`FuseConfig::for_calibrated_odometry`] as `localize` does) with the ranges
+/// taken after it. Until then the offline graph has nothing but odometry there. `sonar` holds the
+/// run's readings and the walls; the trajectory is returned whole.
+pub fn hold_tail_to_walls(
+    odometry: &[StampedPose],
+    visual: &[VisualTurn],
+    offline: &[StampedPose],
+    last_t_s: f64,
+    calibration: Option<&OdometryCalibration>,
+    sonar: SonarInput<'_>,
+    config: &FuseConfig,
+) -> Vec<StampedPose> {
+    let start = odometry.partition_point(|p| p.t_s < last_t_s);
+    if start + 1 >= odometry.len() || start >= offline.len() || sonar.walls.is_empty() {
+        return offline.to_vec();
+    }
+    let tail = &odometry[start..];
+    let tail = calibration.map_or_else(|| tail.to_vec(), |c| c.apply(tail));
+    let anchor = offline[start].pose.compose(&tail[0].pose.inverse());
+    let tail: Vec<StampedPose> = tail
+        .iter()
+        .map(|p| StampedPose {
+            t_s: p.t_s,
+            pose: anchor.compose(&p.pose),
+        })
+        .collect();
+    let readings: Vec<SonarReading> = sonar
+        .readings
+        .iter()
+        .filter(|r| r.t_s > tail[0].t_s)
+        .copied()
+        .collect();
+    let held = localize(
+        &tail,
+        visual,
+        &[],
+        &[],
+        Some(SonarInput {
+            readings: &readings,
+            ..sonar
+        }),
+        &match calibration {
+            Some(_) => config.for_calibrated_odometry(),
+            None => config.clone(),
+        },
+    );
+    let mut out = offline[..start].to_vec();
+    out.extend(held.trajectory);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fusion::testing::{corridor, square_run};
+    use crate::fusion::{run_offline, run_online};
+    use crate::metrics::ate_m;
+
+    /// Along the corridor, with the wall's ranges (left sonar 0.2 m off centre) the filter stays
+    /// on its line; without them it ends half a metre off.
+    #[test]
+    fn ranges_off_a_surveyed_wall_hold_the_robot_to_it() {
+        let (layout, wall, odometry, truth, readings) = corridor();
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: std::slice::from_ref(&wall),
+        };
+        let config = FuseConfig::default();
+        let with = localize(&odometry, &[], &[], &[], Some(sonar), &config);
+        let without = localize(&odometry, &[], &[], &[], None, &config);
+        let end = |r: &LocalizeResult| r.trajectory.last().unwrap().pose.y;
+        assert!(end(&without).abs() > 0.4, "{}", end(&without));
+        assert!(end(&with).abs() < 0.03, "{}", end(&with));
+        assert!(with.ranges_fused() > 10 && with.ranges_gated_out() == 0);
+        assert!(ate_m(&with.trajectory, &truth).unwrap() < 0.03);
+    }
+
+    /// A robot whose odometry jumps (a wheel slip, a kidnap) has its sightings gated out; three in
+    /// a row that agree put it back where they say.
+    #[test]
+    fn a_lost_filter_starts_again_from_sightings_that_agree() {
+        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig::default();
+        let online = run_online(&odom, &sightings, &[], &config);
+        let survey = run_offline(&odom, &[], &sightings, &online, &config);
+        // Halfway round, the odometry jumps 1 m to the robot's left.
+        let half = odom.len() / 2;
+        let jump = odom[half].pose.compose(&Pose2::new(0.0, 1.0, 0.0));
+        let jumped: Vec<StampedPose> = odom
+            .iter()
+            .enumerate()
+            .map(|(i, p)| StampedPose {
+                t_s: p.t_s,
+                pose: if i < half {
+                    p.pose
+                } else {
+                    jump.compose(&odom[half].pose.between(&p.pose))
+                },
+            })
+            .collect();
+        let result = localize(&jumped, &[], &sightings, &survey.landmarks, None, &config);
+        assert_eq!(
+            result.relocalised_t_s.len(),
+            1,
+            "{:?}",
+            result.relocalised_t_s
+        );
+        assert!(result.relocalised_t_s[0] > odom[half].t_s);
+        let (end, gt) = (
+            result.trajectory.last().unwrap().pose,
+            truth.last().unwrap().pose,
+        );
+        let error = (end.x - gt.x).hypot(end.y - gt.y);
+        assert!(error < 0.05, "{error} m off at the end");
+    }
+
+    /// The face a range is matched with: the nearest one in the beam, none without an echo.
+    #[test]
+    fn a_range_is_matched_with_the_nearest_face_in_its_beam() {
+        let (layout, wall, _, _, readings) = corridor();
+        // A nearer face across the same beam, and a still nearer one behind the sensor (facing
+        // it, but not in the beam's direction).
+        let nearer = WallSegment {
+            offset_m: -0.35,
+            from_m: [2.0, 0.35],
+            to_m: [4.0, 0.35],
+            ..wall
+        };
+        let behind = WallSegment {
+            normal_rad: 0.5 * std::f64::consts::PI,
+            offset_m: 0.0,
+            from_m: [-1.0, 0.0],
+            to_m: [11.0, 0.0],
+            ..wall
+        };
+        let walls = [wall, nearer, behind];
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: &walls,
+        };
+        let reading = readings[0];
+        let m = wall_in_beam(&sonar, &reading, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        assert_eq!(m.wall, 0);
+        assert!((m.expected_m - 0.3).abs() < 1e-12, "{m:?}");
+        assert_eq!(m.range_m, reading.range_m.unwrap());
+        let m = wall_in_beam(&sonar, &reading, Pose2::new(3.0, 0.0, 0.0)).unwrap();
+        assert_eq!(m.wall, 1);
+        assert!((m.expected_m - 0.15).abs() < 1e-12, "{m:?}");
+        // Past the nearer face's end (less its inset) the far wall is matched again.
+        let m = wall_in_beam(&sonar, &reading, Pose2::new(3.97, 0.0, 0.0)).unwrap();
+        assert_eq!(m.wall, 0);
+        // Turned 20 degrees, the wall's normal is outside the beam less its margin.
+        assert_eq!(
+            wall_in_beam(&sonar, &reading, Pose2::new(0.0, 0.0, 20f64.to_radians())),
+            None
+        );
+        let none = SonarReading {
+            range_m: None,
+            ..reading
+        };
+        assert_eq!(wall_in_beam(&sonar, &none, Pose2::new(0.0, 0.0, 0.0)), None);
+        let at_max = SonarReading {
+            range_m: Some(layout.max_range_m),
+            ..reading
+        };
+        assert_eq!(
+            wall_in_beam(&sonar, &at_max, Pose2::new(0.0, 0.0, 0.0)),
+            None
+        );
+        // A face beyond the sensor's reach cannot have sent the echo.
+        let far = WallSegment {
+            offset_m: wall.offset_m - layout.max_range_m,
+            from_m: [-1.0, 0.5 + layout.max_range_m],
+            to_m: [11.0, 0.5 + layout.max_range_m],
+            ..wall
+        };
+        let m = far.expected_range([0.0, 0.2], 0.5 * std::f64::consts::PI, 0.1, 0.0);
+        assert!(m.is_some_and(|e| e > layout.max_range_m), "{m:?}");
+        let beyond = SonarInput {
+            walls: std::slice::from_ref(&far),
+            ..sonar
+        };
+        assert_eq!(
+            wall_in_beam(&beyond, &reading, Pose2::new(0.0, 0.0, 0.0)),
+            None
+        );
+        let unknown = SonarReading {
+            sensor: 3,
+            ..reading
+        };
+        assert_eq!(
+            wall_in_beam(&sonar, &unknown, Pose2::new(0.0, 0.0, 0.0)),
+            None
+        );
+    }
+
+    /// A range is not fused while the filter knows its distance to the wall worse than
+    /// `sonar_max_range_sigma_m`: the face it would be matched with may be the wrong one.
+    #[test]
+    fn a_lost_filter_does_not_fuse_ranges() {
+        let (layout, wall, odometry, _, readings) = corridor();
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: std::slice::from_ref(&wall),
+        };
+        let config = FuseConfig::default();
+        for (sigma, fused) in [(0.05, true), (0.5, false)] {
+            let (mut ekf, _) = Ekf::at_start(&odometry);
+            ekf.p = DMatrix::identity(3, 3) * (sigma * sigma);
+            ekf.p[(2, 2)] = 1e-6;
+            let before = ekf.x.clone();
+            let outcome = fuse_range(&mut ekf, &readings[0], &sonar, &config);
+            assert_eq!(outcome.is_some(), fused, "sigma {sigma}: {outcome:?}");
+            assert_eq!(ekf.x == before, !fused, "sigma {sigma}");
+        }
+    }
+
+    /// A survey whose last sighting came 2 m into the corridor: its offline trajectory is right
+    /// until then and drifts after; held to the wall, the end stays on the line and the part
+    /// before the sighting is kept as it was.
+    #[test]
+    fn the_tail_after_the_last_sighting_is_held_to_the_walls() {
+        let (layout, wall, odometry, truth, readings) = corridor();
+        let last_t_s = 40.0;
+        let k = 40;
+        let anchor = truth[k].pose.compose(&odometry[k].pose.inverse());
+        let offline: Vec<StampedPose> = (0..odometry.len())
+            .map(|i| {
+                if i <= k {
+                    truth[i]
+                } else {
+                    StampedPose {
+                        t_s: odometry[i].t_s,
+                        pose: anchor.compose(&odometry[i].pose),
+                    }
+                }
+            })
+            .collect();
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: std::slice::from_ref(&wall),
+        };
+        let held = hold_tail_to_walls(
+            &odometry,
+            &[],
+            &offline,
+            last_t_s,
+            None,
+            sonar,
+            &FuseConfig::default(),
+        );
+        assert_eq!(held.len(), offline.len());
+        assert_eq!(&held[..k], &offline[..k]);
+        let end = |t: &[StampedPose]| t.last().unwrap().pose.y;
+        assert!(end(&offline).abs() > 0.3, "{}", end(&offline));
+        assert!(end(&held).abs() < 0.03, "{}", end(&held));
+    }
+
+    #[test]
+    fn localisation_against_a_survey_bounds_the_drift() {
+        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig::default();
+        let online = run_online(&odom, &sightings, &[], &config);
+        let survey = run_offline(&odom, &[], &sightings, &online, &config);
+        // A second run with the same drift, localised against the first run's landmarks.
+        let result = localize(&odom, &[], &sightings, &survey.landmarks, None, &config);
+        let ate = ate_m(&result.trajectory, &truth).unwrap();
+        assert!(
+            ate < 0.2 * ate_m(&odom, &truth).unwrap(),
+            "localised ATE {ate}"
+        );
+        assert!(result.rejected.is_empty() && result.unknown.is_empty());
+        assert!(result.since_sighting_m.contains(&0.0));
+    }
+}

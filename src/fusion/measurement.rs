@@ -1,0 +1,40 @@
+//! The measurement models of the fusion stage: a sighting as a planar measurement of its tag in
+//! the robot frame, and the noise of an odometry increment.
+
+use crate::fusion::FuseConfig;
+use crate::visual::sightings::TagSighting;
+use nalgebra::{Matrix3, Vector3};
+
+/// Odometry noise of one increment, in the frame of its start.
+pub(crate) fn odometry_covariance(path_m: f64, turn_rad: f64, config: &FuseConfig) -> Matrix3<f64> {
+    let vt = config.odometry_sigma_m_per_sqrt_m.powi(2) * path_m;
+    let vh = config.heading_sigma_per_sqrt_rad.powi(2) * turn_rad
+        + config.heading_sigma_per_sqrt_m.powi(2) * path_m;
+    Matrix3::from_diagonal(&Vector3::new(vt + 1e-12, vt + 1e-12, vh + 1e-12))
+}
+/// The planar measurement `(x, y, ψ)` and its covariance, with the configured floors.
+pub(crate) fn sighting_measurement(
+    s: &TagSighting,
+    config: &FuseConfig,
+) -> (Vector3<f64>, Matrix3<f64>) {
+    let z = Vector3::new(
+        s.position_in_robot_m[0],
+        s.position_in_robot_m[1],
+        s.yaw_in_robot_rad,
+    );
+    let floor = config.sighting_sigma_floor_m.powi(2);
+    let c = &s.covariance_m2;
+    let yaw_sigma = s.yaw_sigma_rad.max(config.yaw_sigma_floor_rad);
+    let r = Matrix3::new(
+        c[0][0] + floor,
+        c[0][1],
+        0.0,
+        c[1][0],
+        c[1][1] + floor,
+        0.0,
+        0.0,
+        0.0,
+        yaw_sigma * yaw_sigma,
+    );
+    (z, r)
+}

@@ -1,0 +1,146 @@
+//! The survey end to end over a run: the online filter, the offline pass, the tail held to the
+//! walls, and the map rebuilt from the corrected trajectory, its corners matched with the
+//! landmarks.
+
+use crate::dataset::RunDataset;
+use crate::fusion::{
+    associate, hold_tail_to_walls, run_offline, run_online_calibrated, FuseConfig, Landmark,
+    OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
+};
+use crate::sonar::grid::OccupancyMap;
+use crate::sonar::map::{
+    counting_map, counting_map_along, map_trajectory, timed, MapError, MappingConfig, SonarMap,
+};
+use crate::sonar::walls::map_walls;
+use crate::visual::sightings::TagSighting;
+use crate::visual::vo::VisualTurn;
+use std::collections::BTreeMap;
+
+/// Everything a survey produces.
+#[derive(Debug, Clone)]
+pub struct Survey {
+    /// The grid and features with odometry poses (what the robot had while it ran).
+    pub raw: SonarMap,
+    /// The online filter.
+    pub online: OnlineResult,
+    /// The counting grid with the online filter's poses: the map the robot had while it ran.
+    pub online_map: OccupancyMap,
+    /// The offline pose graph.
+    pub offline: OfflineResult,
+    /// The grid and features rebuilt from the offline trajectory.
+    pub corrected: SonarMap,
+    /// The surveyed landmarks (offline positions, matched with the corrected map's corners).
+    pub landmarks: Vec<Landmark>,
+    /// The turns the cameras measured between pictures, as fused.
+    pub visual: Vec<VisualTurn>,
+    /// Seconds per stage.
+    pub timings_s: BTreeMap<String, f64>,
+}
+
+/// Runs the survey over a run, its [`raw_map`], its tag sightings and the turns its cameras
+/// measured: online filter (predicting with `calibration` until it finds the run's own, when an
+/// earlier survey of the robot gives one), offline pass, and the map rebuilt from the corrected
+/// poses.
+pub fn survey(
+    run: &RunDataset,
+    raw: SonarMap,
+    (sightings, visual): (&[TagSighting], &[VisualTurn]),
+    mapping: &MappingConfig,
+    fuse: &FuseConfig,
+    calibration: Option<OdometryCalibration>,
+) -> Result<Survey, MapError> {
+    let mut timings_s = BTreeMap::new();
+    let times = &mut timings_s;
+    let online = timed("fuse_online", times, || {
+        run_online_calibrated(
+            &run.odometry,
+            visual,
+            sightings,
+            &raw.features_online,
+            fuse,
+            calibration,
+        )
+    });
+    let online_map = timed("map_online", times, || {
+        counting_map_along(run, &online.trajectory, mapping)
+    })?;
+    let mut offline = timed("fuse_offline", times, || {
+        run_offline(&run.odometry, visual, sightings, &online, fuse)
+    });
+    if fuse.hold_tail_to_walls {
+        timed("fuse_tail", times, || {
+            hold_tail(run, sightings, visual, &online, &mut offline, mapping, fuse)
+        })?;
+    }
+    let corrected = timed("map_corrected", times, || {
+        map_trajectory(run, &offline.trajectory, mapping)
+    })?;
+    let landmarks = offline
+        .landmarks
+        .iter()
+        .map(|l| {
+            let mut l = l.clone();
+            let xy = nalgebra::Vector2::new(l.position_m[0], l.position_m[1]);
+            let c = &l.covariance_m2;
+            let cov = nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]);
+            l.matched_corner = associate(&xy, &cov, &corrected.features_offline, fuse);
+            l
+        })
+        .collect();
+    Ok(Survey {
+        raw,
+        online,
+        online_map,
+        offline,
+        corrected,
+        landmarks,
+        visual: visual.to_vec(),
+        timings_s,
+    })
+}
+
+/// [`hold_tail_to_walls`] on a survey's offline trajectory, with the walls of the readings placed
+/// along it up to the last fused sighting.
+fn hold_tail(
+    run: &RunDataset,
+    sightings: &[TagSighting],
+    visual: &[VisualTurn],
+    online: &OnlineResult,
+    offline: &mut OfflineResult,
+    mapping: &MappingConfig,
+    fuse: &FuseConfig,
+) -> Result<(), MapError> {
+    let Some(last_t) = online
+        .accepted
+        .iter()
+        .map(|&k| sightings[k].t_s)
+        .max_by(f64::total_cmp)
+    else {
+        return Ok(());
+    };
+    if run.odometry.last().is_none_or(|p| p.t_s <= last_t) {
+        return Ok(()); // the run ends at its last sighting: no tail to hold
+    }
+    let layout = &run.meta.robot.sonar;
+    let readings: Vec<_> = run
+        .placed_readings(&offline.trajectory)
+        .into_iter()
+        .filter(|r| r.t_s <= last_t)
+        .collect();
+    let grid = counting_map(run, &readings, mapping)?;
+    let walls = map_walls(&readings, 0.5 * layout.cone_rad, layout.max_range_m, &grid);
+    offline.trajectory = hold_tail_to_walls(
+        &run.odometry,
+        visual,
+        &offline.trajectory,
+        last_t,
+        offline.odometry_calibration.as_ref(),
+        SonarInput {
+            readings: &run.sonar,
+            layout,
+            walls: &walls,
+        },
+        fuse,
+    );
+    Ok(())
+}

@@ -1,0 +1,59 @@
+//! How a localised run's error grows with the distance travelled since the last sighting.
+
+use crate::fusion::LocalizeResult;
+use crate::geometry::{pose_at, StampedPose};
+use serde::Serialize;
+
+/// Error statistics of a localised run over one band of distance since the last sighting.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GrowthBin {
+    /// Band start, metres travelled since the last fused sighting.
+    pub from_m: f64,
+    /// Band end, metres.
+    pub to_m: f64,
+    /// Odometry samples in the band.
+    pub samples: usize,
+    /// Mean filter sigma, metres.
+    pub mean_sigma_m: f64,
+    /// RMS position error against ground truth, metres (`None` without ground truth).
+    pub rms_error_m: Option<f64>,
+}
+
+/// Bands of distance since the last sighting used by [`error_growth`], metres.
+pub const GROWTH_BANDS_M: [f64; 7] = [0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
+
+/// How the error grows with the distance travelled since the last sighting.
+pub fn error_growth(result: &LocalizeResult, truth: Option<&[StampedPose]>) -> Vec<GrowthBin> {
+    let mut bins: Vec<GrowthBin> = GROWTH_BANDS_M
+        .iter()
+        .enumerate()
+        .map(|(i, &from_m)| GrowthBin {
+            from_m,
+            to_m: GROWTH_BANDS_M.get(i + 1).copied().unwrap_or(f64::INFINITY),
+            samples: 0,
+            mean_sigma_m: 0.0,
+            rms_error_m: truth.map(|_| 0.0),
+        })
+        .collect();
+    for (i, p) in result.trajectory.iter().enumerate() {
+        let d = result.since_sighting_m.get(i).copied().unwrap_or(0.0);
+        let Some(bin) = bins.iter_mut().find(|b| d >= b.from_m && d < b.to_m) else {
+            continue;
+        };
+        bin.samples += 1;
+        bin.mean_sigma_m += result.sigma_m.get(i).copied().unwrap_or(0.0);
+        if let (Some(sum), Some(gt)) = (
+            bin.rms_error_m.as_mut(),
+            truth.and_then(|t| pose_at(t, p.t_s)),
+        ) {
+            *sum += (p.pose.x - gt.x).powi(2) + (p.pose.y - gt.y).powi(2);
+        }
+    }
+    for b in &mut bins {
+        let n = b.samples.max(1) as f64;
+        b.mean_sigma_m /= n;
+        b.rms_error_m = b.rms_error_m.map(|s| (s / n).sqrt());
+    }
+    bins.retain(|b| b.samples > 0);
+    bins
+}

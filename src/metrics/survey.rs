@@ -1,0 +1,265 @@
+//! A survey's figures: with the world and ground truth, map and feature scores, ATE of each
+//! trajectory, landmark errors and visual-turn errors; without them, what was fused and found.
+
+use crate::dataset::RunDataset;
+use crate::fusion::Survey;
+use crate::geometry::{Pose2, StampedPose};
+use crate::metrics::map::{score_features, score_map, FeatureScore, MapScore};
+use crate::metrics::{align_se2, ate_m};
+use crate::sonar::map::{counting_map_along, MapError, MappingConfig, SonarMap};
+use crate::world::World;
+use std::collections::BTreeMap;
+
+/// Scores of a [`SonarMap`] against a world.
+#[derive(Debug, Clone)]
+pub struct SonarScores {
+    /// Counting grid.
+    pub counting: MapScore,
+    /// Log-odds grid.
+    pub log_odds: MapScore,
+    /// Online features.
+    pub features_online: FeatureScore,
+    /// Offline features.
+    pub features_offline: FeatureScore,
+}
+
+/// Scores a survey against the world and the run's ground truth: the sonar scores of the raw map,
+/// the corrected map and the map built with ground-truth poses; ATE of each trajectory; the
+/// landmark position errors.
+pub fn score_survey(
+    survey: &Survey,
+    run: &RunDataset,
+    world: &World,
+    mapping: &MappingConfig,
+) -> Result<BTreeMap<String, f64>, MapError> {
+    let mut m = score_sonar_map(&survey.raw, run, world).metrics();
+    let online = score_map(&survey.online_map, world);
+    m.insert(
+        "map_online.occupied_precision".into(),
+        online.occupied_precision,
+    );
+    m.insert("map_online.occupied_recall".into(), online.occupied_recall);
+    let corrected = score_map(&survey.corrected.counting, world);
+    m.insert(
+        "map_corrected.occupied_precision".into(),
+        corrected.occupied_precision,
+    );
+    m.insert(
+        "map_corrected.occupied_recall".into(),
+        corrected.occupied_recall,
+    );
+    if let Some(truth) = &run.ground_truth {
+        // Only its counting grid is scored: not the Hough passes and walls a full map builds.
+        let gt_map = counting_map_along(run, truth, mapping)?;
+        let gt = score_map(&gt_map, world);
+        m.insert(
+            "map_ground_truth.occupied_precision".into(),
+            gt.occupied_precision,
+        );
+        m.insert(
+            "map_ground_truth.occupied_recall".into(),
+            gt.occupied_recall,
+        );
+        for (key, estimate) in [
+            ("ate_m.odometry", &run.odometry),
+            ("ate_m.online", &survey.online.trajectory),
+            ("ate_m.offline", &survey.offline.trajectory),
+        ] {
+            if let Some(ate) = ate_m(estimate, truth) {
+                m.insert(key.into(), ate);
+            }
+        }
+    }
+    let landmark_errors = |align: Pose2| -> Vec<f64> {
+        let mut errors: Vec<f64> = survey
+            .landmarks
+            .iter()
+            .filter_map(|l| {
+                let tag = world
+                    .tags
+                    .iter()
+                    .find(|t| t.id == l.id && t.family == l.family)?;
+                let p =
+                    align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
+                let d = nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
+                    - nalgebra::Vector3::from(tag.position_m);
+                Some(d.norm())
+            })
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        errors
+    };
+    let errors = landmark_errors(Pose2::new(0.0, 0.0, 0.0));
+    if let Some(median) = median_sorted(&errors) {
+        m.insert("landmarks.median_error_m".into(), median);
+        m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
+    }
+    // Diagnostics: the same after the best rigid alignment of the offline trajectory with the
+    // truth, i.e. with the shift and turn of the whole survey (its anchoring) taken out.
+    if let Some(align) = run
+        .ground_truth
+        .as_deref()
+        .and_then(|t| align_se2(&survey.offline.trajectory, t))
+    {
+        if let Some(median) = median_sorted(&landmark_errors(align)) {
+            m.insert("landmarks.median_error_aligned_m".into(), median);
+        }
+        let aligned: Vec<StampedPose> = survey
+            .offline
+            .trajectory
+            .iter()
+            .map(|p| StampedPose {
+                t_s: p.t_s,
+                pose: align.compose(&p.pose),
+            })
+            .collect();
+        if let Some(ate) = run.ground_truth.as_deref().and_then(|t| ate_m(&aligned, t)) {
+            m.insert("ate_m.offline_aligned".into(), ate);
+        }
+    }
+    if let Some(truth) = run.ground_truth.as_deref() {
+        let errors: Vec<(f64, f64)> = survey
+            .visual
+            .iter()
+            .filter_map(|v| {
+                let a = crate::geometry::pose_at(truth, v.from_t_s)?;
+                let b = crate::geometry::pose_at(truth, v.to_t_s)?;
+                let e = crate::geometry::wrap_angle(v.turn_rad - (b.theta - a.theta));
+                Some((e, v.sigma_rad))
+            })
+            .collect();
+        if !errors.is_empty() {
+            let n = errors.len() as f64;
+            let rms = (errors.iter().map(|(e, _)| e * e).sum::<f64>() / n).sqrt();
+            let nees = errors.iter().map(|(e, s)| (e / s).powi(2)).sum::<f64>() / n;
+            m.insert("visual.turn_error_rms_deg".into(), rms.to_degrees());
+            m.insert("visual.turn_nees".into(), nees);
+        }
+    }
+    m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
+    m.insert("landmarks.planned".into(), world.tags.len() as f64);
+    Ok(m)
+}
+
+/// Median of a sorted list.
+fn median_sorted(v: &[f64]) -> Option<f64> {
+    let n = v.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(v[n / 2]),
+        _ => Some(0.5 * (v[n / 2 - 1] + v[n / 2])),
+    }
+}
+
+/// Survey figures that need no ground truth.
+pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64> {
+    let mut m = BTreeMap::new();
+    m.insert("sightings.total".into(), sightings as f64);
+    m.insert("echoes".into(), survey.raw.echoes as f64);
+    m.insert("echoes.off_grid".into(), survey.raw.echoes_off_grid as f64);
+    m.insert(
+        "sightings.fused".into(),
+        survey.online.accepted.len() as f64,
+    );
+    m.insert(
+        "sightings.gated_out".into(),
+        survey.online.rejected.len() as f64,
+    );
+    m.insert("conflicts".into(), survey.online.conflicts.len() as f64);
+    m.insert(
+        "online.resolves".into(),
+        survey.online.resolves.len() as f64,
+    );
+    m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
+    m.insert(
+        "landmarks.matched_corners".into(),
+        survey
+            .landmarks
+            .iter()
+            .filter(|l| l.matched_corner.is_some())
+            .count() as f64,
+    );
+    m.insert("visual.turns".into(), survey.visual.len() as f64);
+    m.insert(
+        "visual.fused_online".into(),
+        survey.online.visual_fused as f64,
+    );
+    m.insert(
+        "visual.gated_out_online".into(),
+        survey.online.visual_rejected as f64,
+    );
+    m.insert("offline.keyframes".into(), survey.offline.keyframes as f64);
+    m.insert("offline.factors".into(), survey.offline.factors as f64);
+    if let Some(c) = survey.offline.odometry_calibration {
+        m.insert(
+            "offline.odometry_turn_scale_error".into(),
+            c.turn_scale_error,
+        );
+        m.insert(
+            "offline.odometry_heading_drift_rad_per_m".into(),
+            c.heading_drift_rad_per_m,
+        );
+        m.insert(
+            "offline.odometry_distance_scale_error".into(),
+            c.distance_scale_error,
+        );
+    }
+    m.insert(
+        "offline.converged".into(),
+        f64::from(u8::from(survey.offline.converged)),
+    );
+    m
+}
+
+/// Scores a sonar map against the world. Sonar positions come from the ground truth when the run
+/// has it (else from odometry).
+pub fn score_sonar_map(map: &SonarMap, run: &RunDataset, world: &World) -> SonarScores {
+    let trajectory = run.ground_truth.as_deref().unwrap_or(&run.odometry);
+    let positions: Vec<_> = run
+        .placed_readings(trajectory)
+        .iter()
+        .map(|r| r.world_from_sensor.position())
+        .collect();
+    SonarScores {
+        counting: score_map(&map.counting, world),
+        log_odds: score_map(&map.log_odds, world),
+        features_online: score_features(&map.features_online, world, &positions),
+        features_offline: score_features(&map.features_offline, world, &positions),
+    }
+}
+
+impl SonarScores {
+    /// The scores as `report.json` metrics (DESIGN.md keys plus ours).
+    pub fn metrics(&self) -> BTreeMap<String, f64> {
+        let mut m = BTreeMap::new();
+        let mut put = |k: &str, v: f64| {
+            m.insert(k.to_string(), v);
+        };
+        put("map.occupied_precision", self.counting.occupied_precision);
+        put("map.occupied_recall", self.counting.occupied_recall);
+        put("map.free_accuracy", self.counting.free_accuracy);
+        put(
+            "map_log_odds.occupied_precision",
+            self.log_odds.occupied_precision,
+        );
+        put(
+            "map_log_odds.occupied_recall",
+            self.log_odds.occupied_recall,
+        );
+        put("map_log_odds.free_accuracy", self.log_odds.free_accuracy);
+        put("features.precision", self.features_offline.precision);
+        put("features.recall", self.features_offline.recall);
+        put("features.count", self.features_offline.features as f64);
+        put(
+            "features.reachable_corners",
+            self.features_offline.reachable_corners as f64,
+        );
+        put("features_online.precision", self.features_online.precision);
+        put("features_online.recall", self.features_online.recall);
+        put(
+            "features_online.count",
+            self.features_online.features as f64,
+        );
+        m
+    }
+}

@@ -1,0 +1,47 @@
+//! Trajectory errors against the truth: the absolute trajectory error (ATE) and the rigid
+//! alignment that separates a survey's anchoring from its shape.
+
+use crate::geometry::{pose_at, Pose2, StampedPose};
+use nalgebra::Vector2;
+
+/// The rigid motion `truth_from_estimate` that best aligns an estimate's positions with the truth
+/// at the estimate's times (least squares, closed form), for diagnostics: what of an error is a
+/// shift and turn of the whole survey, and what is shape.
+pub fn align_se2(estimate: &[StampedPose], truth: &[StampedPose]) -> Option<Pose2> {
+    let pairs: Vec<(Vector2<f64>, Vector2<f64>)> = estimate
+        .iter()
+        .filter_map(|p| {
+            let t = pose_at(truth, p.t_s)?;
+            Some((Vector2::new(p.pose.x, p.pose.y), Vector2::new(t.x, t.y)))
+        })
+        .collect();
+    if pairs.len() < 2 {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let ca = pairs.iter().map(|p| p.0).sum::<Vector2<f64>>() / n;
+    let cb = pairs.iter().map(|p| p.1).sum::<Vector2<f64>>() / n;
+    let (mut sin, mut cos) = (0.0, 0.0);
+    for (a, b) in &pairs {
+        let (a, b) = (a - ca, b - cb);
+        sin += a.x * b.y - a.y * b.x;
+        cos += a.x * b.x + a.y * b.y;
+    }
+    let theta = sin.atan2(cos);
+    let (s, c) = theta.sin_cos();
+    let t = cb - Vector2::new(c * ca.x - s * ca.y, s * ca.x + c * ca.y);
+    Some(Pose2::new(t.x, t.y, theta))
+}
+
+/// Root-mean-square position error of `estimate` against `truth` at the estimate's times (no
+/// alignment: both start from the known start pose in the world frame).
+pub fn ate_m(estimate: &[StampedPose], truth: &[StampedPose]) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for p in estimate {
+        let t = pose_at(truth, p.t_s)?;
+        sum += (p.pose.x - t.x).powi(2) + (p.pose.y - t.y).powi(2);
+        n += 1;
+    }
+    (n > 0).then(|| (sum / n as f64).sqrt())
+}

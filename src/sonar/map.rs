@@ -1,0 +1,195 @@
+//! The sonar half end to end: readings placed along a trajectory, the counting and log-odds
+//! grids, the online and offline Hough features, and the straight walls.
+
+use crate::dataset::{PoseSource, RunDataset};
+use crate::geometry::StampedPose;
+use crate::sonar::grid::{
+    CountingGrid, GridConfig, GridError, LogOddsGrid, OccupancyGrid, OccupancyMap,
+};
+use crate::sonar::hough::{
+    classify_features, features_offline, features_online, Accumulator, Feature, HoughConfig,
+};
+use crate::sonar::walls::{map_walls, WallSegment};
+use crate::sonar::PlacedReading;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Grid and Hough settings together: the `mapping:` section of a world or run file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct MappingConfig {
+    /// Occupancy grid.
+    pub grid: GridConfig,
+    /// Hough corner features.
+    pub hough: HoughConfig,
+}
+
+/// Errors of mapping a run.
+#[derive(Debug, thiserror::Error)]
+pub enum MapError {
+    /// Bad grid settings.
+    #[error(transparent)]
+    Grid(#[from] GridError),
+    /// The run lacks the trajectory asked for.
+    #[error("the run has no ground_truth.csv; use --poses odometry")]
+    NoGroundTruth,
+}
+
+/// Everything the sonar half produces.
+#[derive(Debug, Clone)]
+pub struct SonarMap {
+    /// The paper's counting grid.
+    pub counting: OccupancyMap,
+    /// The log-odds grid over the same readings.
+    pub log_odds: OccupancyMap,
+    /// Features from the online windows.
+    pub features_online: Vec<Feature>,
+    /// Features from the offline pass over the whole run.
+    pub features_offline: Vec<Feature>,
+    /// The offline accumulator.
+    pub accumulator: Accumulator,
+    /// The straight walls, fitted to the ranges (what a later run localises against).
+    pub walls: Vec<WallSegment>,
+    /// Readings used (with an echo or not).
+    pub readings: usize,
+    /// Readings with an echo.
+    pub echoes: usize,
+    /// Echoes whose point (the sensor's position plus the range along its axis) lies outside the
+    /// grid: what the grid loses when it does not cover the run.
+    pub echoes_off_grid: usize,
+    /// Seconds per stage.
+    pub timings_s: BTreeMap<String, f64>,
+}
+
+/// Builds the grids and features of a run along the chosen trajectory.
+pub fn map_run(
+    run: &RunDataset,
+    poses: PoseSource,
+    config: &MappingConfig,
+) -> Result<SonarMap, MapError> {
+    let trajectory = run.trajectory(poses).ok_or(MapError::NoGroundTruth)?;
+    map_trajectory(run, trajectory, config)
+}
+
+/// Builds the grids and features of a run with the readings placed along `trajectory` (odometry,
+/// ground truth or a corrected estimate).
+pub fn map_trajectory(
+    run: &RunDataset,
+    trajectory: &[StampedPose],
+    config: &MappingConfig,
+) -> Result<SonarMap, MapError> {
+    let layout = &run.meta.robot.sonar;
+    let mut timings_s = BTreeMap::new();
+    let start = Instant::now();
+    let readings = timed("place_readings", &mut timings_s, || {
+        run.placed_readings(trajectory)
+    });
+    let counting = timed("grid_counting", &mut timings_s, || {
+        counting_map(run, &readings, config)
+    })?;
+    let (echoes, echoes_off_grid) = readings
+        .iter()
+        .filter_map(|r| {
+            let range = r
+                .range_m
+                .filter(|x| x.is_finite() && *x < layout.max_range_m)?;
+            let p = r.world_from_sensor;
+            let (x, y) = (p.x + range * p.theta.cos(), p.y + range * p.theta.sin());
+            Some(counting.geometry.cell_of(x, y).is_none())
+        })
+        .fold((0, 0), |(n, off), is_off| (n + 1, off + is_off as usize));
+
+    // The log-odds grid, the two Hough passes and the walls read the same placed readings and
+    // counting grid and nothing of each other: the online Hough pass (the longest) runs on one
+    // core, the rest on the other. Each stage's time is its own, taken while the others run.
+    let half = 0.5 * layout.cone_rad;
+    let ((online, online_times), rest) = rayon::join(
+        || {
+            let mut times = BTreeMap::new();
+            let online = timed("hough_online", &mut times, || {
+                let mut online =
+                    features_online(&readings, trajectory, half, &counting, &config.hough);
+                classify_features(&mut online, &counting);
+                online
+            });
+            (online, times)
+        },
+        || -> Result<_, MapError> {
+            let mut times = BTreeMap::new();
+            let log_odds = timed("grid_log_odds", &mut times, || {
+                let mut grid =
+                    LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+                grid.insert_all(&readings);
+                Ok::<_, MapError>(grid.map())
+            })?;
+            let (offline, accumulator) = timed("hough_offline", &mut times, || {
+                let (mut offline, accumulator) =
+                    features_offline(&readings, half, &counting, &config.hough);
+                classify_features(&mut offline, &counting);
+                (offline, accumulator)
+            });
+            let walls = timed("walls", &mut times, || {
+                map_walls(&readings, half, layout.max_range_m, &counting)
+            });
+            Ok((log_odds, offline, accumulator, walls, times))
+        },
+    );
+    let (log_odds, offline, accumulator, walls, rest_times) = rest?;
+    timings_s.extend(online_times);
+    timings_s.extend(rest_times);
+    timings_s.insert("total".into(), start.elapsed().as_secs_f64());
+
+    Ok(SonarMap {
+        counting,
+        log_odds,
+        features_online: online,
+        features_offline: offline,
+        accumulator,
+        walls,
+        readings: readings.len(),
+        echoes,
+        echoes_off_grid,
+        timings_s,
+    })
+}
+
+/// Runs `f`, noting its wall-clock time under `name`.
+pub(crate) fn timed<T>(
+    name: &str,
+    timings: &mut BTreeMap<String, f64>,
+    f: impl FnOnce() -> T,
+) -> T {
+    let t = Instant::now();
+    let out = f();
+    timings.insert(name.to_owned(), t.elapsed().as_secs_f64());
+    out
+}
+
+/// The raw map: the grid and features with the odometry's poses. It needs no pictures, so a
+/// survey builds it while the tags are being detected.
+pub fn raw_map(run: &RunDataset, mapping: &MappingConfig) -> Result<SonarMap, MapError> {
+    map_trajectory(run, &run.odometry, mapping)
+}
+
+/// The counting grid of the run's sonar readings placed along `trajectory` (the grid alone, not
+/// the Hough passes and walls of [`map_trajectory`]).
+pub(crate) fn counting_map_along(
+    run: &RunDataset,
+    trajectory: &[StampedPose],
+    mapping: &MappingConfig,
+) -> Result<OccupancyMap, MapError> {
+    counting_map(run, &run.placed_readings(trajectory), mapping)
+}
+
+/// The counting grid of sonar readings of the run, placed.
+pub(crate) fn counting_map(
+    run: &RunDataset,
+    readings: &[PlacedReading],
+    mapping: &MappingConfig,
+) -> Result<OccupancyMap, MapError> {
+    let layout = &run.meta.robot.sonar;
+    let mut grid = CountingGrid::new(mapping.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+    grid.insert_all(readings);
+    Ok(grid.map())
+}
