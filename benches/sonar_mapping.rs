@@ -7,7 +7,7 @@ use std::path::Path;
 use stereotag::dataset::PoseSource;
 use stereotag::sonar::grid::{CountingGrid, GridConfig, LogOddsGrid, OccupancyGrid};
 use stereotag::sonar::hough::{Accumulator, HoughConfig};
-use stereotag::sonar::map::map_run;
+use stereotag::sonar::map::map_trajectory;
 use stereotag::sonar::{PlacedReading, SonarLayout};
 
 fn museum_readings() -> (
@@ -92,13 +92,27 @@ fn whole_run(c: &mut Criterion) {
     let mut group = c.benchmark_group("map_museum_run");
     group.sample_size(10);
     group.bench_function("map_run", |b| {
-        b.iter(|| map_run(black_box(&run), PoseSource::Odometry, &mapping).unwrap())
+        b.iter(|| {
+            map_trajectory(
+                &run.sonar_log(),
+                run.trajectory(PoseSource::Odometry).unwrap(),
+                &mapping,
+            )
+            .unwrap()
+        })
     });
     group.finish();
     let start = std::time::Instant::now();
     let n = 5;
     for _ in 0..n {
-        black_box(map_run(&run, PoseSource::Odometry, &mapping).unwrap());
+        black_box(
+            map_trajectory(
+                &run.sonar_log(),
+                run.trajectory(PoseSource::Odometry).unwrap(),
+                &mapping,
+            )
+            .unwrap(),
+        );
     }
     let secs = start.elapsed().as_secs_f64() / n as f64;
     println!(

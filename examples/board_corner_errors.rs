@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release --example board_corner_errors -- DIR`
 
-use stereotag::io::Target;
+use stereotag::calib::{Target, TargetDetector};
 
 /// Corner id and pixel.
 type Points = Vec<(u32, [f64; 2])>;
@@ -15,7 +15,7 @@ fn main() -> anyhow::Result<()> {
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json"))?)?;
     let target: Target = serde_json::from_value(truth["target"].clone())?;
-    let mut grid = stereotag::visual::tags::AprilGridMultiScale::new()?;
+    let mut detector = TargetDetector::new(&target)?;
     let (mut errors, mut raw_errors, mut expected) = (Vec::new(), Vec::new(), 0usize);
     for frame in truth["frames"].as_array().into_iter().flatten() {
         for side in ["left", "right"] {
@@ -33,41 +33,13 @@ fn main() -> anyhow::Result<()> {
                 })
                 .collect();
             expected += want.len();
-            let (found, raw): (Points, Points) = match &target {
-                Target::Aprilgrid(g) => {
-                    use stereotag::visual::tags::TagDetector;
-                    let raw = grid.detect(&image)?;
-                    let refined = stereotag::calib::chessboard::refine_aprilgrid(
-                        &image,
-                        &raw,
-                        g.tag_cols,
-                        g.tag_spacing,
-                    );
-                    let ids = |d: &[stereotag::visual::tags::TagDetection]| {
-                        d.iter()
-                            .flat_map(|t| {
-                                (0..4).map(move |k| (t.id * 4 + k as u32, t.corners_px[k]))
-                            })
-                            .collect::<Vec<_>>()
-                    };
-                    (refined, ids(&raw))
-                }
-                Target::Checkerboard(c) => {
-                    let found = stereotag::calib::chessboard::detect_chessboard(
-                        &image,
-                        c.target_cols,
-                        c.target_rows,
-                    )
-                    .map(|px| {
-                        px.into_iter()
-                            .enumerate()
-                            .map(|(k, p)| (k as u32, p))
-                            .collect()
-                    })
-                    .unwrap_or_default();
-                    (found, Vec::new())
-                }
-            };
+            let view = detector.detect(&image)?;
+            let found: Points = view.corners.iter().map(|c| (c.id, c.px)).collect();
+            let raw: Points = view
+                .tags
+                .iter()
+                .flat_map(|t| (0..4).map(move |k| (t.id * 4 + k as u32, t.corners_px[k])))
+                .collect();
             if std::env::var("DUMP").is_ok() {
                 for (id, p) in &found {
                     if let Some(w) = want.get(&(*id as u64)) {

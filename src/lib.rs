@@ -15,10 +15,11 @@ pub mod geometry;
 pub mod io;
 pub mod metrics;
 pub mod plan;
+pub mod progress;
 pub mod render;
 pub mod sim;
 pub mod sonar;
 pub mod visual;
-#[cfg(feature = "rerun")]
 pub mod viz;
+pub mod workflow;
 pub mod world;

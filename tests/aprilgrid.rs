@@ -2,9 +2,13 @@
 //! expected tag counts from aprilgrid-rs's tests) and a real EuRoC stereo pair calibrated from its
 //! images with the official intrinsics.
 
-use std::process::Command;
+use std::path::Path;
+use stereotag::calib::LensModel;
 use stereotag::io::load_gray;
+use stereotag::progress::Silent;
 use stereotag::visual::tags::{AprilGridMultiScale, TagDetector};
+use stereotag::viz::RecordingRequest;
+use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
 
 fn detect(name: &str) -> Vec<u32> {
     let img =
@@ -35,26 +39,25 @@ fn euroc_pair_calibrates_from_its_images() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cal");
     let data = "../shared/data/euroc_aprilgrid/calib/stereo";
-    let status = Command::new(env!("CARGO_BIN_EXE_stereotag"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "-q",
-            "calibrate",
-            "--target",
-            "calibration/targets/aprilgrid_6x6.yaml",
-            "--left",
-            &format!("{data}/cam0_*.png"),
-            "--right",
-            &format!("{data}/cam1_*.png"),
-            "--fix-intrinsics",
-            "calibration/rigs/euroc_official.yaml",
-            "--no-rerun",
-            "--out",
-        ])
-        .arg(&out)
-        .status()
-        .unwrap();
-    assert!(status.success());
+    let (left, right) = (format!("{data}/cam0_*.png"), format!("{data}/cam1_*.png"));
+    calibrate(
+        &CalibrateRequest {
+            target: Path::new("calibration/targets/aprilgrid_6x6.yaml"),
+            input: CalibrationInput::Images {
+                left: &left,
+                right: &right,
+            },
+            resolution: None,
+            model: LensModel::Radtan,
+            fix_intrinsics: Some(Path::new("calibration/rigs/euroc_official.yaml")),
+            out: &out,
+            force: false,
+            rectify_pair: None,
+            recording: RecordingRequest::none(),
+        },
+        &Silent,
+    )
+    .unwrap();
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let m = &r["metrics"];

@@ -4,33 +4,45 @@
 //! (1.5 s of nearly the same pose) do not observe the intrinsics.
 
 use serde_json::Value;
-use std::process::Command;
+use std::path::Path;
+use stereotag::calib::LensModel;
+use stereotag::progress::Silent;
+use stereotag::viz::RecordingRequest;
+use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
 
 /// Official EuRoC baseline, metres (|T_c1_c0 translation| of sensor.yaml).
 const OFFICIAL_BASELINE_M: f64 = 0.110078;
 /// Issue 4's tolerance on the baseline with intrinsics fixed, metres.
 const BASELINE_TOLERANCE_M: f64 = 0.0015;
 
-fn calibrate(extra: &[&str], out: &std::path::Path) -> Value {
-    let data = "../shared/data/euroc_aprilgrid/calib/cam_april";
-    let status = Command::new(env!("CARGO_BIN_EXE_stereotag"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "-q",
-            "calibrate",
-            "--target",
-            "calibration/targets/aprilgrid_6x6.yaml",
-            "--corners-left",
-            &format!("{data}/cam0"),
-            "--corners-right",
-            &format!("{data}/cam1"),
-            "--out",
-        ])
-        .arg(out)
-        .args(extra)
-        .status()
-        .unwrap();
-    assert!(status.success());
+/// Calibrates from the EuRoC corner files with `fix_intrinsics` or `resolution`, and
+/// `rectify_pair`; returns report.json as written.
+fn calibrate_corners(
+    fix_intrinsics: Option<&str>,
+    resolution: Option<(u32, u32)>,
+    rectify_pair: Option<(&Path, &Path)>,
+    out: &Path,
+) -> Value {
+    let data = Path::new("../shared/data/euroc_aprilgrid/calib/cam_april");
+    let (left, right) = (data.join("cam0"), data.join("cam1"));
+    calibrate(
+        &CalibrateRequest {
+            target: Path::new("calibration/targets/aprilgrid_6x6.yaml"),
+            input: CalibrationInput::Corners {
+                left: &left,
+                right: &right,
+            },
+            resolution,
+            model: LensModel::Radtan,
+            fix_intrinsics: fix_intrinsics.map(Path::new),
+            out,
+            force: false,
+            rectify_pair,
+            recording: RecordingRequest::none(),
+        },
+        &Silent,
+    )
+    .unwrap();
     serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
 
@@ -38,14 +50,14 @@ fn calibrate(extra: &[&str], out: &std::path::Path) -> Value {
 fn euroc_baseline_with_official_intrinsics() {
     let dir = tempfile::tempdir().unwrap();
     let stereo = "../shared/data/euroc_aprilgrid/calib/stereo";
-    let r = calibrate(
-        &[
-            "--fix-intrinsics",
-            "calibration/rigs/euroc_official.yaml",
-            "--rectify-pair",
-            &format!("{stereo}/cam0_1403709395937837056.png"),
-            &format!("{stereo}/cam1_1403709395937837056.png"),
-        ],
+    let (l, r) = (
+        format!("{stereo}/cam0_1403709395937837056.png"),
+        format!("{stereo}/cam1_1403709395937837056.png"),
+    );
+    let r = calibrate_corners(
+        Some("calibration/rigs/euroc_official.yaml"),
+        None,
+        Some((Path::new(&l), Path::new(&r))),
         &dir.path().join("fixed"),
     );
     let m = &r["metrics"];
@@ -72,7 +84,7 @@ fn euroc_baseline_with_official_intrinsics() {
 #[test]
 fn euroc_free_calibration_warns_about_unobserved_intrinsics() {
     let dir = tempfile::tempdir().unwrap();
-    let r = calibrate(&["--resolution", "752x480"], &dir.path().join("free"));
+    let r = calibrate_corners(None, Some((752, 480)), None, &dir.path().join("free"));
     let warnings: Vec<String> = r["warnings"]
         .as_array()
         .unwrap()

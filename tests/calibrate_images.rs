@@ -1,16 +1,22 @@
-//! Calibration from images, end to end through the commands a user runs (issue 4):
-//! - rendered: `stereotag render --calibration-sequence` of the default rig, then `stereotag
-//!   calibrate` on the images: AprilGrid (30 views, at 16 and at 4 samples per pixel), chessboard
+//! Calibration from images, end to end through the library's workflows (issue 4):
+//! - rendered: a calibration sequence of the default rig rendered
+//!   (`workflow::render::render_calibration_sequence`, `stereotag render --calibration-sequence`),
+//!   then calibrated from its images (`workflow::calibrate`, `stereotag calibrate`): AprilGrid (30 views, at 16 and at 4 samples per pixel), chessboard
 //!   (13 views) and fisheye (24 views) recover the rig;
 //! - real: the four MRPT chessboard pairs (../shared/data/mrpt_stereo_calib) against OpenCV 5.0's
 //!   result on the same images (reference_output.txt there);
-//! - too few usable views: exit status 2, the images without a board named.
+//! - too few usable views: exit status 2 from the command, the images without a board named.
 
 use nalgebra::{Point2, Vector3};
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
+use stereotag::calib::LensModel;
 use stereotag::camera::Camera;
+use stereotag::progress::Silent;
+use stereotag::viz::RecordingRequest;
+use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
+use stereotag::workflow::render::{render_calibration_sequence, RenderRequest};
 
 fn stereotag(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_stereotag"))
@@ -20,23 +26,23 @@ fn stereotag(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
-fn calibrate(target: &str, left: &str, right: &str, out: &Path, extra: &[&str]) -> Value {
-    let mut args = vec![
-        "-q",
-        "calibrate",
-        "--target",
-        target,
-        "--left",
-        left,
-        "--right",
-        right,
-        "--no-rerun",
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let o = stereotag(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+/// Calibrates a rig from image globs with `model`; returns report.json as written.
+fn calibrate_images(target: &str, left: &str, right: &str, out: &Path, model: LensModel) -> Value {
+    calibrate(
+        &CalibrateRequest {
+            target: Path::new(target),
+            input: CalibrationInput::Images { left, right },
+            resolution: None,
+            model,
+            fix_intrinsics: None,
+            out,
+            force: false,
+            rectify_pair: None,
+            recording: RecordingRequest::none(),
+        },
+        &Silent,
+    )
+    .unwrap();
     serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
 
@@ -46,8 +52,8 @@ fn rendered(
     target: &str,
     views: usize,
     rig: &str,
-    extra: &[&str],
-    render_extra: &[&str],
+    model: LensModel,
+    samples: Option<usize>,
 ) -> (
     Value,
     stereotag::camera::StereoRig,
@@ -55,34 +61,32 @@ fn rendered(
 ) {
     let dir = tempfile::tempdir().unwrap();
     let seq = dir.path().join("seq");
-    let o = stereotag(
-        &[
-            "-q",
-            "render",
-            "--calibration-sequence",
-            &views.to_string(),
-            "--target",
-            target,
-            "--rig",
-            rig,
-            "--out",
-            seq.to_str().unwrap(),
-        ]
-        .into_iter()
-        .chain(render_extra.iter().copied())
-        .collect::<Vec<_>>(),
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rendered = render_calibration_sequence(
+        &RenderRequest {
+            rig: Path::new(rig),
+            out: &seq,
+            samples,
+            every_sample: false,
+            motion: None,
+            seed: 1,
+            force: false,
+        },
+        views,
+        Path::new(target),
+        &Silent,
+    )
+    .unwrap();
+    assert_eq!(rendered, views);
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(seq.join("truth.json")).unwrap()).unwrap();
     assert_eq!(truth["frames"].as_array().unwrap().len(), views);
     let out = dir.path().join("cal");
-    let report = calibrate(
+    let report = calibrate_images(
         target,
         &format!("{}/left/*.png", seq.display()),
         &format!("{}/right/*.png", seq.display()),
         &out,
-        extra,
+        model,
     );
     for f in [
         "camchain.yaml",
@@ -181,13 +185,13 @@ fn distortion_difference_px(truth: &Camera, est: &Camera) -> f64 {
 
 /// Issue 4's figures on 30 rendered AprilGrid views at `samples` per pixel; returns RMS, the
 /// whole cameras' largest projection difference and the distortion's.
-fn rendered_aprilgrid(samples: &str) -> (f64, f64, f64) {
+fn rendered_aprilgrid(samples: usize) -> (f64, f64, f64) {
     let (report, truth, est) = rendered(
         "calibration/targets/aprilgrid_6x6.yaml",
         30,
         "calibration/rigs/default.yaml",
-        &[],
-        &["--samples", samples],
+        LensModel::Radtan,
+        Some(samples),
     );
     let m = &report["metrics"];
     eprintln!("aprilgrid, {samples} samples per pixel: {m}");
@@ -210,7 +214,7 @@ fn rendered_aprilgrid(samples: &str) -> (f64, f64, f64) {
 fn rendered_aprilgrid_sequence_recovers_the_rig() {
     // The calibration sequence's default, 16 samples per pixel. Issue 4: RMS <= 0.2 px,
     // largest reprojection difference < 0.1 px; measured 0.023 px and 0.053 px (README).
-    let (rms, whole, distortion) = rendered_aprilgrid("16");
+    let (rms, whole, distortion) = rendered_aprilgrid(16);
     assert!(rms <= 0.05, "RMS {rms}");
     assert!(whole < 0.1, "largest projection difference {whole} px");
     assert!(distortion < 0.05, "distortion alone {distortion} px");
@@ -220,7 +224,7 @@ fn rendered_aprilgrid_sequence_recovers_the_rig() {
 fn rendered_aprilgrid_sequence_at_four_samples_per_pixel() {
     // The scene default, 4 jittered samples: measured RMS 0.050 px, whole cameras 0.112 px,
     // distortion alone 0.077 px (README).
-    let (rms, whole, distortion) = rendered_aprilgrid("4");
+    let (rms, whole, distortion) = rendered_aprilgrid(4);
     assert!(rms <= 0.1, "RMS {rms}");
     assert!(whole < 0.15, "largest projection difference {whole} px");
     assert!(distortion < 0.1, "distortion alone {distortion} px");
@@ -232,8 +236,8 @@ fn rendered_chessboard_sequence_recovers_the_rig() {
         "calibration/targets/checkerboard_9x6.yaml",
         13,
         "calibration/rigs/default.yaml",
-        &[],
-        &[],
+        LensModel::Radtan,
+        None,
     );
     let m = &report["metrics"];
     eprintln!("chessboard: {m}");
@@ -251,8 +255,8 @@ fn rendered_fisheye_sequence_recovers_the_equidistant_rig() {
         "calibration/targets/aprilgrid_6x6.yaml",
         24,
         "calibration/rigs/fisheye_example.yaml",
-        &["--model", "equidistant"],
-        &[],
+        LensModel::Equidistant,
+        None,
     );
     let m = &report["metrics"];
     eprintln!("fisheye: {m}");
@@ -281,12 +285,12 @@ fn mrpt_chessboard_photos_agree_with_opencv() {
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cal");
-    let report = calibrate(
+    let report = calibrate_images(
         "calibration/targets/checkerboard_9x6.yaml",
         &format!("{data}/*_left.jpg"),
         &format!("{data}/*_right.jpg"),
         &out,
-        &[],
+        LensModel::Radtan,
     );
     let m = &report["metrics"];
     eprintln!("mrpt: {m}");

@@ -109,20 +109,13 @@ fn bad_rigs_name_the_file_and_key() {
 fn rig_export_writes_opencv_and_ros_files() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("export");
-    let status = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
-        .args([
-            "-q",
-            "rig",
-            common::root()
-                .join("calibration/rigs/default.yaml")
-                .to_str()
-                .unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    let export = stereotag::workflow::rig::export_rig(
+        &common::root().join("calibration/rigs/default.yaml"),
+        &out,
+        false,
+    )
+    .unwrap();
+    assert!((export.rectification.focal_px - 459.5).abs() < 1.0);
     let info = std::fs::read_to_string(out.join("right.yaml")).unwrap();
     assert!(info.contains("distortion_model: plumb_bob") && info.contains("projection_matrix:"));
     // P2[0][3] = f * Tx with Tx = -baseline: -459.5 * 0.12.

@@ -32,19 +32,21 @@ fn simulated_run_round_trips() {
 fn simulate_takes_stereo_pictures_when_tags_are_in_view() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
-    let status = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
-        .current_dir(common::root())
-        .args([
-            "-q",
-            "simulate",
-            "--world",
-            "samples/office/world.yaml",
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    use stereotag::workflow::simulate::{simulate, Pictures, SimSettings, SimulateRequest};
+    simulate(
+        &SimulateRequest {
+            world: &common::sample("office/world.yaml"),
+            out: &out,
+            settings: SimSettings::default(),
+            pictures: Some(Pictures {
+                rig: &common::root().join(stereotag::io::DEFAULT_RIG),
+                policy: Default::default(),
+            }),
+            force: false,
+        },
+        &stereotag::progress::Silent,
+    )
+    .unwrap();
     let run = load_run(&out).unwrap();
     assert!(run.stereo.len() >= 5, "{} pairs", run.stereo.len());
     for e in &run.stereo {

@@ -6,7 +6,7 @@ use stereotag::dataset::PoseSource;
 use stereotag::io::load_world;
 use stereotag::metrics::score_sonar_map;
 use stereotag::sim::simulate;
-use stereotag::sonar::map::map_run;
+use stereotag::sonar::map::map_trajectory;
 
 /// Occupied precision with ground-truth poses on the office (issue 2: 0.85).
 const OCCUPIED_PRECISION_GT: f64 = 0.85;
@@ -33,7 +33,12 @@ fn office_with_ground_truth_poses_maps_the_walls() {
         run.sonar.len()
     );
 
-    let gt = map_run(run, PoseSource::GroundTruth, &loaded.mapping).unwrap();
+    let gt = map_trajectory(
+        &run.sonar_log(),
+        run.trajectory(PoseSource::GroundTruth).unwrap(),
+        &loaded.mapping,
+    )
+    .unwrap();
     let gt_scores = score_sonar_map(&gt, run, &loaded.world);
     assert!(
         gt_scores.counting.occupied_precision >= OCCUPIED_PRECISION_GT,
@@ -79,7 +84,12 @@ fn office_with_ground_truth_poses_maps_the_walls() {
     assert!(gt_scores.counting.occupied_precision >= gt_scores.log_odds.occupied_precision - 0.02);
 
     // Odometry drift makes the map worse: that is what the visual half is for.
-    let odo = map_run(run, PoseSource::Odometry, &loaded.mapping).unwrap();
+    let odo = map_trajectory(
+        &run.sonar_log(),
+        run.trajectory(PoseSource::Odometry).unwrap(),
+        &loaded.mapping,
+    )
+    .unwrap();
     let odo_scores = score_sonar_map(&odo, run, &loaded.world);
     assert!(odo_scores.counting.occupied_precision < gt_scores.counting.occupied_precision);
 }

@@ -1,10 +1,17 @@
-//! The survey end to end through the binary: `stereotag demo` on the office (simulate, render,
-//! detect, triangulate, fuse online and offline, rebuild the map, record), checked against the
-//! figures of the fusion issue and the Rerun recording read back with the `rerun` CLI.
+//! The survey end to end through the library's workflows: the demo on the office (simulate,
+//! render, detect, triangulate, fuse online and offline, rebuild the map, record), checked against
+//! the figures of the fusion issue and the Rerun recording read back with the `rerun` CLI; a later
+//! run localised against it; tags planned on a sonar map.
 
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
+use stereotag::dataset::PoseSource;
+use stereotag::progress::Silent;
+use stereotag::visual::tags::Backend;
+use stereotag::viz::RecordingRequest;
+use stereotag::workflow::sightings::DetectOptions;
+use stereotag::workflow::simulate::{Pictures, SimSettings, SimulateRequest};
 
 /// Offline ATE at most this share of odometry's (the issue's figure).
 const OFFLINE_ATE_RATIO: f64 = 0.2;
@@ -40,14 +47,70 @@ fn metric(report: &Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("report.json has no metric {key}"))
 }
 
+fn read_report(dir: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// The demo (the office simulated with pictures, then surveyed and recorded) into `out`.
 fn run_demo(out: &Path, seed: u64) -> Value {
-    let status = stereotag()
-        .args(["-q", "demo", "--seed", &seed.to_string(), "--out"])
-        .arg(out)
-        .status()
-        .expect("running stereotag demo");
-    assert!(status.success(), "stereotag demo failed: {status}");
-    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+    stereotag::workflow::demo::demo(
+        &stereotag::workflow::demo::DemoRequest {
+            world: Path::new("samples/office/world.yaml"),
+            out,
+            seed: Some(seed),
+            detect: DetectOptions::survey(Backend::ApriltagC),
+            force: false,
+            recording: RecordingRequest::default(),
+        },
+        &Silent,
+    )
+    .expect("the demo runs");
+    read_report(out)
+}
+
+/// `world` simulated into `out` with `settings`, with pictures (the default rig) unless
+/// `no_stereo`.
+fn simulate(world: &Path, out: &Path, settings: SimSettings, no_stereo: bool) {
+    stereotag::workflow::simulate::simulate(
+        &SimulateRequest {
+            world,
+            out,
+            settings,
+            pictures: (!no_stereo).then(|| Pictures {
+                rig: Path::new(stereotag::io::DEFAULT_RIG),
+                policy: Default::default(),
+            }),
+            force: false,
+        },
+        &Silent,
+    )
+    .expect("the simulation runs");
+}
+
+/// The sonar map of `run` into `out`.
+fn map(run: &Path, out: &Path, poses: PoseSource) {
+    stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
+        run_dir: run,
+        out,
+        poses,
+        world: None,
+        config: None,
+        force: false,
+    })
+    .expect("the map is made");
+}
+
+/// `plan` on `map` into `out`, predicting with `tags` when given.
+fn plan(map: &Path, out: &Path, tags: Option<&Path>, no_walls: bool) {
+    stereotag::workflow::plan::plan(&stereotag::workflow::plan::PlanRequest {
+        map,
+        out: Some(out),
+        config: Default::default(),
+        tags,
+        no_walls,
+        force: false,
+    })
+    .expect("the plan is made");
 }
 
 #[test]
@@ -244,37 +307,42 @@ fn a_later_run_localises_against_the_survey() {
     run_demo(&survey, 1);
     // A second day: another seed, the same home, the same start.
     let run = dir.path().join("run2");
-    let status = stereotag()
-        .args([
-            "-q",
-            "simulate",
-            "--world",
-            "samples/office/world.yaml",
-            "--seed",
-            "2",
-            "--out",
-        ])
-        .arg(&run)
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let localize_run = |run: &Path, out: &str, extra: &[&str]| -> Value {
-        let loc = dir.path().join(out);
-        let status = stereotag()
-            .args(["-q", "localize", "--survey"])
-            .arg(&survey)
-            .arg("--run")
-            .arg(run)
-            .arg("--out")
-            .arg(&loc)
-            .args(extra)
-            .status()
-            .unwrap();
-        assert!(status.success());
-        serde_json::from_str(&std::fs::read_to_string(loc.join("report.json")).unwrap()).unwrap()
+    let seed_2 = SimSettings {
+        seed: Some(2),
+        ..SimSettings::default()
     };
-    let localize = |out: &str, extra: &[&str]| localize_run(&run, out, extra);
-    let report = localize("loc", &[]);
+    simulate(
+        Path::new("samples/office/world.yaml"),
+        &run,
+        seed_2.clone(),
+        false,
+    );
+    // Localised with the walls or with the tags alone, recorded or not.
+    let localize_run = |run: &Path, out: &str, walls: bool, record: bool| -> Value {
+        let loc = dir.path().join(out);
+        stereotag::workflow::localize::localize(
+            &stereotag::workflow::localize::LocalizeRequest {
+                survey: &survey,
+                run_dir: run,
+                out: &loc,
+                world: None,
+                config: None,
+                detect: DetectOptions::survey(Backend::ApriltagC),
+                raw_odometry: false,
+                no_walls: !walls,
+                force: false,
+                recording: if record {
+                    RecordingRequest::default()
+                } else {
+                    RecordingRequest::none()
+                },
+            },
+            &Silent,
+        )
+        .expect("the run is localised");
+        read_report(&loc)
+    };
+    let report = localize_run(&run, "loc", true, true);
     let odometry = metric(&report, "ate_m.odometry");
     let localised = metric(&report, "ate_m.localized");
     assert!(
@@ -288,7 +356,7 @@ fn a_later_run_localises_against_the_survey() {
     assert!(metric(&report, "ranges.fused") >= 50.0);
     assert!(localised <= 0.05, "localised {localised}");
     let tags_only = metric(
-        &localize("loc_tags", &["--no-walls", "--no-rerun"]),
+        &localize_run(&run, "loc_tags", false, false),
         "ate_m.localized",
     );
     assert!(
@@ -299,22 +367,10 @@ fn a_later_run_localises_against_the_survey() {
     // walls and without: RMS of the predicted error at the cells the robot drove through, against
     // the RMS error it had there (measured: 1.1 vs 1.0 cm with walls, 3.8 vs 3.7 cm tags only).
     let gt_map = dir.path().join("gt_map");
-    let ok = |c: &mut Command| assert!(c.status().unwrap().success());
-    ok(stereotag()
-        .args(["-q", "map", "--poses", "ground-truth", "--run"])
-        .arg(survey.join("run"))
-        .arg("--out")
-        .arg(&gt_map));
+    map(&survey.join("run"), &gt_map, PoseSource::GroundTruth);
     for (loc, walls) in [("loc", true), ("loc_tags", false)] {
         let out = dir.path().join(format!("plan_{loc}"));
-        ok(stereotag()
-            .args(["-q", "plan", "--map"])
-            .arg(&gt_map)
-            .arg("--tags")
-            .arg(survey.join("landmarks.json"))
-            .arg("--out")
-            .arg(&out)
-            .args(if walls { &[][..] } else { &["--no-walls"][..] }));
+        plan(&gt_map, &out, Some(&survey.join("landmarks.json")), !walls);
         let (predicted, measured) = predicted_and_measured(&gt_map, &out, &dir.path().join(loc));
         let ratio = predicted / measured;
         eprintln!("plan, walls {walls}: predicted {predicted:.3} m, measured {measured:.3} m");
@@ -378,15 +434,8 @@ fn a_later_run_localises_against_the_survey() {
     let moved_world = dir.path().join("office_moved.yaml");
     std::fs::write(&moved_world, moved).unwrap();
     let moved_run = dir.path().join("run_moved");
-    let status = stereotag()
-        .args(["-q", "simulate", "--seed", "2", "--world"])
-        .arg(&moved_world)
-        .arg("--out")
-        .arg(&moved_run)
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let report = localize_run(&moved_run, "loc_moved", &["--no-rerun"]);
+    simulate(&moved_world, &moved_run, seed_2, false);
+    let report = localize_run(&moved_run, "loc_moved", true, false);
     let localised = metric(&report, "ate_m.localized");
     assert!(
         localised <= 0.05,
@@ -400,29 +449,18 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let map = dir.path().join("map");
-    let ok = |c: &mut Command| assert!(c.status().unwrap().success());
-    ok(stereotag()
-        .args([
-            "-q",
-            "simulate",
-            "--world",
-            "samples/museum/world.yaml",
-            "--no-stereo",
-            "--no-odometry-noise",
-            "--out",
-        ])
-        .arg(&run));
-    ok(stereotag()
-        .args(["-q", "map", "--run"])
-        .arg(&run)
-        .arg("--out")
-        .arg(&map));
+    simulate(
+        Path::new("samples/museum/world.yaml"),
+        &run,
+        SimSettings {
+            no_odometry_noise: true,
+            ..SimSettings::default()
+        },
+        true,
+    );
+    self::map(&run, &map, PoseSource::Odometry);
     let plan_dir = dir.path().join("plan");
-    ok(stereotag()
-        .args(["-q", "plan", "--map"])
-        .arg(&map)
-        .arg("--out")
-        .arg(&plan_dir));
+    plan(&map, &plan_dir, None, false);
     let plan: Value =
         serde_json::from_str(&std::fs::read_to_string(plan_dir.join("plan.json")).unwrap())
             .unwrap();

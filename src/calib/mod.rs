@@ -10,6 +10,9 @@
 //! `(JᵀJ)⁻¹` scaled by the residual variance, with `J` taken by central differences at the solution.
 
 pub mod chessboard;
+mod target;
+
+pub use target::{AprilGridTarget, CheckerboardTarget, Target, TargetDetector, TargetView};
 
 use crate::camera::{Camera, Distortion, StereoRig};
 use nalgebra::{

@@ -1,4 +1,5 @@
 use super::UsageError;
+use stereotag::io::Settings;
 
 /// Arguments of `stereotag config`.
 #[derive(Debug, clap::Args)]
@@ -10,21 +11,13 @@ pub struct Config {
 
 impl Config {
     pub fn run(&self) -> anyhow::Result<()> {
-        let text = match self.kind.as_str() {
-            "mapping" => {
-                serde_yaml_ng::to_string(&stereotag::sonar::map::MappingConfig::default())?
-            }
-            "simulation" => serde_yaml_ng::to_string(&stereotag::sim::SimConfig::default())?,
-            "fuse" => serde_yaml_ng::to_string(&stereotag::fusion::FuseConfig::default())?,
-            "plan" => serde_yaml_ng::to_string(&stereotag::plan::PlanConfig::default())?,
-            other => {
-                return Err(UsageError(format!(
-                    "unknown settings kind `{other}`: expected mapping, simulation, fuse or plan"
-                ))
-                .into())
-            }
-        };
-        print!("{text}");
+        let settings = Settings::from_name(&self.kind).ok_or_else(|| {
+            UsageError(format!(
+                "unknown settings kind `{}`: expected mapping, simulation, fuse or plan",
+                self.kind
+            ))
+        })?;
+        print!("{}", settings.default_yaml());
         Ok(())
     }
 }

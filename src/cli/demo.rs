@@ -1,8 +1,8 @@
-use super::detect::Backend;
-use super::simulate::simulate_world;
-use super::survey::{survey_into, DetectOptions, SurveyJob};
+use super::Bars;
 use std::path::{Path, PathBuf};
-use stereotag::io::OutputDir;
+use stereotag::visual::tags::Backend;
+use stereotag::workflow::demo::{demo, DemoRequest};
+use stereotag::workflow::sightings::DetectOptions;
 
 /// Arguments of `stereotag demo`.
 #[derive(Debug, clap::Args)]
@@ -35,53 +35,25 @@ impl Demo {
         if let Some(d) = self.decimate {
             super::check_decimate(d)?; // before the simulation, not after it
         }
-        let force = self.force || self.out == Path::new("out");
-        let dir = OutputDir::create(&self.out, force)?;
-        let run_dir = dir.path("run");
-        let rig = Path::new(super::DEFAULT_RIG);
-        let policy = stereotag::render::CapturePolicy::default();
-        let sim = simulate_world(
-            &self.world,
-            &run_dir,
-            Some((rig, &policy)),
-            false,
-            quiet,
-            |c| {
-                if let Some(s) = self.seed {
-                    c.seed = s;
-                }
-                Ok(())
-            },
-        )?;
-        tracing::info!("{}; surveying", sim.end_reason);
-        let output = survey_into(
-            &SurveyJob {
-                run_dir: &run_dir,
+        let survey_defaults = DetectOptions::survey(Backend::ApriltagC);
+        let output = demo(
+            &DemoRequest {
+                world: &self.world,
                 out: &self.out,
-                world: Some(&self.world),
-                config: None,
-                calibration_from: None,
+                seed: self.seed,
                 detect: DetectOptions {
-                    keep_images: false,
-                    backend: Backend::ApriltagC,
-                    families: &[],
-                    decimate: self
-                        .decimate
-                        .unwrap_or(super::survey::default_decimate(Backend::ApriltagC)),
-                    min_contrast: self
-                        .min_contrast
-                        .unwrap_or(super::survey::DEFAULT_MIN_CONTRAST),
-                    tag_size_m: None,
-                    quiet,
-                    visual_odometry: true,
+                    decimate: self.decimate.unwrap_or(survey_defaults.decimate),
+                    min_contrast: self.min_contrast.unwrap_or(survey_defaults.min_contrast),
+                    ..survey_defaults
                 },
-                force,
-                rerun: &self.rerun,
+                force: self.force || self.out == Path::new("out"),
+                recording: self.rerun.request()?,
             },
-            &dir,
+            &Bars::new(quiet),
         )?;
-        dir.commit()?;
-        let get = |k: &str| output.metrics.get(k).copied().unwrap_or(f64::NAN);
+        let survey = &output.survey;
+        super::survey::print_summary(&survey.survey, &survey.metrics, survey.world.as_ref());
+        let get = |k: &str| survey.metrics.get(k).copied().unwrap_or(f64::NAN);
         println!(
             "stereotag demo: {} -> {}",
             self.world.display(),
@@ -102,7 +74,7 @@ impl Demo {
             get("map_ground_truth.occupied_precision"),
             get("map_ground_truth.occupied_recall"),
         );
-        if output.survey.landmarks.is_empty() {
+        if survey.survey.landmarks.is_empty() {
             println!(
                 "  no landmarks: the robot saw no tag ({} sightings); see {}/map_corrected.png, survey.rrd",
                 get("sightings.total"),
@@ -111,7 +83,7 @@ impl Demo {
         } else {
             println!(
                 "  {} landmarks, median position error {:.1} mm; see {}/landmarks.json, map_corrected.png, survey.rrd",
-                output.survey.landmarks.len(),
+                survey.survey.landmarks.len(),
                 get("landmarks.median_error_m") * 1e3,
                 self.out.display()
             );

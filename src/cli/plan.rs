@@ -1,7 +1,6 @@
 use std::path::PathBuf;
-use stereotag::io::{self, OutputDir};
-use stereotag::plan::{plan_tags, predict, PlanConfig};
-use stereotag::sonar::grid::OccupancyMap;
+use stereotag::plan::PlanConfig;
+use stereotag::workflow::plan::{plan, PlanOutput, PlanRequest};
 
 /// Arguments of `stereotag plan`.
 #[derive(Debug, clap::Args)]
@@ -37,8 +36,6 @@ pub struct PlanArgs {
 
 impl PlanArgs {
     pub fn run(&self) -> anyhow::Result<()> {
-        let map = io::load_ros_occupancy(&self.map.join("map.yaml"))?;
-        let corners = io::load_features_csv(&self.map.join("corners.csv"))?;
         let mut config = if self.no_visual_odometry {
             PlanConfig::wheels_only()
         } else {
@@ -50,96 +47,66 @@ impl PlanArgs {
         if let Some(n) = self.max_tags {
             config.max_tags = n;
         }
-        let walls = if self.no_walls {
-            Vec::new()
-        } else {
-            match ["walls.csv", "walls_corrected.csv"]
-                .iter()
-                .map(|f| self.map.join(f))
-                .find(|p| p.exists())
-            {
-                Some(path) => io::load_walls_csv(&path)?,
-                None => {
-                    tracing::warn!(
-                        "{}: no walls.csv (written by `stereotag map`): predicting as with tags only",
-                        self.map.display()
+        let output = plan(&PlanRequest {
+            map: &self.map,
+            out: self.out.as_deref(),
+            config,
+            tags: self.tags.as_deref(),
+            no_walls: self.no_walls,
+            force: self.force,
+        })?;
+        let json = match &output {
+            PlanOutput::Predicted {
+                prediction,
+                tags_m,
+                walls,
+                json,
+            } => {
+                tracing::info!(
+                    "{} tags from {}: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
+                    tags_m.len(),
+                    self.tags.as_deref().unwrap_or(std::path::Path::new("")).display(),
+                    100.0 * prediction.coverage,
+                    prediction.free_cells,
+                    100.0 * prediction.wall_held,
+                    walls,
+                    prediction.predicted_error_mean_m,
+                    prediction.predicted_error_max_m
+                );
+                json
+            }
+            PlanOutput::Proposed {
+                plan,
+                corners,
+                walls,
+                json,
+            } => {
+                tracing::info!(
+                    "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
+                    plan.tags.len(),
+                    corners,
+                    100.0 * plan.prediction.coverage,
+                    plan.prediction.free_cells,
+                    100.0 * plan.prediction.wall_held,
+                    walls,
+                    plan.prediction.predicted_error_mean_m,
+                    plan.prediction.predicted_error_max_m
+                );
+                for t in &plan.tags {
+                    tracing::info!(
+                        "  tag at ({:.2}, {:.2}) m: {} {} votes, {} new cells",
+                        t.x_m,
+                        t.y_m,
+                        t.kind.as_str(),
+                        t.votes,
+                        t.new_cells
                     );
-                    Vec::new()
                 }
+                json
             }
         };
-        if let Some(tags) = &self.tags {
-            let file = io::load_landmarks(tags)?;
-            let positions: Vec<[f64; 2]> = file
-                .landmarks
-                .iter()
-                .map(|r| [r.landmark.position_m[0], r.landmark.position_m[1]])
-                .collect();
-            let prediction = predict(&map, &positions, &walls, &config);
-            tracing::info!(
-                "{} tags from {}: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
-                positions.len(),
-                tags.display(),
-                100.0 * prediction.coverage,
-                prediction.free_cells,
-                100.0 * prediction.wall_held,
-                walls.len(),
-                prediction.predicted_error_mean_m,
-                prediction.predicted_error_max_m
-            );
-            let json = serde_json::json!({ "prediction": prediction, "tags_m": positions, "config": config });
-            return self.write(&json, &map, &prediction.cell_errors_m);
-        }
-        let plan = plan_tags(&map, &corners, &walls, &config);
-        let json = serde_json::json!({ "plan": plan, "config": config });
-        self.write(&json, &map, &plan.prediction.cell_errors_m)?;
-        tracing::info!(
-            "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
-            plan.tags.len(),
-            corners.len(),
-            100.0 * plan.prediction.coverage,
-            plan.prediction.free_cells,
-            100.0 * plan.prediction.wall_held,
-            walls.len(),
-            plan.prediction.predicted_error_mean_m,
-            plan.prediction.predicted_error_max_m
-        );
-        for t in &plan.tags {
-            tracing::info!(
-                "  tag at ({:.2}, {:.2}) m: {} {} votes, {} new cells",
-                t.x_m,
-                t.y_m,
-                t.kind.as_str(),
-                t.votes,
-                t.new_cells
-            );
-        }
-        Ok(())
-    }
-
-    /// plan.json and predicted_error.csv into `--out`, or plan.json printed.
-    fn write(
-        &self,
-        json: &serde_json::Value,
-        map: &OccupancyMap,
-        cell_errors_m: &[Option<f64>],
-    ) -> anyhow::Result<()> {
-        match &self.out {
-            Some(out) => {
-                let dir = OutputDir::create(out, self.force)?;
-                io::save_json(&dir.path("plan.json"), json)?;
-                let g = &map.geometry;
-                let mut csv = String::from("x_m,y_m,error_m\n");
-                for (i, e) in cell_errors_m.iter().enumerate() {
-                    if let Some(e) = e {
-                        let (x, y) = g.centre(i % g.width, i / g.width);
-                        csv.push_str(&format!("{x:.3},{y:.3},{e:.4}\n"));
-                    }
-                }
-                std::fs::write(dir.path("predicted_error.csv"), csv)?;
-                dir.commit()?;
-            }
-            None => println!("{}", serde_json::to_string_pretty(json)?),
+        if self.out.is_none() {
+            println!("{}", serde_json::to_string_pretty(json)?);
         }
         Ok(())
     }

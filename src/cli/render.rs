@@ -1,8 +1,10 @@
-use super::UsageError;
+use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::geometry::Pose2;
-use stereotag::io::{self, OutputDir};
-use stereotag::render::{RenderConfig, Renderer};
+use stereotag::io::DEFAULT_RIG;
+use stereotag::workflow::render::{
+    render_calibration_sequence, render_pose, render_sequence, RenderRequest,
+};
 
 /// Arguments of `stereotag render`.
 #[derive(Debug, clap::Args)]
@@ -11,7 +13,7 @@ pub struct Render {
     #[arg(long, required_unless_present = "calibration_sequence")]
     world: Option<PathBuf>,
     /// Stereo rig file (Kalibr camchain).
-    #[arg(long, default_value = super::DEFAULT_RIG)]
+    #[arg(long, default_value = DEFAULT_RIG)]
     rig: PathBuf,
     /// Robot pose `x,y,theta` (metres, radians): one pair.
     #[arg(
@@ -64,11 +66,6 @@ pub struct Render {
     force: bool,
 }
 
-/// Samples per pixel of scenes (issue 3: at least 4).
-const SCENE_SAMPLES: usize = 4;
-/// Samples per pixel of calibration views.
-const CALIBRATION_SAMPLES: usize = 16;
-
 /// Parses `x,y,theta` (metres, radians) given to `flag`.
 fn parse_pose(flag: &str, text: &str) -> Result<[f64; 3], String> {
     let parts: Vec<f64> = text
@@ -108,185 +105,44 @@ fn samples_per_pixel(text: &str) -> Result<usize, String> {
 }
 
 impl Render {
-    /// Render settings with the noise seed and `--motion`.
-    fn config(&self, seed: u64) -> RenderConfig {
-        RenderConfig {
-            seed,
+    /// The request shared by the three modes.
+    fn request(&self) -> RenderRequest<'_> {
+        RenderRequest {
+            rig: &self.rig,
+            out: &self.out,
+            samples: self.samples,
+            every_sample: self.every_sample,
             motion: self.motion,
-            ..RenderConfig::default()
-        }
-    }
-
-    /// The renderer for `rig` with `--samples` per pixel.
-    fn renderer(&self, rig: &stereotag::camera::StereoRig) -> Renderer {
-        let default = if self.calibration_sequence.is_some() {
-            CALIBRATION_SAMPLES
-        } else {
-            SCENE_SAMPLES
-        };
-        let n = self.samples.unwrap_or(default);
-        let renderer = Renderer::with_samples(rig, (n as f64).sqrt().round() as usize);
-        if self.every_sample {
-            renderer.with_every_sample()
-        } else {
-            renderer
+            seed: self.seed,
+            force: self.force,
         }
     }
 
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         if let (Some(n), Some(target)) = (self.calibration_sequence, &self.target) {
-            return self.run_calibration_sequence(n, target, quiet);
+            let views = render_calibration_sequence(&self.request(), n, target, &Bars::new(quiet))?;
+            tracing::info!(
+                "rendered {views} calibration pairs -> {}",
+                self.out.display()
+            );
+            return Ok(());
         }
         let world = self
             .world
             .as_deref()
             .ok_or_else(|| UsageError("--world is needed to render a scene".into()))?;
         if let Some(poses) = &self.poses {
-            return self.run_sequence(world, poses, quiet);
+            let pairs = render_sequence(&self.request(), world, poses, &Bars::new(quiet))?;
+            tracing::info!("rendered {pairs} pairs -> {}", self.out.display());
+            return Ok(());
         }
         let [x, y, theta] =
             parse_pose("--pose", self.pose.as_deref().unwrap_or_default()).map_err(UsageError)?;
-        let loaded = io::load_world(world)?;
-        let rig = super::load_rig_arg(&self.rig)?;
-        let config = self.config(self.seed);
-        let start = std::time::Instant::now();
-        let pair = self
-            .renderer(&rig)
-            .render(&loaded.world, Pose2::new(x, y, theta), &config)?;
-        let secs = start.elapsed().as_secs_f64();
-        let dir = OutputDir::create(&self.out, self.force)?;
-        let save = |img: &image::GrayImage, name: &str| io::save_camera_png(&dir.path(name), img);
-        save(&pair.left, "left.png")?;
-        save(&pair.right, "right.png")?;
-        let truth = serde_json::json!({
-            "world_from_robot": [x, y, theta],
-            "tags": pair.tags,
-        });
-        io::save_json(&dir.path("truth.json"), &truth)?;
-        dir.commit()?;
+        let rendered = render_pose(&self.request(), world, Pose2::new(x, y, theta))?;
         tracing::info!(
-            "rendered in {secs:.3} s; {} tags in view -> {}",
-            pair.tags.len(),
-            self.out.display()
-        );
-        Ok(())
-    }
-
-    fn run_sequence(
-        &self,
-        world: &std::path::Path,
-        poses_path: &std::path::Path,
-        quiet: bool,
-    ) -> anyhow::Result<()> {
-        let poses = io::read_poses(poses_path)?;
-        let loaded = io::load_world(world)?;
-        let rig = super::load_rig_arg(&self.rig)?;
-        let renderer = self.renderer(&rig);
-        let dir = OutputDir::create(&self.out, self.force)?;
-        std::fs::create_dir_all(dir.path("left"))?;
-        std::fs::create_dir_all(dir.path("right"))?;
-        let bar = super::progress(poses.len() as u64, "render", quiet);
-        let mut frames = Vec::with_capacity(poses.len());
-        for (k, p) in poses.iter().enumerate() {
-            let config = self.config(self.seed.wrapping_add(k as u64));
-            let pair = renderer.render(&loaded.world, p.pose, &config)?;
-            let (left, right) = save_pair(&dir, k, &pair.left, &pair.right)?;
-            frames.push(serde_json::json!({
-                "t_s": p.t_s,
-                "world_from_robot": [p.pose.x, p.pose.y, p.pose.theta],
-                "left": left,
-                "right": right,
-                "tags": pair.tags,
-            }));
-            bar.inc(1);
-        }
-        bar.finish_and_clear();
-        io::save_json(
-            &dir.path("truth.json"),
-            &serde_json::json!({ "frames": frames }),
-        )?;
-        dir.commit()?;
-        tracing::info!("rendered {} pairs -> {}", poses.len(), self.out.display());
-        Ok(())
-    }
-}
-
-/// Writes the `k`th pair of a sequence as left/NNNNNN.png and right/NNNNNN.png; returns the
-/// names.
-fn save_pair(
-    dir: &OutputDir,
-    k: usize,
-    left: &image::GrayImage,
-    right: &image::GrayImage,
-) -> anyhow::Result<(String, String)> {
-    let names = (format!("left/{k:06}.png"), format!("right/{k:06}.png"));
-    for (img, name) in [(left, &names.0), (right, &names.1)] {
-        io::save_camera_png(&dir.path(name), img)?;
-    }
-    Ok(names)
-}
-
-impl Render {
-    fn run_calibration_sequence(
-        &self,
-        n: usize,
-        target_path: &std::path::Path,
-        quiet: bool,
-    ) -> anyhow::Result<()> {
-        use stereotag::render::board::{calibration_poses, Board};
-        let target = io::load_target(target_path)?;
-        let rig = super::load_rig_arg(&self.rig)?;
-        let board = match &target {
-            io::Target::Aprilgrid(g) => {
-                Board::aprilgrid(g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing)?
-            }
-            io::Target::Checkerboard(c) => Board::Chessboard {
-                cols: c.target_cols,
-                rows: c.target_rows,
-                col_m: c.col_spacing_m,
-                row_m: c.row_spacing_m,
-            },
-        };
-        let poses = calibration_poses(&rig, &board, n, self.seed);
-        if poses.len() < n {
-            tracing::warn!(
-                "the whole board fits both images in only {} of {n} views tried: a smaller board or a wider lens helps",
-                poses.len()
-            );
-        }
-        let renderer = self.renderer(&rig);
-        let dir = OutputDir::create(&self.out, self.force)?;
-        std::fs::create_dir_all(dir.path("left"))?;
-        std::fs::create_dir_all(dir.path("right"))?;
-        io::save_rig(&dir.path("rig.yaml"), &rig)?;
-        let bar = super::progress(poses.len() as u64, "render", quiet);
-        let mut frames = Vec::with_capacity(poses.len());
-        for (k, pose) in poses.iter().enumerate() {
-            let config = RenderConfig {
-                seed: self.seed.wrapping_add(k as u64),
-                ..RenderConfig::default()
-            };
-            let view = renderer.render_board(&board, pose, &config);
-            let (left, right) = save_pair(&dir, k, &view.left, &view.right)?;
-            let q = pose.rotation.coords;
-            let t = pose.translation.vector;
-            frames.push(serde_json::json!({
-                "left": left,
-                "right": right,
-                "left_from_board": {"t_m": [t.x, t.y, t.z], "q_xyzw": [q.x, q.y, q.z, q.w]},
-                "corners": view.corners,
-            }));
-            bar.inc(1);
-        }
-        bar.finish_and_clear();
-        io::save_json(
-            &dir.path("truth.json"),
-            &serde_json::json!({ "target": target, "frames": frames }),
-        )?;
-        dir.commit()?;
-        tracing::info!(
-            "rendered {} calibration pairs -> {}",
-            poses.len(),
+            "rendered in {:.3} s; {} tags in view -> {}",
+            rendered.secs,
+            rendered.tags,
             self.out.display()
         );
         Ok(())

@@ -1,5 +1,5 @@
 use std::path::PathBuf;
-use stereotag::io::{self, OutputDir};
+use stereotag::workflow::rig::export_rig;
 
 /// Arguments of `stereotag rig`.
 #[derive(Debug, clap::Args)]
@@ -16,41 +16,13 @@ pub struct Rig {
 
 impl Rig {
     pub fn run(&self) -> anyhow::Result<()> {
-        let rig = io::load_rig(&self.rig)?;
-        let dir = OutputDir::create(&self.out, self.force)?;
-        let rect = write_rig_exports(&dir, &rig)?;
-        dir.commit()?;
+        let export = export_rig(&self.rig, &self.out, self.force)?;
         tracing::info!(
             "baseline {:.4} m, rectified focal {:.2} px; wrote {}",
-            rig.baseline_m(),
-            rect.focal_px,
+            export.rig.baseline_m(),
+            export.rectification.focal_px,
             self.out.display()
         );
         Ok(())
     }
-}
-
-/// Writes a rig as Kalibr camchain, OpenCV FileStorage and ROS camera_info (Bouguet-rectified).
-pub(crate) fn write_rig_exports(
-    dir: &OutputDir,
-    rig: &stereotag::camera::StereoRig,
-) -> anyhow::Result<stereotag::camera::Rectification> {
-    let rect = rig.rectify();
-    io::save_rig(&dir.path("camchain.yaml"), rig)?;
-    io::save_opencv_stereo(&dir.path("opencv_stereo.yaml"), rig, &rect)?;
-    io::save_camera_info(
-        &dir.path("left.yaml"),
-        "left",
-        &rig.left,
-        &rect.left_rotation,
-        &rect.left_projection(),
-    )?;
-    io::save_camera_info(
-        &dir.path("right.yaml"),
-        "right",
-        &rig.right,
-        &rect.right_rotation,
-        &rect.right_projection(),
-    )?;
-    Ok(rect)
 }

@@ -4,7 +4,7 @@
 //! interpolating a trajectory at the reading's time and composing with the sensor's mount.
 
 use crate::geometry::StampedPose;
-use crate::sonar::{place_readings, PlacedReading, SonarLayout, SonarReading};
+use crate::sonar::{PlacedReading, SonarLayout, SonarLog, SonarReading};
 use serde::{Deserialize, Serialize};
 
 /// Version tag written into `run.yaml`.
@@ -87,8 +87,16 @@ impl RunDataset {
         }
     }
 
+    /// The run's sonar: its layout and readings.
+    pub fn sonar_log(&self) -> SonarLog<'_> {
+        SonarLog {
+            layout: &self.meta.robot.sonar,
+            readings: &self.sonar,
+        }
+    }
+
     /// Every sonar reading placed in the world along the given trajectory.
     pub fn placed_readings(&self, trajectory: &[StampedPose]) -> Vec<PlacedReading> {
-        place_readings(&self.sonar, &self.meta.robot.sonar, trajectory)
+        self.sonar_log().placed(trajectory)
     }
 }

@@ -7,9 +7,10 @@ use crate::fusion::{
     associate, hold_tail_to_walls, run_offline, run_online_calibrated, FuseConfig, Landmark,
     OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
 };
-use crate::sonar::grid::OccupancyMap;
+use crate::progress::timed;
+use crate::sonar::grid::{GridError, OccupancyMap};
 use crate::sonar::map::{
-    counting_map, counting_map_along, map_trajectory, timed, MapError, MappingConfig, SonarMap,
+    counting_map, counting_map_along, map_trajectory, MappingConfig, SonarMap,
 };
 use crate::sonar::walls::map_walls;
 use crate::visual::sightings::TagSighting;
@@ -37,7 +38,7 @@ pub struct Survey {
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// Runs the survey over a run, its [`raw_map`], its tag sightings and the turns its cameras
+/// Runs the survey over a run, its raw map (the grid and features with the odometry's poses), its tag sightings and the turns its cameras
 /// measured: online filter (predicting with `calibration` until it finds the run's own, when an
 /// earlier survey of the robot gives one), offline pass, and the map rebuilt from the corrected
 /// poses.
@@ -48,7 +49,7 @@ pub fn survey(
     mapping: &MappingConfig,
     fuse: &FuseConfig,
     calibration: Option<OdometryCalibration>,
-) -> Result<Survey, MapError> {
+) -> Result<Survey, GridError> {
     let mut timings_s = BTreeMap::new();
     let times = &mut timings_s;
     let online = timed("fuse_online", times, || {
@@ -62,7 +63,7 @@ pub fn survey(
         )
     });
     let online_map = timed("map_online", times, || {
-        counting_map_along(run, &online.trajectory, mapping)
+        counting_map_along(&run.sonar_log(), &online.trajectory, mapping)
     })?;
     let mut offline = timed("fuse_offline", times, || {
         run_offline(&run.odometry, visual, sightings, &online, fuse)
@@ -73,7 +74,7 @@ pub fn survey(
         })?;
     }
     let corrected = timed("map_corrected", times, || {
-        map_trajectory(run, &offline.trajectory, mapping)
+        map_trajectory(&run.sonar_log(), &offline.trajectory, mapping)
     })?;
     let landmarks = offline
         .landmarks
@@ -109,7 +110,7 @@ fn hold_tail(
     offline: &mut OfflineResult,
     mapping: &MappingConfig,
     fuse: &FuseConfig,
-) -> Result<(), MapError> {
+) -> Result<(), GridError> {
     let Some(last_t) = online
         .accepted
         .iter()
@@ -127,7 +128,7 @@ fn hold_tail(
         .into_iter()
         .filter(|r| r.t_s <= last_t)
         .collect();
-    let grid = counting_map(run, &readings, mapping)?;
+    let grid = counting_map(layout, &readings, mapping)?;
     let walls = map_walls(&readings, 0.5 * layout.cone_rad, layout.max_range_m, &grid);
     offline.trajectory = hold_tail_to_walls(
         &run.odometry,

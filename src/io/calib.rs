@@ -1,59 +1,9 @@
 //! Calibration inputs: Kalibr target YAML and corners already detected (the EuRoC / yac CSV).
 
 use super::{parse_yaml, read_text, IoError};
-use crate::calib::{Corner, ViewCorners};
-use serde::{Deserialize, Serialize};
+use crate::calib::{Corner, Target, ViewCorners};
+use serde::Deserialize;
 use std::path::Path;
-
-/// A calibration target as Kalibr describes it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "target_type", rename_all = "lowercase")]
-pub enum Target {
-    /// Kalibr AprilGrid: tag36h11 tags with 2-bit borders in a grid.
-    Aprilgrid(AprilGridTarget),
-    /// Chessboard by inner corners.
-    Checkerboard(CheckerboardTarget),
-}
-
-/// A Kalibr AprilGrid (`target_type: aprilgrid`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AprilGridTarget {
-    /// Tags across.
-    #[serde(rename = "tagCols")]
-    pub tag_cols: u32,
-    /// Tags down.
-    #[serde(rename = "tagRows")]
-    pub tag_rows: u32,
-    /// Tag edge, metres.
-    #[serde(rename = "tagSize")]
-    pub tag_size: f64,
-    /// Gap between tags over the tag edge.
-    #[serde(rename = "tagSpacing")]
-    pub tag_spacing: f64,
-    #[serde(default, rename = "target_type", skip_serializing)]
-    kind: Option<serde::de::IgnoredAny>,
-}
-
-/// A chessboard by its inner corners (`target_type: checkerboard`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CheckerboardTarget {
-    /// Inner corners across.
-    #[serde(rename = "targetCols")]
-    pub target_cols: u32,
-    /// Inner corners down.
-    #[serde(rename = "targetRows")]
-    pub target_rows: u32,
-    /// Square height, metres.
-    #[serde(rename = "rowSpacingMeters")]
-    pub row_spacing_m: f64,
-    /// Square width, metres.
-    #[serde(rename = "colSpacingMeters")]
-    pub col_spacing_m: f64,
-    #[serde(default, rename = "target_type", skip_serializing)]
-    kind: Option<serde::de::IgnoredAny>,
-}
 
 /// `target_type` alone (other keys ignored), to pick the variant before its fields are read
 /// from the text with their line numbers (an internally tagged enum reads the document into a

@@ -119,10 +119,21 @@ pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
     })
 }
 
-fn save_gray_png(path: &Path, width: usize, height: usize, pixels: Vec<u8>) -> Result<(), IoError> {
+fn save_gray_pixels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    pixels: Vec<u8>,
+) -> Result<(), IoError> {
     let img = image::GrayImage::from_raw(width as u32, height as u32, pixels)
         .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))?;
-    img.save(path)
+    save_gray_png(path, &img)
+}
+
+/// Writes a grey image as PNG (the image crate's default compression).
+pub fn save_gray_png(path: &Path, image: &image::GrayImage) -> Result<(), IoError> {
+    image
+        .save(path)
         .map_err(|e| IoError::content(path, format!("cannot write PNG: {e}")))
 }
 
@@ -145,7 +156,7 @@ pub fn save_map_png(path: &Path, map: &OccupancyMap) -> Result<(), IoError> {
             }
         }
     }
-    save_gray_png(path, g.width, g.height, pixels)
+    save_gray_pixels(path, g.width, g.height, pixels)
 }
 
 /// The accumulator as an image: radius down the rows, angle across, log-scaled votes.
@@ -156,7 +167,7 @@ pub fn save_accumulator_png(path: &Path, acc: &Accumulator) -> Result<(), IoErro
         .iter()
         .map(|&v| (255.0 * (1.0 + v as f64).ln() / (1.0 + max).ln()).round() as u8)
         .collect();
-    save_gray_png(path, acc.n_phi, acc.n_rho, pixels)
+    save_gray_pixels(path, acc.n_phi, acc.n_rho, pixels)
 }
 
 /// Writes `corners.csv`: `x_m,y_m,votes,kind`.

@@ -12,20 +12,21 @@ mod run;
 mod survey;
 mod world;
 
-pub use calib::{load_corner_csvs, load_target, Target};
+pub use calib::{load_corner_csvs, load_target};
 pub use maps::{
     load_features_csv, load_ros_map, load_ros_occupancy, load_walls_csv, save_accumulator_png,
-    save_features_csv, save_map_png, save_ros_map, save_walls_csv, RosMapYaml,
+    save_features_csv, save_gray_png, save_map_png, save_ros_map, save_walls_csv, RosMapYaml,
 };
 pub use output::OutputDir;
 pub use rig::{
-    load_rig, parse_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig,
-    Camchain, KalibrCamera,
+    load_rig, load_rig_or_builtin, parse_rig, robot_from_forward_camera, save_camera_info,
+    save_opencv_stereo, save_rig, save_rig_exports, Camchain, KalibrCamera, DEFAULT_RIG,
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
 pub use survey::{
-    load_landmarks, save_landmarks, save_trajectory_csv, save_visual_turns_csv, save_wpilib_layout,
-    LandmarkRecord, LandmarksFile, Trajectories, VISUAL_TURNS_HEADER,
+    load_landmarks, save_landmarks, save_localization_csv, save_survey, save_trajectory_csv,
+    save_visual_turns_csv, save_wpilib_layout, LandmarkRecord, LandmarksFile, Trajectories,
+    LOCALIZATION_HEADER, VISUAL_TURNS_HEADER,
 };
 pub use world::{load_world, LoadedWorld, WorldFile};
 
@@ -135,6 +136,29 @@ pub fn load_gray(path: &Path) -> Result<image::GrayImage, IoError> {
         .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))
 }
 
+/// An error naming the image when its size is not the camera's (`rig` says which rig, for the
+/// message).
+pub fn check_image_size(
+    image: &image::GrayImage,
+    camera: &crate::camera::Camera,
+    path: &Path,
+    rig: &str,
+) -> Result<(), IoError> {
+    if image.dimensions() == (camera.width, camera.height) {
+        return Ok(());
+    }
+    Err(IoError::content(
+        path,
+        format!(
+            "image is {}x{} but {rig} says {}x{}",
+            image.width(),
+            image.height(),
+            camera.width,
+            camera.height
+        ),
+    ))
+}
+
 /// The data rows of a CSV file with a fixed header: (1-based line number, trimmed fields), blank
 /// lines skipped; a wrong header or field count names the line.
 pub(crate) fn csv_rows<'a>(
@@ -171,6 +195,55 @@ pub(crate) fn csv_rows<'a>(
     Ok(rows)
 }
 
+/// The files matching a glob with `*` in its last component (any number of them, as in
+/// `cam0/*.png`), sorted; an error when none does.
+pub fn glob(pattern: &str) -> Result<Vec<PathBuf>, IoError> {
+    let path = Path::new(pattern);
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let parts: Vec<&str> = name.split('*').collect();
+    let matches = |s: &str| {
+        let (first, last) = (parts[0], parts[parts.len() - 1]);
+        if parts.len() == 1 {
+            return s == first;
+        }
+        if !s.starts_with(first) || !s.ends_with(last) || s.len() < first.len() + last.len() {
+            return false;
+        }
+        let mut rest = &s[first.len()..s.len() - last.len()];
+        for p in &parts[1..parts.len() - 1] {
+            match rest.find(p) {
+                Some(i) => rest = &rest[i + p.len()..],
+                None => return false,
+            }
+        }
+        true
+    };
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| IoError::content(Path::new(pattern), format!("{}: {e}", dir.display())))?;
+    let mut out: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| matches(&e.file_name().to_string_lossy()))
+        .map(|e| e.path())
+        .collect();
+    out.sort();
+    if out.is_empty() {
+        return Err(IoError::content(Path::new(pattern), "no file matches"));
+    }
+    Ok(out)
+}
+
+/// Creates a directory and its parents.
+pub fn create_dir(path: &Path) -> Result<(), IoError> {
+    std::fs::create_dir_all(path).map_err(|e| IoError::file(path, e))
+}
+
 /// Reads a whole text file.
 pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
     std::fs::read_to_string(path).map_err(|e| IoError::file(path, e))
@@ -196,6 +269,57 @@ pub(crate) fn to_yaml<T: serde::Serialize>(path: &Path, value: &T) -> Result<Str
 /// Writes a file.
 pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     std::fs::write(path, bytes).map_err(|e| IoError::file(path, e))
+}
+
+/// The fusion settings of a YAML file (`stereotag config --default fuse`), checked, or the
+/// defaults when no file is given.
+pub fn load_fuse_config(path: Option<&Path>) -> Result<crate::fusion::FuseConfig, IoError> {
+    let Some(p) = path else {
+        return Ok(crate::fusion::FuseConfig::default());
+    };
+    let config: crate::fusion::FuseConfig = parse_yaml(p, &read_text(p)?)?;
+    config
+        .validate()
+        .map_err(|e| IoError::content(p, e.to_string()))?;
+    Ok(config)
+}
+
+/// The kinds of settings files, each with its defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Settings {
+    /// Grid and Hough settings (`mapping:` of a world or run file, `map --config`).
+    Mapping,
+    /// Simulation settings (`simulation:` of a world file).
+    Simulation,
+    /// Fusion settings (`survey --config`, `localize --config`).
+    Fuse,
+    /// Tag planning settings.
+    Plan,
+}
+
+impl Settings {
+    /// The kind of settings called `name` (`mapping`, `simulation`, `fuse` or `plan`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "mapping" => Some(Self::Mapping),
+            "simulation" => Some(Self::Simulation),
+            "fuse" => Some(Self::Fuse),
+            "plan" => Some(Self::Plan),
+            _ => None,
+        }
+    }
+
+    /// The defaults as YAML, ready to edit.
+    pub fn default_yaml(self) -> String {
+        let yaml = match self {
+            Self::Mapping => serde_yaml_ng::to_string(&crate::sonar::map::MappingConfig::default()),
+            Self::Simulation => serde_yaml_ng::to_string(&crate::sim::SimConfig::default()),
+            Self::Fuse => serde_yaml_ng::to_string(&crate::fusion::FuseConfig::default()),
+            Self::Plan => serde_yaml_ng::to_string(&crate::plan::PlanConfig::default()),
+        };
+        // Plain structs of numbers and flags always serialise.
+        yaml.unwrap_or_default()
+    }
 }
 
 /// Writes a value as pretty JSON.

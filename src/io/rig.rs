@@ -2,7 +2,7 @@
 //! `stereotag:` so that Kalibr users and their tools read the files as they are.
 
 use super::{parse_yaml, read_text, to_yaml, write_file, IoError};
-use crate::camera::{Camera, Distortion, StereoRig};
+use crate::camera::{Camera, Distortion, Rectification, StereoRig};
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -176,6 +176,20 @@ pub fn robot_from_forward_camera(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64>
     )
 }
 
+/// The stereo rig `simulate`, `render` and `demo` use unless told otherwise (repository-relative).
+pub const DEFAULT_RIG: &str = "calibration/rigs/default.yaml";
+
+/// Loads a rig file; the default one ([`DEFAULT_RIG`]), when it is not there (stereotag run
+/// outside its repository, or installed), from the copy built into the library, and says so.
+pub fn load_rig_or_builtin(path: &Path) -> Result<StereoRig, IoError> {
+    if path == Path::new(DEFAULT_RIG) && !path.exists() {
+        tracing::info!("{DEFAULT_RIG} is not here: using the copy built into stereotag");
+        let text = include_str!("../../calibration/rigs/default.yaml");
+        return parse_rig(path, text);
+    }
+    load_rig(path)
+}
+
 /// Reads a Kalibr camchain YAML file as a stereo rig. Without `stereotag.robot_from_left` the
 /// left camera is taken to look straight ahead from the robot centre, 0.3 m up.
 pub fn load_rig(path: &Path) -> Result<StereoRig, IoError> {
@@ -334,4 +348,28 @@ pub fn save_camera_info(
         fmt_list(&p),
     );
     write_file(path, s.as_bytes())
+}
+
+/// Writes a rig as Kalibr camchain (`camchain.yaml`), OpenCV FileStorage (`opencv_stereo.yaml`)
+/// and ROS camera_info (`left.yaml`, `right.yaml`, Bouguet-rectified) into `dir`; returns the
+/// rectification.
+pub fn save_rig_exports(dir: &Path, rig: &StereoRig) -> Result<Rectification, IoError> {
+    let rect = rig.rectify();
+    save_rig(&dir.join("camchain.yaml"), rig)?;
+    save_opencv_stereo(&dir.join("opencv_stereo.yaml"), rig, &rect)?;
+    save_camera_info(
+        &dir.join("left.yaml"),
+        "left",
+        &rig.left,
+        &rect.left_rotation,
+        &rect.left_projection(),
+    )?;
+    save_camera_info(
+        &dir.join("right.yaml"),
+        "right",
+        &rig.right,
+        &rect.right_rotation,
+        &rect.right_projection(),
+    )?;
+    Ok(rect)
 }

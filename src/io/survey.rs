@@ -2,9 +2,12 @@
 //! `visual_turns.csv` (ours).
 
 use super::{read_text, write_file, IoError};
-use crate::fusion::{Landmark, OdometryCalibration};
+use crate::dataset::RunDataset;
+use crate::fusion::{Landmark, OdometryCalibration, Survey};
 use crate::geometry::{pose_at, StampedPose};
+use crate::world::World;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -188,4 +191,130 @@ pub fn save_visual_turns_csv(
         );
     }
     write_file(path, s.as_bytes())
+}
+
+/// Writes every survey output into `dir` (DESIGN.md's survey outputs: the maps and their
+/// pictures, corners, walls, visual turns, `landmarks.json`, `layout.json`, `trajectory.csv` and
+/// `report.json` with the metrics, timings, conflicts and the planned-versus-surveyed table).
+pub fn save_survey(
+    dir: &Path,
+    run: &RunDataset,
+    world: Option<&World>,
+    s: &Survey,
+    metrics: &BTreeMap<String, f64>,
+    timings: &BTreeMap<String, f64>,
+) -> Result<(), IoError> {
+    super::save_ros_map(dir, "map", &s.raw.counting)?;
+    super::save_map_png(&dir.join("map.png"), &s.raw.counting)?;
+    super::save_accumulator_png(&dir.join("hough.png"), &s.raw.accumulator)?;
+    super::save_features_csv(&dir.join("corners.csv"), &s.raw.features_offline)?;
+    super::save_ros_map(dir, "map_online", &s.online_map)?;
+    super::save_map_png(&dir.join("map_online.png"), &s.online_map)?;
+    super::save_ros_map(dir, "map_corrected", &s.corrected.counting)?;
+    super::save_map_png(&dir.join("map_corrected.png"), &s.corrected.counting)?;
+    super::save_accumulator_png(&dir.join("hough_corrected.png"), &s.corrected.accumulator)?;
+    super::save_features_csv(
+        &dir.join("corners_corrected.csv"),
+        &s.corrected.features_offline,
+    )?;
+    super::save_walls_csv(&dir.join("walls_corrected.csv"), &s.corrected.walls)?;
+    super::save_visual_turns_csv(
+        &dir.join("visual_turns.csv"),
+        &s.visual,
+        &run.odometry,
+        run.ground_truth.as_deref(),
+    )?;
+    let planned = |l: &Landmark| {
+        world
+            .and_then(|w| w.tags.iter().find(|t| t.id == l.id && t.family == l.family))
+            .map(|t| t.position_m)
+    };
+    let mut landmarks = s.landmarks.clone();
+    landmarks.sort_by(|a, b| (&a.family, a.id).cmp(&(&b.family, b.id)));
+    let records = landmarks
+        .iter()
+        .map(|l| LandmarkRecord {
+            landmark: l.clone(),
+            planned_position_m: planned(l),
+        })
+        .collect();
+    super::save_landmarks(
+        &dir.join("landmarks.json"),
+        &LandmarksFile {
+            landmarks: records,
+            odometry_calibration: s.offline.odometry_calibration,
+        },
+    )?;
+    super::save_wpilib_layout(&dir.join("layout.json"), &landmarks, 0.5)?;
+    super::save_trajectory_csv(
+        &dir.join("trajectory.csv"),
+        &Trajectories {
+            odometry: &run.odometry,
+            online: &s.online.trajectory,
+            offline: &s.offline.trajectory,
+            ground_truth: run.ground_truth.as_deref(),
+        },
+    )?;
+    let displacement: Vec<_> = landmarks
+        .iter()
+        .filter_map(|l| {
+            let p = planned(l)?;
+            let d = [
+                l.position_m[0] - p[0],
+                l.position_m[1] - p[1],
+                l.position_m[2] - p[2],
+            ];
+            Some(serde_json::json!({
+                "id": l.id, "family": l.family, "planned_m": p, "surveyed_m": l.position_m,
+                "displacement_m": d, "distance_m": (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+            }))
+        })
+        .collect();
+    let finite: BTreeMap<_, _> = metrics
+        .iter()
+        .map(|(k, v)| (k.clone(), v.is_finite().then_some(*v)))
+        .collect();
+    let report = serde_json::json!({
+        "metrics": finite,
+        "timings_s": timings,
+        "conflicts": s.online.conflicts,
+        "planned_vs_surveyed": displacement,
+    });
+    super::save_json(&dir.join("report.json"), &report)?;
+    Ok(())
+}
+
+/// The header of `localization.csv`.
+pub const LOCALIZATION_HEADER: &str = "t_s,odom_x_m,odom_y_m,odom_theta_rad,x_m,y_m,theta_rad,sigma_m,since_sighting_m,gt_x_m,gt_y_m,gt_theta_rad";
+
+/// Writes `localization.csv`: at each odometry time the odometry as logged, the localised pose,
+/// its sigma, the distance since the last sighting and, when known, the true pose.
+pub fn save_localization_csv(
+    path: &Path,
+    odometry: &[StampedPose],
+    result: &crate::fusion::LocalizeResult,
+    truth: Option<&[StampedPose]>,
+) -> Result<(), IoError> {
+    let mut csv = format!("{LOCALIZATION_HEADER}\n");
+    for (i, (o, p)) in odometry.iter().zip(&result.trajectory).enumerate() {
+        let gt = truth
+            .and_then(|t| pose_at(t, o.t_s))
+            .map_or(",,".to_string(), |g| {
+                format!("{:.5},{:.5},{:.6}", g.x, g.y, g.theta)
+            });
+        let _ = writeln!(
+            csv,
+            "{:.4},{:.5},{:.5},{:.6},{:.5},{:.5},{:.6},{:.5},{:.4},{gt}",
+            o.t_s,
+            o.pose.x,
+            o.pose.y,
+            o.pose.theta,
+            p.pose.x,
+            p.pose.y,
+            p.pose.theta,
+            result.sigma_m[i],
+            result.since_sighting_m[i],
+        );
+    }
+    write_file(path, csv.as_bytes())
 }

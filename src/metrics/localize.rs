@@ -2,6 +2,7 @@
 
 use crate::fusion::LocalizeResult;
 use crate::geometry::{pose_at, StampedPose};
+use crate::metrics::ate_m;
 use serde::Serialize;
 
 /// Error statistics of a localised run over one band of distance since the last sighting.
@@ -56,4 +57,55 @@ pub fn error_growth(result: &LocalizeResult, truth: Option<&[StampedPose]>) -> V
     }
     bins.retain(|b| b.samples > 0);
     bins
+}
+
+/// What a localisation fused and, with ground truth, its ATE: the figures of `localize`'s
+/// `report.json`. `odometry` is the odometry the filter ran on (`run_odometry` corrected with a
+/// survey's calibration when `calibrated`).
+pub fn localization_metrics(
+    result: &LocalizeResult,
+    run_odometry: &[StampedPose],
+    odometry: &[StampedPose],
+    calibrated: bool,
+    truth: Option<&[StampedPose]>,
+    counts: LocalizationCounts,
+) -> serde_json::Map<String, serde_json::Value> {
+    let mut metrics = serde_json::Map::new();
+    metrics.insert("sightings.fused".into(), result.accepted.len().into());
+    metrics.insert("sightings.gated_out".into(), result.rejected.len().into());
+    metrics.insert("sightings.unknown_tag".into(), result.unknown.len().into());
+    metrics.insert("walls.surveyed".into(), counts.walls.into());
+    metrics.insert("ranges.fused".into(), result.ranges_fused().into());
+    metrics.insert("ranges.gated_out".into(), result.ranges_gated_out().into());
+    metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
+    metrics.insert("visual.turns".into(), counts.visual_turns.into());
+    metrics.insert("visual.fused".into(), result.visual_fused.into());
+    metrics.insert("visual.gated_out".into(), result.visual_rejected.into());
+    metrics.insert(
+        "odometry.calibrated".into(),
+        f64::from(u8::from(calibrated)).into(),
+    );
+    if let Some(t) = truth {
+        metrics.insert("ate_m.odometry".into(), ate_m(run_odometry, t).into());
+        if calibrated {
+            metrics.insert(
+                "ate_m.odometry_calibrated".into(),
+                ate_m(odometry, t).into(),
+            );
+        }
+        metrics.insert(
+            "ate_m.localized".into(),
+            ate_m(&result.trajectory, t).into(),
+        );
+    }
+    metrics
+}
+
+/// What the localisation had to work with, for its report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LocalizationCounts {
+    /// Surveyed walls the sonar was matched against.
+    pub walls: usize,
+    /// Visual turns measured.
+    pub visual_turns: usize,
 }

@@ -6,6 +6,8 @@ pub mod map;
 pub mod survey;
 pub mod trajectory;
 
-pub use localize::{error_growth, GrowthBin, GROWTH_BANDS_M};
+pub use localize::{
+    error_growth, localization_metrics, GrowthBin, LocalizationCounts, GROWTH_BANDS_M,
+};
 pub use survey::{score_sonar_map, score_survey, survey_metrics, SonarScores};
 pub use trajectory::{align_se2, ate_m};

@@ -6,7 +6,8 @@ use crate::fusion::Survey;
 use crate::geometry::{Pose2, StampedPose};
 use crate::metrics::map::{score_features, score_map, FeatureScore, MapScore};
 use crate::metrics::{align_se2, ate_m};
-use crate::sonar::map::{counting_map_along, MapError, MappingConfig, SonarMap};
+use crate::sonar::grid::GridError;
+use crate::sonar::map::{counting_map_along, MappingConfig, SonarMap};
 use crate::world::World;
 use std::collections::BTreeMap;
 
@@ -31,7 +32,7 @@ pub fn score_survey(
     run: &RunDataset,
     world: &World,
     mapping: &MappingConfig,
-) -> Result<BTreeMap<String, f64>, MapError> {
+) -> Result<BTreeMap<String, f64>, GridError> {
     let mut m = score_sonar_map(&survey.raw, run, world).metrics();
     let online = score_map(&survey.online_map, world);
     m.insert(
@@ -50,7 +51,7 @@ pub fn score_survey(
     );
     if let Some(truth) = &run.ground_truth {
         // Only its counting grid is scored: not the Hough passes and walls a full map builds.
-        let gt_map = counting_map_along(run, truth, mapping)?;
+        let gt_map = counting_map_along(&run.sonar_log(), truth, mapping)?;
         let gt = score_map(&gt_map, world);
         m.insert(
             "map_ground_truth.occupied_precision".into(),

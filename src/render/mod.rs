@@ -1273,6 +1273,41 @@ fn truths(
     truth
 }
 
+/// The tags of a world as the renderer paints them, to find which are in view without
+/// rendering.
+pub struct TagVisibility<'a> {
+    world: &'a World,
+    paints: Vec<TagPaint>,
+}
+
+impl<'a> TagVisibility<'a> {
+    /// The world's tags, ready to be looked for; fails on a tag the renderer cannot paint.
+    pub fn new(world: &'a World) -> Result<Self, RenderError> {
+        let paints = world
+            .tags
+            .iter()
+            .map(tag_paint)
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self { world, paints })
+    }
+
+    /// The tags a robot at `world_from_robot` sees in both cameras.
+    pub fn seen(
+        &self,
+        rig: &StereoRig,
+        world_from_robot: &Pose2,
+        config: &RenderConfig,
+    ) -> Vec<TagTruth> {
+        truths(
+            self.world,
+            &self.paints,
+            rig,
+            &world_from_left(rig, world_from_robot),
+            config,
+        )
+    }
+}
+
 /// The tags a robot at `world_from_robot` sees in both cameras, without rendering.
 pub fn visible_tags(
     world: &World,
@@ -1280,90 +1315,7 @@ pub fn visible_tags(
     world_from_robot: Pose2,
     config: &RenderConfig,
 ) -> Result<Vec<TagTruth>, RenderError> {
-    let paints = world
-        .tags
-        .iter()
-        .map(tag_paint)
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok(truths(
-        world,
-        &paints,
-        rig,
-        &world_from_left(rig, &world_from_robot),
-        config,
-    ))
-}
-
-/// When to take stereo pictures along a run: whenever a tag is in view of both cameras within
-/// `max_range_m`, at most once per `min_travel_m` of travel or `min_turn_rad` of turn; and, for the
-/// visual odometry, with no tag in view as well once the robot has moved `every` since the last
-/// picture.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CapturePolicy {
-    /// Farthest tag worth a picture (ours: 6 m; a 16 cm tag is still 12 px wide there).
-    pub max_range_m: f64,
-    /// Least travel between pictures (ours: 0.15 m).
-    pub min_travel_m: f64,
-    /// Least turn between pictures (ours: 10 degrees).
-    pub min_turn_rad: f64,
-    /// Travel (m) or turn (rad) after which a picture is taken whatever is in view (ours: 0.3 m
-    /// or 20 degrees, so that consecutive pictures share most of what they see); `None` for
-    /// pictures of tags only.
-    pub every: Option<(f64, f64)>,
-}
-
-impl Default for CapturePolicy {
-    fn default() -> Self {
-        Self {
-            max_range_m: 6.0,
-            min_travel_m: 0.15,
-            min_turn_rad: 10f64.to_radians(),
-            every: Some((0.3, 20f64.to_radians())),
-        }
-    }
-}
-
-/// The stamped true poses at which pictures are taken.
-pub fn plan_captures(
-    world: &World,
-    rig: &StereoRig,
-    trajectory: &[crate::geometry::StampedPose],
-    policy: &CapturePolicy,
-    config: &RenderConfig,
-) -> Result<Vec<crate::geometry::StampedPose>, RenderError> {
-    let paints = world
-        .tags
-        .iter()
-        .map(tag_paint)
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut out: Vec<crate::geometry::StampedPose> = Vec::new();
-    for p in trajectory {
-        if let Some(last) = out.last() {
-            let moved = (p.pose.x - last.pose.x).hypot(p.pose.y - last.pose.y);
-            let turned = crate::geometry::wrap_angle(p.pose.theta - last.pose.theta).abs();
-            if moved < policy.min_travel_m && turned < policy.min_turn_rad {
-                continue;
-            }
-            if policy
-                .every
-                .is_some_and(|(m, rad)| moved >= m || turned >= rad)
-            {
-                out.push(*p);
-                continue;
-            }
-        } else if policy.every.is_some() {
-            out.push(*p);
-            continue;
-        }
-        let seen = truths(world, &paints, rig, &world_from_left(rig, &p.pose), config);
-        if seen
-            .iter()
-            .any(|t| Vector3::from(t.centre_in_left_m).norm() <= policy.max_range_m)
-        {
-            out.push(*p);
-        }
-    }
-    Ok(out)
+    Ok(TagVisibility::new(world)?.seen(rig, &world_from_robot, config))
 }
 
 #[cfg(test)]

@@ -22,7 +22,10 @@
 //! budget ends. The controller senses walls with an ideal proximity sensor (the simulator's
 //! geometry) so that the run is about mapping, not about control; only the logged sonar is noisy.
 
+pub mod capture;
+
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, RUN_FORMAT};
+
 use crate::geometry::StampedPose;
 use crate::geometry::{wrap_angle, Pose2};
 use crate::sonar::grid::{CountingGrid, GridConfig, GridError, OccupancyGrid, OccupancyMap};

@@ -1,8 +1,8 @@
 //! The sonar half end to end: readings placed along a trajectory, the counting and log-odds
 //! grids, the online and offline Hough features, and the straight walls.
 
-use crate::dataset::{PoseSource, RunDataset};
 use crate::geometry::StampedPose;
+use crate::progress::timed;
 use crate::sonar::grid::{
     CountingGrid, GridConfig, GridError, LogOddsGrid, OccupancyGrid, OccupancyMap,
 };
@@ -10,7 +10,7 @@ use crate::sonar::hough::{
     classify_features, features_offline, features_online, Accumulator, Feature, HoughConfig,
 };
 use crate::sonar::walls::{map_walls, WallSegment};
-use crate::sonar::PlacedReading;
+use crate::sonar::{PlacedReading, SonarLayout, SonarLog};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -23,17 +23,6 @@ pub struct MappingConfig {
     pub grid: GridConfig,
     /// Hough corner features.
     pub hough: HoughConfig,
-}
-
-/// Errors of mapping a run.
-#[derive(Debug, thiserror::Error)]
-pub enum MapError {
-    /// Bad grid settings.
-    #[error(transparent)]
-    Grid(#[from] GridError),
-    /// The run lacks the trajectory asked for.
-    #[error("the run has no ground_truth.csv; use --poses odometry")]
-    NoGroundTruth,
 }
 
 /// Everything the sonar half produces.
@@ -62,31 +51,48 @@ pub struct SonarMap {
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// Builds the grids and features of a run along the chosen trajectory.
-pub fn map_run(
-    run: &RunDataset,
-    poses: PoseSource,
-    config: &MappingConfig,
-) -> Result<SonarMap, MapError> {
-    let trajectory = run.trajectory(poses).ok_or(MapError::NoGroundTruth)?;
-    map_trajectory(run, trajectory, config)
+/// Share of echoes off the grid above which the grid is taken not to cover the run: 25% (odometry
+/// drift puts up to 15% of the samples' echoes off their grids, ground-truth poses 0.4-3%: echoes
+/// from behind the outer walls).
+pub const OFF_GRID_WARN: f64 = 0.25;
+
+impl SonarMap {
+    /// What to tell the user when the grid does not cover the run (more than [`OFF_GRID_WARN`]
+    /// of the echoes fell outside it and are lost): how many, where the grid lies, what to set.
+    pub fn off_grid_warning(&self) -> Option<String> {
+        let share = self.echoes_off_grid as f64 / self.echoes.max(1) as f64;
+        if share <= OFF_GRID_WARN {
+            return None;
+        }
+        let g = &self.counting.geometry;
+        Some(format!(
+            "{} of {} sonar echoes ({:.0}%) fall outside the grid (x {:.1}..{:.1} m, y {:.1}..{:.1} m) and are lost: set `mapping.grid` (origin_m, width_cells, height_cells) in run.yaml or the mapping settings to cover the run",
+            self.echoes_off_grid,
+            self.echoes,
+            100.0 * share,
+            g.origin_m[0],
+            g.origin_m[0] + g.width as f64 * g.resolution_m,
+            g.origin_m[1],
+            g.origin_m[1] + g.height as f64 * g.resolution_m,
+        ))
+    }
 }
 
-/// Builds the grids and features of a run with the readings placed along `trajectory` (odometry,
-/// ground truth or a corrected estimate).
+/// Builds the grids, features and walls of a run's sonar with the readings placed along
+/// `trajectory` (odometry, ground truth or a corrected estimate).
 pub fn map_trajectory(
-    run: &RunDataset,
+    sonar: &SonarLog<'_>,
     trajectory: &[StampedPose],
     config: &MappingConfig,
-) -> Result<SonarMap, MapError> {
-    let layout = &run.meta.robot.sonar;
+) -> Result<SonarMap, GridError> {
+    let layout = sonar.layout;
     let mut timings_s = BTreeMap::new();
     let start = Instant::now();
     let readings = timed("place_readings", &mut timings_s, || {
-        run.placed_readings(trajectory)
+        sonar.placed(trajectory)
     });
     let counting = timed("grid_counting", &mut timings_s, || {
-        counting_map(run, &readings, config)
+        counting_map(layout, &readings, config)
     })?;
     let (echoes, echoes_off_grid) = readings
         .iter()
@@ -115,13 +121,13 @@ pub fn map_trajectory(
             });
             (online, times)
         },
-        || -> Result<_, MapError> {
+        || -> Result<_, GridError> {
             let mut times = BTreeMap::new();
             let log_odds = timed("grid_log_odds", &mut times, || {
                 let mut grid =
                     LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
                 grid.insert_all(&readings);
-                Ok::<_, MapError>(grid.map())
+                Ok::<_, GridError>(grid.map())
             })?;
             let (offline, accumulator) = timed("hough_offline", &mut times, || {
                 let (mut offline, accumulator) =
@@ -154,41 +160,22 @@ pub fn map_trajectory(
     })
 }
 
-/// Runs `f`, noting its wall-clock time under `name`.
-pub(crate) fn timed<T>(
-    name: &str,
-    timings: &mut BTreeMap<String, f64>,
-    f: impl FnOnce() -> T,
-) -> T {
-    let t = Instant::now();
-    let out = f();
-    timings.insert(name.to_owned(), t.elapsed().as_secs_f64());
-    out
-}
-
-/// The raw map: the grid and features with the odometry's poses. It needs no pictures, so a
-/// survey builds it while the tags are being detected.
-pub fn raw_map(run: &RunDataset, mapping: &MappingConfig) -> Result<SonarMap, MapError> {
-    map_trajectory(run, &run.odometry, mapping)
-}
-
 /// The counting grid of the run's sonar readings placed along `trajectory` (the grid alone, not
 /// the Hough passes and walls of [`map_trajectory`]).
-pub(crate) fn counting_map_along(
-    run: &RunDataset,
+pub fn counting_map_along(
+    sonar: &SonarLog<'_>,
     trajectory: &[StampedPose],
     mapping: &MappingConfig,
-) -> Result<OccupancyMap, MapError> {
-    counting_map(run, &run.placed_readings(trajectory), mapping)
+) -> Result<OccupancyMap, GridError> {
+    counting_map(sonar.layout, &sonar.placed(trajectory), mapping)
 }
 
-/// The counting grid of sonar readings of the run, placed.
-pub(crate) fn counting_map(
-    run: &RunDataset,
+/// The counting grid of placed readings of sensors of `layout`.
+pub fn counting_map(
+    layout: &SonarLayout,
     readings: &[PlacedReading],
     mapping: &MappingConfig,
-) -> Result<OccupancyMap, MapError> {
-    let layout = &run.meta.robot.sonar;
+) -> Result<OccupancyMap, GridError> {
     let mut grid = CountingGrid::new(mapping.grid.clone(), layout.cone_rad, layout.max_range_m)?;
     grid.insert_all(readings);
     Ok(grid.map())

@@ -182,3 +182,19 @@ pub fn place_readings(
         })
         .collect()
 }
+
+/// A run's sonar: where the sensors sit and what they read, time-ordered.
+#[derive(Debug, Clone, Copy)]
+pub struct SonarLog<'a> {
+    /// The sensors.
+    pub layout: &'a SonarLayout,
+    /// The readings.
+    pub readings: &'a [SonarReading],
+}
+
+impl SonarLog<'_> {
+    /// Every reading placed in the world along `trajectory` ([`place_readings`]).
+    pub fn placed(&self, trajectory: &[StampedPose]) -> Vec<PlacedReading> {
+        place_readings(self.readings, self.layout, trajectory)
+    }
+}

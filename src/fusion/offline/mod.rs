@@ -156,7 +156,9 @@ pub(crate) fn run_offline_with_prior(
         .collect();
     anchors.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut keyframes: Vec<Keyframe> = Vec::new();
-    let mut sighting_kf: HashMap<usize, usize> = HashMap::new();
+    // Ordered: the tag factors go into the graph in the order of the sightings, so that the
+    // solution does not depend on a hash order (it did in its last digits).
+    let mut sighting_kf: BTreeMap<usize, usize> = BTreeMap::new();
     let mut time_kf: HashMap<u64, usize> = HashMap::new();
     let mut anchors = anchors.into_iter().peekable();
     let mut last_kf = first.pose;

@@ -264,6 +264,29 @@ pub enum TagError {
     C(String),
 }
 
+/// The detector backends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// kornia-apriltag's segmentation and tag families with our port of the C library's quad
+    /// fit and decoding (pure Rust).
+    Kornia,
+    /// kornia-apriltag's own pipeline end to end (for comparison: it finds fewer tags).
+    KorniaLibrary,
+    /// The AprilRobotics C library.
+    ApriltagC,
+}
+
+impl Backend {
+    /// A detector of this backend with `config`, or the error naming the setting it refuses.
+    pub fn detector(self, config: DetectorConfig) -> Result<Box<dyn TagDetector + Send>, TagError> {
+        Ok(match self {
+            Backend::Kornia => Box::new(KorniaDetector::new(config)?),
+            Backend::KorniaLibrary => Box::new(KorniaDetector::library(config)?),
+            Backend::ApriltagC => Box::new(CDetector::new(config)?),
+        })
+    }
+}
+
 /// A tag detector.
 pub trait TagDetector {
     /// Detects tags in a grey image; the list is sorted by id, then by the centre's x.

@@ -1,0 +1,37 @@
+//! Progress of long work and the time its stages take, reported to whoever runs it: the command line draws bars from it, a
+//! program embedding the library may show it or ignore it ([`Silent`]).
+//!
+//! A workflow announces each stage with [`Progress::start`] (its name and number of steps),
+//! reports steps as they are done (from worker threads too, hence `Sync`) and closes the stage
+//! with [`Progress::finish`].
+
+/// Receives a workflow's progress. Every method does nothing by default.
+pub trait Progress: Sync {
+    /// A stage of `total` steps starts (e.g. `"detect"`, 779 stereo pairs).
+    fn start(&self, _stage: &str, _total: u64) {}
+    /// `steps` more steps of the current stage are done.
+    fn advance(&self, _steps: u64) {}
+    /// The current stage has done `done` steps in all.
+    fn set(&self, _done: u64) {}
+    /// The current stage is over.
+    fn finish(&self) {}
+}
+
+/// Progress that goes nowhere.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl Progress for Silent {}
+
+/// Runs `f`, noting its wall-clock time in seconds under `name` (a stage of a report's
+/// `timings_s`).
+pub(crate) fn timed<T>(
+    name: &str,
+    timings: &mut std::collections::BTreeMap<String, f64>,
+    f: impl FnOnce() -> T,
+) -> T {
+    let t = std::time::Instant::now();
+    let out = f();
+    timings.insert(name.to_owned(), t.elapsed().as_secs_f64());
+    out
+}

@@ -1,0 +1,280 @@
+//! Drawing shared by the recordings: conversions to rerun's types, the world's walls and planned
+//! tags, trajectories, the robot, landmarks with their ellipsoids, surveyed walls, maps.
+
+use super::palette;
+use super::{VizError, ELLIPSOID_SIGMAS, POSE_SAMPLE_S};
+use crate::fusion::Landmark;
+use crate::geometry::StampedPose;
+use crate::sonar::grid::OccupancyMap;
+use crate::sonar::walls::WallSegment;
+use crate::world::World;
+use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
+use rerun::blueprint as bp;
+
+/// The time panel on the `time` timeline, following the end of the run (the finished map and
+/// trajectories); scrub back to replay it.
+pub(super) fn following_time_panel() -> bp::TimePanel {
+    bp::TimePanel::new()
+        .with_timeline("time")
+        .with_play_state(bp::components::PlayState::Following)
+}
+
+pub(super) fn f32s<const N: usize>(v: [f64; N]) -> [f32; N] {
+    v.map(|x| x as f32)
+}
+
+pub(super) fn quaternion(r: &UnitQuaternion<f64>) -> rerun::Quaternion {
+    rerun::Quaternion::from_xyzw([r.i as f32, r.j as f32, r.k as f32, r.w as f32])
+}
+
+pub(super) fn transform(iso: &Isometry3<f64>) -> rerun::Transform3D {
+    let t = iso.translation.vector;
+    rerun::Transform3D::from_translation_rotation(f32s([t.x, t.y, t.z]), quaternion(&iso.rotation))
+}
+
+pub(super) fn planar_transform(p: &crate::geometry::Pose2) -> rerun::Transform3D {
+    let r = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), p.theta);
+    rerun::Transform3D::from_translation_rotation([p.x as f32, p.y as f32, 0.0], quaternion(&r))
+}
+
+pub(super) fn strip(trajectory: &[StampedPose], z: f64) -> Vec<[f32; 3]> {
+    trajectory
+        .iter()
+        .map(|p| [p.pose.x as f32, p.pose.y as f32, z as f32])
+        .collect()
+}
+
+/// Pixel position in the map image (row 0 at the top) of a world point.
+pub(super) fn map_pixel(map: &OccupancyMap, x: f64, y: f64) -> [f32; 2] {
+    let g = &map.geometry;
+    [
+        ((x - g.origin_m[0]) / g.resolution_m) as f32,
+        (g.height as f64 - (y - g.origin_m[1]) / g.resolution_m) as f32,
+    ]
+}
+
+/// The map as the paper shows it: inverse grey, unknown mid-grey; row 0 at the top.
+pub(super) fn map_image(map: &OccupancyMap) -> rerun::Image {
+    let g = &map.geometry;
+    let mut pixels = vec![0u8; g.width * g.height];
+    for row in 0..g.height {
+        for col in 0..g.width {
+            let v = map.occupancy[row * g.width + col];
+            pixels[(g.height - 1 - row) * g.width + col] = match v {
+                Some(p) => (255.0 * (1.0 - p)).round().clamp(0.0, 255.0) as u8,
+                None => 128,
+            };
+        }
+    }
+    rerun::Image::from_l8(pixels, [g.width as u32, g.height as u32])
+}
+
+/// The map as a ROS OccupancyGrid (0 free .. 100 occupied, 255 unknown) for the GridMap archetype.
+pub(super) fn feature_color(kind: crate::sonar::hough::FeatureKind) -> rerun::Color {
+    match kind {
+        crate::sonar::hough::FeatureKind::Corner => palette::CORNER,
+        crate::sonar::hough::FeatureKind::Edge => palette::EDGE,
+        crate::sonar::hough::FeatureKind::Unknown => palette::UNKNOWN_FEATURE,
+    }
+}
+
+pub(super) fn grid_map(map: &OccupancyMap) -> rerun::GridMap {
+    let g = &map.geometry;
+    let data: Vec<u8> = map
+        .occupancy
+        .iter()
+        .map(|v| v.map_or(255, |p| (100.0 * p).round().clamp(0.0, 100.0) as u8))
+        .collect();
+    // GridMap rows run from the lower-left corner, as the map's.
+    rerun::GridMap::new(
+        data,
+        rerun::components::ImageFormat::from_color_model(
+            [g.width as u32, g.height as u32],
+            rerun::ColorModel::L,
+            rerun::ChannelDatatype::U8,
+        ),
+        g.resolution_m as f32,
+    )
+    .with_translation([g.origin_m[0] as f32, g.origin_m[1] as f32, -0.01])
+    .with_colormap(rerun::components::Colormap::RvizMap)
+}
+
+/// Radii (at [`ELLIPSOID_SIGMAS`]) and orientation of a covariance ellipsoid.
+pub(super) fn ellipsoid(cov: &[[f64; 3]; 3]) -> ([f32; 3], rerun::Quaternion) {
+    let m = Matrix3::from_fn(|i, j| cov[i][j]);
+    let eig = ((m + m.transpose()) * 0.5).symmetric_eigen();
+    let mut axes = eig.eigenvectors;
+    if axes.determinant() < 0.0 {
+        axes.column_mut(2).neg_mut();
+    }
+    let r = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes));
+    let radii = eig
+        .eigenvalues
+        .map(|v| (ELLIPSOID_SIGMAS * v.max(0.0).sqrt()).max(1e-3));
+    (f32s([radii[0], radii[1], radii[2]]), quaternion(&r))
+}
+
+pub(super) fn log_world(
+    rec: &rerun::RecordingStream,
+    world: Option<&World>,
+) -> Result<(), VizError> {
+    let Some(world) = world else {
+        return Ok(());
+    };
+    let walls: Vec<Vec<[f32; 3]>> = world
+        .walls
+        .iter()
+        .map(|w| {
+            let (a, b) = (w.segment.a, w.segment.b);
+            let h = w.height_m as f32;
+            vec![
+                [a.x as f32, a.y as f32, 0.0],
+                [b.x as f32, b.y as f32, 0.0],
+                [b.x as f32, b.y as f32, h],
+                [a.x as f32, a.y as f32, h],
+                [a.x as f32, a.y as f32, 0.0],
+            ]
+        })
+        .collect();
+    rec.log_static(
+        "world/walls",
+        &rerun::LineStrips3D::new(walls)
+            .with_colors([palette::WALLS])
+            .with_radii([rerun::Radius::new_ui_points(1.0)]),
+    )?;
+    let planned: Vec<[f32; 3]> = world.tags.iter().map(|t| f32s(t.position_m)).collect();
+    rec.log_static(
+        "world/tags_planned",
+        &rerun::Points3D::new(planned)
+            .with_labels(world.tags.iter().map(|t| format!("planned {}", t.id)))
+            .with_colors([palette::PLANNED_TAG])
+            .with_radii([0.03f32]),
+    )?;
+    let corners: Vec<[f32; 3]> = world
+        .vertices
+        .iter()
+        .map(|v| [v.position.x as f32, v.position.y as f32, 0.0])
+        .collect();
+    rec.log_static(
+        "world/corners_true",
+        &rerun::Points3D::new(corners)
+            .with_colors([palette::TRUE_CORNER])
+            .with_radii([0.02f32]),
+    )?;
+    Ok(())
+}
+
+/// Each trajectory as a line under `world/trajectories/NAME`, in its colour.
+pub(super) fn log_trajectory_lines(
+    rec: &rerun::RecordingStream,
+    lines: &[(&str, &[StampedPose], rerun::Color)],
+) -> Result<(), VizError> {
+    for (name, t, c) in lines {
+        rec.log_static(
+            format!("world/trajectories/{name}"),
+            &rerun::LineStrips3D::new([strip(t, 0.02)])
+                .with_colors([*c])
+                .with_radii([rerun::Radius::new_ui_points(1.5)])
+                .with_labels([*name]),
+        )?;
+    }
+    Ok(())
+}
+
+/// The robot, a disc outline with a heading tick, moved along `trajectory` on the `time`
+/// timeline.
+pub(super) fn log_robot(
+    rec: &rerun::RecordingStream,
+    trajectory: &[StampedPose],
+) -> Result<(), VizError> {
+    let mut outline: Vec<[f32; 3]> = (0..=24)
+        .map(|k| {
+            let a = k as f32 / 24.0 * std::f32::consts::TAU;
+            [0.2 * a.cos(), 0.2 * a.sin(), 0.05]
+        })
+        .collect();
+    outline.push([0.0, 0.0, 0.05]);
+    rec.log_static(
+        "world/robot/shape",
+        &rerun::LineStrips3D::new([outline]).with_colors([palette::ROBOT]),
+    )?;
+    let mut next = f64::NEG_INFINITY;
+    for p in trajectory {
+        if p.t_s < next {
+            continue;
+        }
+        next = p.t_s + POSE_SAMPLE_S;
+        rec.set_duration_secs("time", p.t_s);
+        rec.log("world/robot", &planar_transform(&p.pose))?;
+    }
+    rec.reset_time();
+    Ok(())
+}
+
+/// A landmark as a point and its covariance ellipsoid under `landmarks/tag_ID`; returns the path.
+pub(super) fn log_landmark(rec: &rerun::RecordingStream, l: &Landmark) -> Result<String, VizError> {
+    let path = format!("landmarks/tag_{}", l.id);
+    let (radii, q) = ellipsoid(&l.covariance_m2);
+    rec.log_static(
+        path.as_str(),
+        &rerun::Points3D::new([f32s(l.position_m)])
+            .with_labels([format!("tag {} ({} sightings)", l.id, l.observations)])
+            .with_colors([palette::FUSED])
+            .with_radii([0.04f32]),
+    )?;
+    rec.log_static(
+        format!("{path}/covariance"),
+        &rerun::Ellipsoids3D::from_centers_and_half_sizes([f32s(l.position_m)], [radii])
+            .with_quaternions([q])
+            .with_colors([palette::LANDMARK_COVARIANCE]),
+    )?;
+    Ok(path)
+}
+
+/// The surveyed walls (what `localize` holds a later run's sonar to): in the scene a low line
+/// along each face, and on `map` when given.
+pub(super) fn log_surveyed_walls(
+    rec: &rerun::RecordingStream,
+    walls: &[WallSegment],
+    map: Option<&OccupancyMap>,
+) -> Result<(), VizError> {
+    let labels: Vec<String> = walls
+        .iter()
+        .map(|w| {
+            format!(
+                "wall {} readings, rms {:.1} cm",
+                w.readings,
+                100.0 * w.rms_m
+            )
+        })
+        .collect();
+    rec.log_static(
+        "world/walls_surveyed",
+        &rerun::LineStrips3D::new(walls.iter().map(|w| {
+            let (a, b) = (w.from_m, w.to_m);
+            [
+                [a[0] as f32, a[1] as f32, 0.1],
+                [b[0] as f32, b[1] as f32, 0.1],
+            ]
+        }))
+        .with_colors([palette::SURVEYED_WALL])
+        .with_radii([rerun::Radius::new_ui_points(2.5)])
+        .with_labels(labels.clone())
+        .with_show_labels(false),
+    )?;
+    if let Some(map) = map {
+        rec.log_static(
+            "map/corrected/walls",
+            &rerun::LineStrips2D::new(walls.iter().map(|w| {
+                [
+                    map_pixel(map, w.from_m[0], w.from_m[1]),
+                    map_pixel(map, w.to_m[0], w.to_m[1]),
+                ]
+            }))
+            .with_colors([palette::SURVEYED_WALL])
+            .with_labels(labels)
+            .with_show_labels(false),
+        )?;
+    }
+    Ok(())
+}

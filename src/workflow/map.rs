@@ -1,0 +1,108 @@
+//! The sonar map of a run: the counting and log-odds grids, the Hough corner features and the
+//! straight walls, scored when the world is known, written as ROS map_server files, CSVs and a
+//! report.
+
+use super::{load_run, world_of_run, Error, Result};
+use crate::dataset::{PoseSource, RunDataset};
+use crate::io::{self, OutputDir};
+use crate::metrics::score_sonar_map;
+use crate::sonar::map::{map_trajectory, MappingConfig, SonarMap};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What to map and how.
+#[derive(Debug, Clone)]
+pub struct MapRequest<'a> {
+    /// The run dataset directory.
+    pub run_dir: &'a Path,
+    /// The output directory.
+    pub out: &'a Path,
+    /// Which trajectory places the readings.
+    pub poses: PoseSource,
+    /// A world file to score against (default: the one run.yaml names, if it exists).
+    pub world: Option<&'a Path>,
+    /// Mapping settings (YAML); default: run.yaml's, else the paper's.
+    pub config: Option<&'a Path>,
+    /// Replace the output directory if it exists.
+    pub force: bool,
+}
+
+/// The map made, and the figures of its `report.json`.
+#[derive(Debug, Clone)]
+pub struct MapOutput {
+    /// The grids, features and walls.
+    pub map: SonarMap,
+    /// Scores (with a world) and counts.
+    pub metrics: BTreeMap<String, f64>,
+}
+
+/// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
+/// `corners.csv`, `corners_online.csv`, `walls.csv` and `report.json` into a new directory.
+pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
+    let run = load_run(request.run_dir)?;
+    let config = match request.config {
+        Some(p) => io::parse_yaml::<MappingConfig>(p, &io::read_text(p)?)?,
+        None => run.meta.mapping.clone().unwrap_or_default(),
+    };
+    let world = world_of_run(request.world, request.run_dir, &run);
+    let output = map_and_score(&run, request.poses, &config, world.as_deref())?;
+    let dir = OutputDir::create(request.out, request.force)?;
+    save_map(&dir.path(""), &output)?;
+    dir.commit()?;
+    Ok(output)
+}
+
+/// Maps a run and scores it when a world file is given.
+pub fn map_and_score(
+    run: &RunDataset,
+    poses: PoseSource,
+    config: &MappingConfig,
+    world: Option<&Path>,
+) -> Result<MapOutput> {
+    let trajectory = run.trajectory(poses).ok_or_else(|| {
+        Error::Request("the run has no ground_truth.csv; use --poses odometry".into())
+    })?;
+    let map = map_trajectory(&run.sonar_log(), trajectory, config)?;
+    let mut metrics = BTreeMap::new();
+    if let Some(w) = world {
+        let loaded = io::load_world(w)?;
+        metrics = score_sonar_map(&map, run, &loaded.world).metrics();
+    }
+    let per_reading_us =
+        |k: &str| map.timings_s.get(k).copied().unwrap_or(0.0) * 1e6 / map.readings.max(1) as f64;
+    metrics.insert(
+        "grid_counting.us_per_reading".into(),
+        per_reading_us("grid_counting"),
+    );
+    metrics.insert(
+        "grid_log_odds.us_per_reading".into(),
+        per_reading_us("grid_log_odds"),
+    );
+    metrics.insert("readings".into(), map.readings as f64);
+    metrics.insert("echoes".into(), map.echoes as f64);
+    metrics.insert("echoes.off_grid".into(), map.echoes_off_grid as f64);
+    let duration =
+        run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
+    metrics.insert("run.duration_s".into(), duration);
+    Ok(MapOutput { map, metrics })
+}
+
+/// Writes a map's files into `dir`.
+fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
+    let map = &output.map;
+    io::save_ros_map(dir, "map", &map.counting)?;
+    io::save_map_png(&dir.join("map.png"), &map.counting)?;
+    io::save_ros_map(dir, "map_log_odds", &map.log_odds)?;
+    io::save_accumulator_png(&dir.join("hough.png"), &map.accumulator)?;
+    io::save_features_csv(&dir.join("corners.csv"), &map.features_offline)?;
+    io::save_features_csv(&dir.join("corners_online.csv"), &map.features_online)?;
+    io::save_walls_csv(&dir.join("walls.csv"), &map.walls)?;
+    let finite: BTreeMap<_, _> = output
+        .metrics
+        .iter()
+        .map(|(k, v)| (k.clone(), v.is_finite().then_some(*v)))
+        .collect();
+    let report = serde_json::json!({ "metrics": finite, "timings_s": map.timings_s });
+    io::save_json(&dir.join("report.json"), &report)?;
+    Ok(())
+}

@@ -1,0 +1,188 @@
+//! The jobs users run, end to end: each loads its inputs through [`crate::io`], runs the stages,
+//! writes its outputs into a directory that appears whole or not at all, and returns what a caller
+//! prints. The `stereotag` command line is one thin caller of these functions; a program can be
+//! another.
+//!
+//! | job | function |
+//! |---|---|
+//! | simulate a robot in a world, pictures included | [`simulate::simulate`] |
+//! | the sonar map of a run | [`map::map`] |
+//! | survey a run: landmarks, corrected trajectory and map | [`survey::survey`] |
+//! | track a later run against a survey | [`localize::localize`] |
+//! | propose tag places from a sonar map | [`plan::plan`] |
+//! | calibrate a stereo rig from images or corners | [`calibrate::calibrate`] |
+//! | detect tags in images, triangulate a pair | [`detect::detect`] |
+//! | render pairs, sequences, calibration views | [`render`] |
+//! | check and export a rig | [`rig::export_rig`] |
+//! | the demo: simulate the office and survey it | [`demo::demo`] |
+//!
+//! A stage never reads a file itself: workflows are where files and stages meet.
+
+pub mod calibrate;
+pub mod demo;
+pub mod detect;
+pub mod localize;
+pub mod map;
+pub mod plan;
+pub mod render;
+pub mod rig;
+pub mod sightings;
+pub mod simulate;
+pub mod survey;
+
+use crate::dataset::RunDataset;
+use crate::geometry::{odometry_jumps, JUMP_SPEED_MPS};
+use crate::io::IoError;
+use std::path::{Path, PathBuf};
+
+/// What can go wrong in a workflow. [`Error::is_bad_input`] tells the caller's mistakes (a bad
+/// file, a bad setting, an output that exists) from failures of the tool itself.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file could not be read or written, or holds something wrong.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// Bad grid settings.
+    #[error(transparent)]
+    Grid(#[from] crate::sonar::grid::GridError),
+    /// The simulation refused its world or settings.
+    #[error("simulating {}: {cause}", world.display())]
+    Sim {
+        /// The world file.
+        world: PathBuf,
+        /// Why.
+        cause: crate::sim::SimError,
+    },
+    /// A tag detector refused its settings.
+    #[error(transparent)]
+    Tag(#[from] crate::visual::tags::TagError),
+    /// A world could not be rendered.
+    #[error(transparent)]
+    Render(#[from] crate::render::RenderError),
+    /// The calibration failed.
+    #[error(transparent)]
+    Calib(#[from] crate::calib::CalibError),
+    /// The recording could not be opened or written.
+    #[error(transparent)]
+    Record(#[from] crate::viz::VizError),
+    /// The request cannot be done as asked (the message says what to change).
+    #[error("{0}")]
+    Request(String),
+    /// A failure while doing `what`.
+    #[error("{what}: {cause}")]
+    During {
+        /// What was being done, e.g. "recording the survey".
+        what: &'static str,
+        /// What went wrong.
+        cause: Box<Error>,
+    },
+}
+
+impl Error {
+    /// Whether the error is the caller's to fix (bad input: exit status 2 on the command line)
+    /// rather than a failure of the tool (1).
+    pub fn is_bad_input(&self) -> bool {
+        match self {
+            Error::Io(_)
+            | Error::Grid(_)
+            | Error::Sim { .. }
+            | Error::Tag(_)
+            | Error::Render(_)
+            | Error::Calib(_)
+            | Error::Request(_) => true,
+            Error::Record(e) => e.is_bad_input(),
+            Error::During { .. } => false,
+        }
+    }
+
+    /// `self` as a failure while doing `what`.
+    pub(crate) fn during(self, what: &'static str) -> Self {
+        Error::During {
+            what,
+            cause: Box::new(self),
+        }
+    }
+}
+
+/// The result of a workflow.
+pub type Result<T> = std::result::Result<T, Error>;
+
+/// Loads a run directory and warns about each odometry jump in it (a reset or glitch in a log:
+/// everything after it is placed with it), naming the line of `odometry.csv`.
+pub fn load_run(run_dir: &Path) -> Result<RunDataset> {
+    let run = crate::io::load_run(run_dir)?;
+    let jumps = odometry_jumps(&run.odometry);
+    if jumps.is_empty() {
+        return Ok(run);
+    }
+    let file = run_dir.join("odometry.csv");
+    // The file's line of each pose (the reader skips the header and blank lines), read again
+    // only when there is a jump to name.
+    let lines: Vec<usize> = std::fs::read_to_string(&file)
+        .unwrap_or_default()
+        .lines()
+        .enumerate()
+        .skip(1)
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, _)| i + 1)
+        .collect();
+    for j in jumps.iter().take(3) {
+        tracing::warn!(
+            "{}:{}: the odometry jumps {:.2} m at t = {:.2} s (faster than {} m/s): a reset or a glitch? Everything after it is placed with it",
+            file.display(),
+            lines.get(j.index).copied().unwrap_or(j.index + 2),
+            j.distance_m,
+            j.t_s,
+            JUMP_SPEED_MPS
+        );
+    }
+    if jumps.len() > 3 {
+        tracing::warn!(
+            "{}: {} more odometry jumps",
+            file.display(),
+            jumps.len() - 3
+        );
+    }
+    Ok(run)
+}
+
+/// The world file of a run: the one given, else the one run.yaml names if it exists.
+pub fn world_of_run(given: Option<&Path>, run_dir: &Path, run: &RunDataset) -> Option<PathBuf> {
+    given.map(Path::to_path_buf).or_else(|| {
+        run.meta
+            .world
+            .as_ref()
+            .map(|w| run_dir.join(w))
+            .filter(|p| p.exists())
+    })
+}
+
+/// The world of a run, loaded (see [`world_of_run`]).
+pub fn load_world_of_run(
+    given: Option<&Path>,
+    run_dir: &Path,
+    run: &RunDataset,
+) -> Result<Option<crate::world::World>> {
+    Ok(world_of_run(given, run_dir, run)
+        .as_deref()
+        .map(crate::io::load_world)
+        .transpose()?
+        .map(|w| w.world))
+}
+
+/// `to` relative to the directory `from_dir` (both as given, made absolute first).
+pub(crate) fn relative_path(to: &Path, from_dir: &Path) -> PathBuf {
+    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let (to, from) = (abs(to), abs(from_dir));
+    let tc: Vec<_> = to.components().collect();
+    let fc: Vec<_> = from.components().collect();
+    let common = tc.iter().zip(&fc).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..fc.len() {
+        out.push("..");
+    }
+    for c in &tc[common..] {
+        out.push(c);
+    }
+    out
+}

@@ -1,0 +1,143 @@
+//! Where to put tags: from a sonar-only map's corners, the tags that cover the most free space,
+//! with the localisation error to expect; or the error to expect with tags already up.
+
+use super::Result;
+use crate::io::{self, OutputDir};
+use crate::plan::{plan_tags, predict, Plan, PlanConfig, Prediction};
+use crate::sonar::grid::OccupancyMap;
+use crate::sonar::walls::WallSegment;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// What to plan on.
+#[derive(Debug, Clone)]
+pub struct PlanRequest<'a> {
+    /// A map directory from `map` or `survey` (map.yaml + map.pgm, corners.csv, walls.csv).
+    pub map: &'a Path,
+    /// Write plan.json and predicted_error.csv here (default: nothing written).
+    pub out: Option<&'a Path>,
+    /// The settings.
+    pub config: PlanConfig,
+    /// Predict the error with the tags of this `landmarks.json` instead of proposing some.
+    pub tags: Option<&'a Path>,
+    /// Ignore the map's straight walls.
+    pub no_walls: bool,
+    /// Replace the output directory if it exists.
+    pub force: bool,
+}
+
+/// What the planner found.
+#[derive(Debug, Clone)]
+pub enum PlanOutput {
+    /// Tags proposed over the map's corners.
+    Proposed {
+        /// The plan.
+        plan: Plan,
+        /// Corners the tags were chosen from.
+        corners: usize,
+        /// Walls the prediction counted on.
+        walls: usize,
+        /// plan.json's contents.
+        json: serde_json::Value,
+    },
+    /// The error to expect with tags already up.
+    Predicted {
+        /// The prediction.
+        prediction: Prediction,
+        /// The tags' positions.
+        tags_m: Vec<[f64; 2]>,
+        /// Walls the prediction counted on.
+        walls: usize,
+        /// plan.json's contents.
+        json: serde_json::Value,
+    },
+}
+
+/// The map's straight walls (`walls.csv` of `map`, or a survey's `walls_corrected.csv`).
+fn map_walls(map: &Path, no_walls: bool) -> Result<Vec<WallSegment>> {
+    if no_walls {
+        return Ok(Vec::new());
+    }
+    match ["walls.csv", "walls_corrected.csv"]
+        .iter()
+        .map(|f| map.join(f))
+        .find(|p| p.exists())
+    {
+        Some(path) => Ok(io::load_walls_csv(&path)?),
+        None => {
+            tracing::warn!(
+                "{}: no walls.csv (written by `stereotag map`): predicting as with tags only",
+                map.display()
+            );
+            Ok(Vec::new())
+        }
+    }
+}
+
+/// Plans tags on a map (or predicts the error with given tags) and, with `out`, writes
+/// `plan.json` and `predicted_error.csv` (the predicted error at each free cell).
+pub fn plan(request: &PlanRequest<'_>) -> Result<PlanOutput> {
+    let map = io::load_ros_occupancy(&request.map.join("map.yaml"))?;
+    let corners = io::load_features_csv(&request.map.join("corners.csv"))?;
+    let walls = map_walls(request.map, request.no_walls)?;
+    let config = &request.config;
+    let output = match request.tags {
+        Some(tags) => {
+            let file = io::load_landmarks(tags)?;
+            let tags_m: Vec<[f64; 2]> = file
+                .landmarks
+                .iter()
+                .map(|r| [r.landmark.position_m[0], r.landmark.position_m[1]])
+                .collect();
+            let prediction = predict(&map, &tags_m, &walls, config);
+            let json =
+                serde_json::json!({ "prediction": prediction, "tags_m": tags_m, "config": config });
+            PlanOutput::Predicted {
+                prediction,
+                tags_m,
+                walls: walls.len(),
+                json,
+            }
+        }
+        None => {
+            let plan = plan_tags(&map, &corners, &walls, config);
+            let json = serde_json::json!({ "plan": plan, "config": config });
+            PlanOutput::Proposed {
+                plan,
+                corners: corners.len(),
+                walls: walls.len(),
+                json,
+            }
+        }
+    };
+    if let Some(out) = request.out {
+        let (json, errors) = match &output {
+            PlanOutput::Proposed { plan, json, .. } => (json, &plan.prediction.cell_errors_m),
+            PlanOutput::Predicted {
+                prediction, json, ..
+            } => (json, &prediction.cell_errors_m),
+        };
+        let dir = OutputDir::create(out, request.force)?;
+        io::save_json(&dir.path("plan.json"), json)?;
+        save_predicted_error(&dir.path("predicted_error.csv"), &map, errors)?;
+        dir.commit()?;
+    }
+    Ok(output)
+}
+
+/// `predicted_error.csv`: the predicted error at each free cell's centre.
+fn save_predicted_error(
+    path: &Path,
+    map: &OccupancyMap,
+    cell_errors_m: &[Option<f64>],
+) -> Result<()> {
+    let g = &map.geometry;
+    let mut csv = String::from("x_m,y_m,error_m\n");
+    for (i, e) in cell_errors_m.iter().enumerate() {
+        if let Some(e) = e {
+            let (x, y) = g.centre(i % g.width, i / g.width);
+            let _ = writeln!(csv, "{x:.3},{y:.3},{e:.4}");
+        }
+    }
+    Ok(io::write_file(path, csv.as_bytes())?)
+}

@@ -1,0 +1,194 @@
+//! Simulate a robot exploring a world: odometry, sonar and ground truth, and the stereo pictures
+//! a capture policy asks for, written as a run dataset.
+
+use super::{relative_path, Error, Result};
+use crate::io::{self, OutputDir};
+use crate::progress::Progress;
+use crate::render::{RenderConfig, Renderer};
+use crate::sim::capture::{plan_captures, render_seed, CapturePolicy};
+use crate::sim::{self, OdometryNoise, SimConfig, SimOutput};
+use crate::sonar::SonarLayout;
+use std::path::Path;
+
+/// Changes to a world's simulation settings.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SimSettings {
+    /// Random seed (default: the world file's, else 1).
+    pub seed: Option<u64>,
+    /// Time budget, seconds (default: the world file's, else 1800).
+    pub duration_s: Option<f64>,
+    /// The sonar layout (default: the world file's, else the paper's five frontal sonars).
+    pub layout: Option<SonarLayout>,
+    /// Perfect odometry (no wheel errors).
+    pub no_odometry_noise: bool,
+    /// The paper's exploration only: no look-around at the start, no second drive of the first
+    /// boundary loop (both added for surveys).
+    pub paper_exploration: bool,
+}
+
+impl SimSettings {
+    /// `config` with these changes.
+    pub fn apply(&self, config: &mut SimConfig) {
+        if let Some(s) = self.seed {
+            config.seed = s;
+        }
+        if let Some(d) = self.duration_s {
+            config.exploration.duration_s = d;
+        }
+        if let Some(layout) = &self.layout {
+            config.sonar_layout = layout.clone();
+        }
+        if self.no_odometry_noise {
+            config.odometry = OdometryNoise::none();
+        }
+        if self.paper_exploration {
+            config.exploration.look_around_at_start = false;
+            config.exploration.revisit_loop = false;
+        }
+    }
+}
+
+/// Stereo pictures along a simulated run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pictures<'a> {
+    /// The stereo rig file (the default rig is built in, when its file is not there).
+    pub rig: &'a Path,
+    /// When to take them.
+    pub policy: CapturePolicy,
+}
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct SimulateRequest<'a> {
+    /// The world file.
+    pub world: &'a Path,
+    /// The run directory to write.
+    pub out: &'a Path,
+    /// Changes to the world's simulation settings.
+    pub settings: SimSettings,
+    /// Stereo pictures to take, if any (none in a world without tags).
+    pub pictures: Option<Pictures<'a>>,
+    /// Replace the output directory if it exists.
+    pub force: bool,
+}
+
+/// A simulated run, and the name of its world.
+#[derive(Debug, Clone)]
+pub struct Simulated {
+    /// The simulation: the run written, the robot's own grid, why exploring ended.
+    pub output: SimOutput,
+    /// The world's name.
+    pub world_name: String,
+}
+
+/// Simulates a world and writes the run dataset (with `stereo/` and `rig.yaml` when pictures are
+/// taken) into a new directory. Progress: simulated seconds, then pictures rendered.
+pub fn simulate(request: &SimulateRequest<'_>, progress: &dyn Progress) -> Result<Simulated> {
+    let loaded = io::load_world(request.world)?;
+    let dir = OutputDir::create(request.out, request.force)?;
+    let simulated = simulate_into(request, &loaded, &dir, progress)?;
+    dir.commit()?;
+    let run = &simulated.output.run;
+    tracing::info!(
+        "simulated {} for {:.0} s ({}): {} sonar readings, {} poses -> {}",
+        simulated.world_name,
+        run.odometry.last().map_or(0.0, |p| p.t_s),
+        simulated.output.end_reason,
+        run.sonar.len(),
+        run.odometry.len(),
+        request.out.display()
+    );
+    Ok(simulated)
+}
+
+/// [`simulate`] into a directory under construction (not committed here), of a loaded world.
+fn simulate_into(
+    request: &SimulateRequest<'_>,
+    loaded: &io::LoadedWorld,
+    dir: &OutputDir,
+    progress: &dyn Progress,
+) -> Result<Simulated> {
+    let mut config = loaded.simulation.clone();
+    request.settings.apply(&mut config);
+    progress.start("simulate s", config.exploration.duration_s.ceil() as u64);
+    let mut output =
+        sim::simulate(&loaded.world, &config, |t| progress.set(t as u64)).map_err(|cause| {
+            Error::Sim {
+                world: request.world.to_path_buf(),
+                cause,
+            }
+        })?;
+    progress.finish();
+    output.run.meta.world = Some(
+        relative_path(request.world, request.out)
+            .to_string_lossy()
+            .into_owned(),
+    );
+    output.run.meta.mapping = Some(loaded.mapping.clone());
+    if let Some(pictures) = request
+        .pictures
+        .as_ref()
+        .filter(|_| !loaded.world.tags.is_empty())
+    {
+        take_pictures(
+            &loaded.world,
+            pictures,
+            dir,
+            &mut output,
+            config.seed,
+            progress,
+        )?;
+    }
+    io::save_run(&dir.path(""), &output.run)?;
+    Ok(Simulated {
+        output,
+        world_name: loaded.name.clone(),
+    })
+}
+
+/// Renders the stereo pairs the policy asks for along the run's true trajectory, writes them
+/// under `stereo/` with the rig, and lists them in the run.
+fn take_pictures(
+    world: &crate::world::World,
+    pictures: &Pictures<'_>,
+    dir: &OutputDir,
+    output: &mut SimOutput,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let rig = io::load_rig_or_builtin(pictures.rig)?;
+    let truth = output.run.ground_truth.clone().unwrap_or_default();
+    let config = RenderConfig::default();
+    let plan = plan_captures(world, &rig, &truth, &pictures.policy, &config)?;
+    for sub in ["stereo/left", "stereo/right"] {
+        io::create_dir(&dir.path(sub))?;
+    }
+    progress.start("render", plan.len() as u64);
+    let renderer = Renderer::new(&rig);
+    for (k, p) in plan.iter().enumerate() {
+        let pair = renderer.render(
+            world,
+            p.pose,
+            &RenderConfig {
+                seed: render_seed(seed, k),
+                ..config.clone()
+            },
+        )?;
+        let (left, right) = (
+            format!("stereo/left/{k:06}.png"),
+            format!("stereo/right/{k:06}.png"),
+        );
+        io::save_camera_png(&dir.path(&left), &pair.left)?;
+        io::save_camera_png(&dir.path(&right), &pair.right)?;
+        output.run.stereo.push(crate::dataset::StereoEntry {
+            t_s: p.t_s,
+            left,
+            right,
+        });
+        progress.advance(1);
+    }
+    progress.finish();
+    io::save_rig(&dir.path("rig.yaml"), &rig)?;
+    output.run.meta.robot.rig = Some("rig.yaml".into());
+    Ok(())
+}

@@ -1,0 +1,232 @@
+//! Survey a run: its tags detected and triangulated, fused with the odometry and the sonar's
+//! corners online and offline, the map rebuilt from the corrected trajectory; the survey
+//! outputs written, scored when the world is known, and recorded.
+
+use super::sightings::{detect_run, DetectOptions, KeptPair, RunSightings};
+use super::{load_run, load_world_of_run, Error, Result};
+use crate::camera::StereoRig;
+use crate::dataset::RunDataset;
+use crate::fusion::{self, OdometryCalibration, Survey};
+use crate::io::{self, OutputDir};
+use crate::metrics::{score_survey, survey_metrics};
+use crate::progress::{timed, Progress};
+use crate::sonar::map::map_trajectory;
+use crate::viz::{Recorder, Recording, RecordingRequest, SurveyScene};
+use crate::world::World;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What to survey and how.
+#[derive(Debug, Clone)]
+pub struct SurveyRequest<'a> {
+    /// The run dataset directory.
+    pub run_dir: &'a Path,
+    /// The output directory.
+    pub out: &'a Path,
+    /// A world file to score against and to give planned tag positions (default: the one
+    /// run.yaml names, if it exists).
+    pub world: Option<&'a Path>,
+    /// Fusion settings (YAML); default [`fusion::FuseConfig::default`].
+    pub config: Option<&'a Path>,
+    /// An earlier survey of the same robot (its directory): the online filter predicts with the
+    /// odometry errors it found until the run's own are learnt.
+    pub calibration_from: Option<&'a Path>,
+    /// How the tags are detected.
+    pub detect: DetectOptions,
+    /// Replace the output directory if it exists.
+    pub force: bool,
+    /// Where the recording goes (default: `survey.rrd` in the output).
+    pub recording: RecordingRequest,
+}
+
+/// What a survey produced, beyond its files.
+#[derive(Debug, Clone)]
+pub struct SurveyOutput {
+    /// The survey.
+    pub survey: Survey,
+    /// The figures of `report.json`.
+    pub metrics: BTreeMap<String, f64>,
+    /// The world it was scored against, if any.
+    pub world: Option<World>,
+}
+
+/// Surveys a run and writes the survey outputs (DESIGN.md) into a new output directory.
+pub fn survey(request: &SurveyRequest<'_>, progress: &dyn Progress) -> Result<SurveyOutput> {
+    // Refuse an existing output before the long work, not after.
+    let dir = OutputDir::create(request.out, request.force)?;
+    let output = survey_into(request, &dir, progress)?;
+    dir.commit()?;
+    Ok(output)
+}
+
+/// The odometry calibration an earlier survey found, from its `landmarks.json`.
+fn calibration_of(survey_dir: &Path) -> Result<OdometryCalibration> {
+    let path = survey_dir.join("landmarks.json");
+    io::load_landmarks(&path)?
+        .odometry_calibration
+        .ok_or_else(|| {
+            Error::Request(format!(
+                "{}: no odometry_calibration (a survey whose offline pass did not estimate \
+                 one); survey without --calibration-from",
+                path.display()
+            ))
+        })
+}
+
+/// The stereo rig of a run with run.yaml's mounting, or `None` when the run has no pictures.
+pub fn load_run_rig(run_dir: &Path, run: &RunDataset) -> Result<Option<StereoRig>> {
+    if run.stereo.is_empty() {
+        tracing::warn!(
+            "the run has no stereo pairs (stereo.csv is empty): sonar and odometry only"
+        );
+        return Ok(None);
+    }
+    let rig_name = run.meta.robot.rig.as_ref().ok_or_else(|| {
+        io::IoError::content(
+            &run_dir.join("run.yaml"),
+            "the run has stereo pairs but run.yaml names no rig (robot.rig)",
+        )
+    })?;
+    let mut rig = io::load_rig(&run_dir.join(rig_name))?;
+    if let Some(v) = run.meta.robot.robot_from_left {
+        rig.robot_from_left = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::new(v[0], v[1], v[2]),
+            nalgebra::UnitQuaternion::from_euler_angles(v[3], v[4], v[5]),
+        );
+    }
+    Ok(Some(rig))
+}
+
+/// [`survey`] writing into an output directory under construction (not committed here).
+pub fn survey_into(
+    request: &SurveyRequest<'_>,
+    dir: &OutputDir,
+    progress: &dyn Progress,
+) -> Result<SurveyOutput> {
+    let started = std::time::Instant::now();
+    let run = load_run(request.run_dir)?;
+    let world = load_world_of_run(request.world, request.run_dir, &run)?;
+    let fuse = io::load_fuse_config(request.config)?;
+    let calibration = request.calibration_from.map(calibration_of).transpose()?;
+    let mapping = run.meta.mapping.clone().unwrap_or_default();
+    let recorder = Recorder::open(
+        &request.recording,
+        Recording::Survey,
+        &dir.path("survey.rrd"),
+    )?;
+    let rig = load_run_rig(request.run_dir, &run)?;
+    let detect_start = std::time::Instant::now();
+    let options = DetectOptions {
+        keep_images: recorder.is_some(),
+        visual_odometry: fuse.visual_odometry,
+        ..request.detect.clone()
+    };
+    // The raw map needs no pictures: it is built on whichever core the detectors leave it.
+    let (detected, (raw, map_raw_s)) = rayon::join(
+        || match &rig {
+            Some(rig) => detect_run(
+                &options,
+                request.run_dir,
+                &run,
+                rig,
+                world.as_ref(),
+                progress,
+            ),
+            None => Ok(RunSightings {
+                sightings: Vec::new(),
+                visual: Vec::new(),
+                images: Vec::new(),
+            }),
+        },
+        || {
+            let t = std::time::Instant::now();
+            let raw = map_trajectory(&run.sonar_log(), &run.odometry, &mapping);
+            (raw, t.elapsed().as_secs_f64())
+        },
+    );
+    let RunSightings {
+        sightings,
+        visual,
+        images,
+    } = detected?;
+    let raw = raw?;
+    let detect_s = detect_start.elapsed().as_secs_f64();
+
+    // The pairs are compressed for the recording while the survey runs: it is mostly one thread
+    // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
+    let ((images, compress_s), result) = rayon::join(
+        || {
+            let t = std::time::Instant::now();
+            (compress_pairs(images), t.elapsed().as_secs_f64())
+        },
+        || {
+            fusion::survey(
+                &run,
+                raw,
+                (&sightings[..], &visual[..]),
+                &mapping,
+                &fuse,
+                calibration,
+            )
+        },
+    );
+    let result = result?;
+    let mut metrics = survey_metrics(&result, sightings.len());
+    metrics.insert(
+        "online.calibration_from_earlier_survey".into(),
+        f64::from(u8::from(calibration.is_some())),
+    );
+    if let Some(w) = &world {
+        metrics.extend(score_survey(&result, &run, w, &mapping)?);
+    }
+    let mut timings = result.timings_s.clone();
+    // Both alongside each other: "detect" is their wall time, "map_raw" the map's alone.
+    timings.insert("detect".into(), detect_s);
+    timings.insert("map_raw".into(), map_raw_s);
+    if let Some(rec) = &recorder {
+        // Alongside the survey's stages above, which it slows down on a two-core machine.
+        timings.insert("record_compress".into(), compress_s);
+        let scene = SurveyScene {
+            run: &run,
+            world: world.as_ref(),
+            survey: &result,
+            sightings: &sightings,
+            metrics: &metrics,
+            mapping: &mapping,
+            rig: rig.as_ref(),
+            images: &images,
+        };
+        timed("record", &mut timings, || rec.log_survey(&scene))
+            .map_err(|e| Error::from(e).during("recording the survey"))?;
+    }
+    timings.insert("total".into(), started.elapsed().as_secs_f64());
+    io::save_survey(
+        &dir.path(""),
+        &run,
+        world.as_ref(),
+        &result,
+        &metrics,
+        &timings,
+    )?;
+    if let Some(rec) = recorder {
+        rec.finish()
+            .map_err(|e| Error::from(e).during("finishing the recording"))?;
+    }
+    Ok(SurveyOutput {
+        survey: result,
+        metrics,
+        world,
+    })
+}
+
+/// The kept pairs compressed for the recording, in parallel, each freed once compressed.
+fn compress_pairs(images: Vec<Option<KeptPair>>) -> Vec<Option<(Vec<u8>, Vec<u8>)>> {
+    images
+        .into_par_iter()
+        .map(|pair| match pair? {
+            KeptPair::Decoded(l, r) => crate::viz::jpeg_pair(&l, &r),
+            KeptPair::Jpeg(l, r) => Some((l, r)),
+        })
+        .collect()
+}
