@@ -12,6 +12,7 @@ pub mod camera;
 pub mod dataset;
 pub mod fusion;
 pub mod geometry;
+pub mod imgproc;
 pub mod io;
 pub mod metrics;
 pub mod plan;

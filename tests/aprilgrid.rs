@@ -3,7 +3,7 @@
 //! images with the official intrinsics.
 
 use std::path::Path;
-use stereotag::calib::LensModel;
+use stereotag::camera::LensModel;
 use stereotag::io::load_gray;
 use stereotag::progress::Silent;
 use stereotag::visual::tags::{AprilGridMultiScale, TagDetector};

@@ -5,7 +5,7 @@
 
 use serde_json::Value;
 use std::path::Path;
-use stereotag::calib::LensModel;
+use stereotag::camera::LensModel;
 use stereotag::progress::Silent;
 use stereotag::viz::RecordingRequest;
 use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};

@@ -23,7 +23,10 @@
 //!    solves `Σ w g gᵀ p = Σ w g gᵀ q`, iterated to 0.005 px. The window is sized from the local
 //!    square size (at most 23 x 23 px, OpenCV's usual 11 half-width).
 
-use crate::visual::tags::edges::{fit_quad, Plane};
+use crate::geometry::homography::Homography;
+use crate::imgproc::blur::{binomial5, binomial5_gray};
+use crate::imgproc::Plane;
+use crate::visual::tags::edges::fit_quad;
 use image::GrayImage;
 use std::collections::{HashMap, VecDeque};
 
@@ -306,18 +309,14 @@ pub fn refine_aprilgrid(
     cols: u32,
     spacing: f64,
 ) -> Vec<(u32, [f64; 2])> {
-    use nalgebra::Vector3;
     let sharp = Plane::from_gray(image);
-    let plane = sharp.blurred();
+    let plane = binomial5_gray(image);
     // Board positions in tag edges (the homographies need no metres).
     let board = |tag: u32, k: usize| -> [f64; 2] {
         let p = crate::calib::aprilgrid_board_point(tag * 4 + k as u32, cols, 1.0, spacing);
         [p[0], p[1]]
     };
-    let apply = |h: &nalgebra::Matrix3<f64>, b: [f64; 2]| {
-        let p = h * Vector3::new(b[0], b[1], 1.0);
-        [p.x / p.z, p.y / p.z]
-    };
+    let apply = |h: &Homography, b: [f64; 2]| h.project(b[0], b[1]);
     let dist = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
     let mut out = Vec::with_capacity(detections.len() * 4);
     for d in detections {
@@ -331,7 +330,7 @@ pub fn refine_aprilgrid(
             .flat_map(|o| (0..4).map(move |k| (board(o.id, k), o.corners_px[k])))
             .collect();
         // Fit, drop the worst-fitting neighbours (their own bad corners), fit again.
-        let h = crate::calib::homography(&near).and_then(|h| {
+        let h = Homography::from_pairs(&near).and_then(|h| {
             let mut kept: Vec<_> = near
                 .iter()
                 .filter(|(b, p)| dist(apply(&h, *b), *p) < 1.5)
@@ -340,7 +339,7 @@ pub fn refine_aprilgrid(
             if kept.len() < 8 {
                 kept = near.clone();
             }
-            crate::calib::homography(&kept)
+            Homography::from_pairs(&kept)
         });
         let cp = &d.corners_px;
         let side = (0..4).map(|k| dist(cp[k], cp[(k + 1) % 4])).sum::<f64>() / 4.0;
@@ -443,8 +442,7 @@ pub fn detect_chessboard(
     if image.width() < 16 || image.height() < 16 || cols < 2 || rows < 2 {
         return Err(ChessboardMiss::NoCorners);
     }
-    let plane = Plane::from_gray(image);
-    let blur = plane.blurred();
+    let blur = binomial5_gray(image);
     let cands = candidates(&blur);
     if cands.len() < 4 {
         return Err(ChessboardMiss::NoCorners);
@@ -479,7 +477,7 @@ pub fn detect_chessboard(
             .collect();
         order_board(&blur, &mut at, cols as usize, rows as usize);
         return Ok(refine_all(
-            &blur.blurred(),
+            &binomial5(&blur),
             &at,
             cols as usize,
             rows as usize,

@@ -14,9 +14,10 @@ mod target;
 
 pub use target::{AprilGridTarget, CheckerboardTarget, Target, TargetDetector, TargetView};
 
-use crate::camera::{Camera, Distortion, StereoRig};
+use crate::camera::{lens, plane_pose, Camera, Distortion, LensModel, StereoRig};
+use crate::geometry::homography::Homography;
 use nalgebra::{
-    DMatrix, DVector, Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3,
+    DMatrix, DVector, Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3,
 };
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
@@ -52,16 +53,6 @@ pub struct CalibConfig {
     pub max_iterations: usize,
     /// Lens model of free intrinsics (ours: radtan; equidistant for fisheye lenses).
     pub model: LensModel,
-}
-
-/// The lens model a free calibration fits (Kalibr's `pinhole-radtan` and `pinhole-equi`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LensModel {
-    /// Radial-tangential k1, k2, p1, p2.
-    #[default]
-    Radtan,
-    /// Equidistant (Kannala-Brandt) k1..k4, for fisheye lenses.
-    Equidistant,
 }
 
 impl Default for CalibConfig {
@@ -474,46 +465,6 @@ fn reprojection_error(cam: &Camera, camera_from_board: &Isometry3<f64>, c: &Corn
         .map_or(f64::INFINITY, |q| (q.x - c.px[0]).hypot(q.y - c.px[1]))
 }
 
-/// Normalised DLT homography from board (x, y) to image points.
-pub(crate) fn homography(pairs: &[([f64; 2], [f64; 2])]) -> Option<Matrix3<f64>> {
-    if pairs.len() < 4 {
-        return None;
-    }
-    let norm = |pts: Vec<[f64; 2]>| -> Matrix3<f64> {
-        let n = pts.len() as f64;
-        let (mx, my) = pts
-            .iter()
-            .fold((0.0, 0.0), |a, p| (a.0 + p[0] / n, a.1 + p[1] / n));
-        let d = pts
-            .iter()
-            .map(|p| (p[0] - mx).hypot(p[1] - my))
-            .sum::<f64>()
-            / n;
-        let s = std::f64::consts::SQRT_2 / d.max(1e-12);
-        Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
-    };
-    let ta = norm(pairs.iter().map(|p| p.0).collect());
-    let tb = norm(pairs.iter().map(|p| p.1).collect());
-    let mut a = DMatrix::zeros(2 * pairs.len(), 9);
-    for (i, (src, dst)) in pairs.iter().enumerate() {
-        let s = ta * Vector3::new(src[0], src[1], 1.0);
-        let d = tb * Vector3::new(dst[0], dst[1], 1.0);
-        let (x, y, u, v) = (s.x / s.z, s.y / s.z, d.x / d.z, d.y / d.z);
-        let r0 = [-x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u];
-        let r1 = [0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v];
-        for j in 0..9 {
-            a[(2 * i, j)] = r0[j];
-            a[(2 * i + 1, j)] = r1[j];
-        }
-    }
-    let svd = (a.transpose() * &a).symmetric_eigen();
-    let k = svd.eigenvalues.imin();
-    let h = svd.eigenvectors.column(k);
-    let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
-    let h = tb.try_inverse()? * hn * ta;
-    Some(h / h[(2, 2)])
-}
-
 /// Zhang's closed-form intrinsics (no distortion, no skew) from several views of a plane.
 fn zhang<'a>(
     views: impl Iterator<Item = &'a Vec<Corner>>,
@@ -536,7 +487,7 @@ fn zhang<'a>(
             .iter()
             .map(|c| ([c.board_m[0], c.board_m[1]], c.px))
             .collect();
-        let Some(h) = homography(&pairs) else {
+        let Some(Homography(h)) = Homography::from_pairs(&pairs) else {
             continue;
         };
         let (v12, v11, v22) = (v(&h, 0, 1), v(&h, 0, 0), v(&h, 1, 1));
@@ -641,43 +592,6 @@ fn board_pose(cam: &Camera, corners: &[Corner]) -> Option<Isometry3<f64>> {
         cam,
         corners.iter().map(|c| ([c.board_m[0], c.board_m[1]], c.px)),
     )
-}
-
-/// Pose in a camera of a plane whose points `(x, y)` (metres, z = 0 on the plane) are seen at
-/// the given pixels: the homography of the undistorted normalised points, decomposed (planar
-/// PnP). Points that do not unproject are left out; `None` when fewer than four remain or the
-/// homography is degenerate.
-pub(crate) fn plane_pose(
-    cam: &Camera,
-    points: impl Iterator<Item = ([f64; 2], [f64; 2])>,
-) -> Option<Isometry3<f64>> {
-    let pairs: Vec<_> = points
-        .filter_map(|(plane, px)| {
-            let n = cam.unproject(&nalgebra::Point2::new(px[0], px[1]))?;
-            Some((plane, [n.x, n.y]))
-        })
-        .collect();
-    let h = homography(&pairs)?;
-    let scale = 1.0 / h.column(0).norm();
-    let mut h = h * scale;
-    if h[(2, 2)] < 0.0 {
-        h = -h; // the board in front of the camera
-    }
-    let r1 = h.column(0).into_owned();
-    let r2 = h.column(1).into_owned();
-    let t = h.column(2).into_owned();
-    let r = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]);
-    // Nearest rotation.
-    let svd = r.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut rot = u * vt;
-    if rot.determinant() < 0.0 {
-        rot = -rot;
-    }
-    Some(Isometry3::from_parts(
-        Translation3::from(t),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot)),
-    ))
 }
 
 /// `right_from_left` as the per-view relative pose with the median translation norm.
@@ -810,65 +724,24 @@ fn transform<T: sna::RealField>(pose: &sna::DVector<T>, p: [T; 3]) -> [T; 3] {
     ]
 }
 
-/// Projection through an intrinsics vector, generic: radtan or equidistant.
-fn project<T: sna::RealField>(k: &sna::DVector<T>, p: [T; 3], equidistant: bool) -> [T; 2] {
-    if equidistant {
-        return project_equidistant(k, p);
-    }
-    let x = p[0].clone() / p[2].clone();
-    let y = p[1].clone() / p[2].clone();
-    let r2 = x.clone() * x.clone() + y.clone() * y.clone();
-    let radial = T::one() + k[4].clone() * r2.clone() + k[5].clone() * r2.clone() * r2.clone();
-    let two = c::<T>(2.0);
-    let xd = x.clone() * radial.clone()
-        + two.clone() * k[6].clone() * x.clone() * y.clone()
-        + k[7].clone() * (r2.clone() + two.clone() * x.clone() * x.clone());
-    let yd = y.clone() * radial
-        + k[6].clone() * (r2 + two.clone() * y.clone() * y.clone())
-        + two * k[7].clone() * x * y;
-    [
-        k[0].clone() * xd + k[2].clone(),
-        k[1].clone() * yd + k[3].clone(),
-    ]
-}
-
-/// Pinhole equidistant projection (Kannala-Brandt k1..k4), generic: `θ = atan(r)`,
-/// `θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, pixel `f · (θd / r) · (x, y) + c`.
-fn project_equidistant<T: sna::RealField>(k: &sna::DVector<T>, p: [T; 3]) -> [T; 2] {
-    let x = p[0].clone() / p[2].clone();
-    let y = p[1].clone() / p[2].clone();
-    let r = (x.clone() * x.clone() + y.clone() * y.clone() + c::<T>(1e-18)).sqrt();
-    let th = r.clone().atan();
-    let t2 = th.clone() * th.clone();
-    let poly = T::one()
-        + t2.clone()
-            * (k[4].clone()
-                + t2.clone() * (k[5].clone() + t2.clone() * (k[6].clone() + t2 * k[7].clone())));
-    let s = th * poly / r;
-    [
-        k[0].clone() * x * s.clone() + k[2].clone(),
-        k[1].clone() * y * s + k[3].clone(),
-    ]
-}
-
 /// One corner in the left image: params [intrinsics_left, board pose].
 struct LeftCorner {
     board: [f64; 3],
     px: [f64; 2],
-    equidistant: bool,
+    model: LensModel,
 }
 
 /// One corner in the right image: params [intrinsics_right, board pose, right_from_left].
 struct RightCorner {
     board: [f64; 3],
     px: [f64; 2],
-    equidistant: bool,
+    model: LensModel,
 }
 
 impl<T: sna::RealField> tiny_solver::factors::Factor<T> for LeftCorner {
     fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
         let p = transform(&params[1], self.board.map(c::<T>));
-        let q = project(&params[0], p, self.equidistant);
+        let q = lens::project(params[0].as_slice(), self.model, p);
         sna::DVector::from_vec(vec![
             q[0].clone() - c::<T>(self.px[0]),
             q[1].clone() - c::<T>(self.px[1]),
@@ -879,7 +752,7 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for LeftCorner {
 impl<T: sna::RealField> tiny_solver::factors::Factor<T> for RightCorner {
     fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
         let p = transform(&params[2], transform(&params[1], self.board.map(c::<T>)));
-        let q = project(&params[0], p, self.equidistant);
+        let q = lens::project(params[0].as_slice(), self.model, p);
         sna::DVector::from_vec(vec![
             q[0].clone() - c::<T>(self.px[0]),
             q[1].clone() - c::<T>(self.px[1]),
@@ -887,8 +760,11 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for RightCorner {
     }
 }
 
-fn is_equidistant(cam: &Camera) -> bool {
-    matches!(cam.distortion, Distortion::Equidistant { .. })
+fn lens_model(cam: &Camera) -> LensModel {
+    match cam.distortion {
+        Distortion::Equidistant { .. } => LensModel::Equidistant,
+        Distortion::Radtan { .. } | Distortion::None => LensModel::Radtan,
+    }
 }
 
 const LEFT: &str = "intrinsics_left";
@@ -932,7 +808,7 @@ fn solve(
                 Box::new(LeftCorner {
                     board: corner.board_m,
                     px: corner.px,
-                    equidistant: is_equidistant(&state.left),
+                    model: lens_model(&state.left),
                 }),
                 Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
                     config.huber_px.max(1e-3),
@@ -946,7 +822,7 @@ fn solve(
                 Box::new(RightCorner {
                     board: corner.board_m,
                     px: corner.px,
-                    equidistant: is_equidistant(&state.right),
+                    model: lens_model(&state.right),
                 }),
                 Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
                     config.huber_px.max(1e-3),

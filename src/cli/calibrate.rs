@@ -1,6 +1,6 @@
 use super::{Bars, UsageError};
 use std::path::PathBuf;
-use stereotag::calib::LensModel;
+use stereotag::camera::LensModel;
 use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
 
 /// Arguments of `stereotag calibrate`.

@@ -47,7 +47,7 @@ impl Localize {
                 out: &self.out,
                 world: self.world.as_deref(),
                 config: self.config.as_deref(),
-                detect: self.detect.options(),
+                detect: self.detect.options()?,
                 raw_odometry: self.raw_odometry,
                 no_walls: self.no_walls,
                 force: self.force,

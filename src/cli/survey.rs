@@ -1,7 +1,8 @@
-use super::Bars;
+use super::{Bars, UsageError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use stereotag::fusion::Survey;
+use stereotag::visual::tags::TagFamily;
 use stereotag::workflow::sightings::{survey_decimate, DetectOptions, SURVEY_MIN_CONTRAST};
 use stereotag::workflow::survey::{survey, SurveyRequest};
 use stereotag::world::World;
@@ -85,15 +86,26 @@ pub struct DetectArgs {
 
 impl DetectArgs {
     /// The detector options these flags give (the survey's defaults where none is given).
-    pub(crate) fn options(&self) -> DetectOptions {
+    pub(crate) fn options(&self) -> Result<DetectOptions, UsageError> {
         let backend = self.backend.into();
-        DetectOptions {
-            families: self.family.clone(),
+        let families = self
+            .family
+            .iter()
+            .map(|f| {
+                TagFamily::from_name(f).ok_or_else(|| {
+                    UsageError(format!(
+                        "family {f}: expected tag36h11, tag25h9, tag16h5 or tagStandard41h12"
+                    ))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(DetectOptions {
+            families,
             decimate: self.decimate.unwrap_or(survey_decimate(backend)),
             min_contrast: self.min_contrast,
             tag_size_m: self.tag_size_m,
             ..DetectOptions::survey(backend)
-        }
+        })
     }
 }
 
@@ -106,7 +118,7 @@ impl SurveyArgs {
                 world: self.world.as_deref(),
                 config: self.config.as_deref(),
                 calibration_from: self.calibration_from.as_deref(),
-                detect: self.detect.options(),
+                detect: self.detect.options()?,
                 force: self.force,
                 recording: self.rerun.request()?,
             },

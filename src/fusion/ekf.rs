@@ -5,13 +5,14 @@ use crate::fusion::landmark::{landmark_from, Extras};
 use crate::fusion::measurement::odometry_covariance;
 use crate::fusion::{FuseConfig, Landmark, OdometryCalibration};
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
+use crate::visual::tags::TagId;
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector2, Vector3};
 
 /// The EKF state: pose first, then three numbers per landmark.
 pub(crate) struct Ekf {
     pub(crate) x: DVector<f64>,
     pub(crate) p: DMatrix<f64>,
-    pub(crate) slots: Vec<(String, u32)>,
+    pub(crate) slots: Vec<TagId>,
 }
 
 impl Ekf {
@@ -76,7 +77,7 @@ impl Ekf {
         Pose2::new(self.x[0], self.x[1], self.x[2])
     }
 
-    pub(crate) fn slot(&self, key: &(String, u32)) -> Option<usize> {
+    pub(crate) fn slot(&self, key: &TagId) -> Option<usize> {
         self.slots.iter().position(|k| k == key)
     }
 
@@ -253,7 +254,7 @@ impl Ekf {
     }
 
     /// Adds a landmark at the sighting seen from the current pose; returns its slot.
-    pub(crate) fn add(&mut self, key: (String, u32), z: &Vector3<f64>, r: &Matrix3<f64>) -> usize {
+    pub(crate) fn add(&mut self, key: TagId, z: &Vector3<f64>, r: &Matrix3<f64>) -> usize {
         // The heading copy stays last: taken out, put back after the new landmark.
         let cloned = self.has_clone().then(|| {
             let c = self.x.len() - 1;
@@ -332,6 +333,7 @@ impl Ekf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::visual::tags::TagFamily;
 
     /// A landmark added while the heading is copied leaves the filter as if it had been added
     /// first: the copy stays last, with its covariance to the landmark carried through the pose.
@@ -351,10 +353,24 @@ mod tests {
         let (mut copy_first, _) = Ekf::at_start(&odometry);
         moved(&mut copy_first);
         copy_first.clone_heading();
-        copy_first.add(("tag36h11".into(), 1), &z, &r);
+        copy_first.add(
+            TagId {
+                family: TagFamily::Tag36h11,
+                id: 1,
+            },
+            &z,
+            &r,
+        );
         let (mut add_first, _) = Ekf::at_start(&odometry);
         moved(&mut add_first);
-        add_first.add(("tag36h11".into(), 1), &z, &r);
+        add_first.add(
+            TagId {
+                family: TagFamily::Tag36h11,
+                id: 1,
+            },
+            &z,
+            &r,
+        );
         add_first.clone_heading();
         assert!(copy_first.has_clone());
         assert!((&copy_first.x - &add_first.x).norm() < 1e-12);

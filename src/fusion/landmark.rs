@@ -4,6 +4,7 @@
 use crate::fusion::FuseConfig;
 use crate::geometry::wrap_angle;
 use crate::sonar::hough::Feature;
+use crate::visual::tags::{TagFamily, TagId};
 use nalgebra::{Matrix2, Vector2};
 use serde::Serialize;
 
@@ -27,7 +28,7 @@ pub struct Landmark {
     /// Tag id.
     pub id: u32,
     /// Tag family.
-    pub family: String,
+    pub family: TagFamily,
     /// Mean triangulated edge length, metres.
     pub size_m: f64,
     /// Tag centre in the world, metres (z is the mean of the sightings).
@@ -48,7 +49,7 @@ pub struct Conflict {
     /// Tag id.
     pub id: u32,
     /// Tag family.
-    pub family: String,
+    pub family: TagFamily,
     /// `"moved"` (never seen at the first place again) or `"duplicate id"` (seen at both).
     pub kind: String,
     /// Where the landmark is, metres.
@@ -98,7 +99,7 @@ pub(crate) struct Extras {
 
 /// A landmark from the filter's estimate of it and the running sums of its sightings.
 pub(crate) fn landmark_from(
-    key: &(String, u32),
+    key: &TagId,
     xy: Vector2<f64>,
     yaw: f64,
     cov: &Matrix2<f64>,
@@ -108,8 +109,8 @@ pub(crate) fn landmark_from(
     let z = extra.z_sum / n;
     let var_z = (extra.z_sq / n - z * z).max(0.0) / n + 1e-6;
     Landmark {
-        id: key.1,
-        family: key.0.clone(),
+        id: key.id,
+        family: key.family,
         size_m: extra.size_sum / n,
         position_m: [xy.x, xy.y, z],
         yaw_rad: wrap_angle(yaw),

@@ -10,6 +10,7 @@ use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
 use crate::sonar::{SonarLayout, SonarReading};
 use crate::visual::sightings::TagSighting;
+use crate::visual::tags::TagId;
 use crate::visual::vo::VisualTurn;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
@@ -266,7 +267,10 @@ pub fn localize(
                     l.yaw_rad,
                 ]),
                 p: DMatrix::zeros(6, 6),
-                slots: vec![(l.family.clone(), l.id)],
+                slots: vec![TagId {
+                    family: l.family,
+                    id: l.id,
+                }],
             };
             full.p
                 .fixed_view_mut::<3, 3>(0, 0)

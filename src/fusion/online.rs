@@ -322,7 +322,7 @@ fn find_conflicts(
             let at = sum / members.len() as f64;
             Conflict {
                 id: lm.id,
-                family: lm.family.clone(),
+                family: lm.family,
                 kind: if seen_again { "duplicate id" } else { "moved" }.into(),
                 landmark_m: [lm.position_m[0], lm.position_m[1]],
                 seen_at_m: [at.x, at.y],

@@ -5,6 +5,7 @@ use crate::fusion::TagSighting;
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
 use crate::sonar::SonarReading;
+use crate::visual::tags::TagFamily;
 use crate::visual::vo::VisualTurn;
 
 /// A robot driving 10 m along a wall 0.5 m to its left (odometry, truth, the left sonar's
@@ -109,7 +110,7 @@ pub(crate) fn square_run(
                 t_s: p.t_s,
                 frame: i,
                 id: id as u32,
-                family: "tag36h11".into(),
+                family: TagFamily::Tag36h11,
                 size_m: 0.16,
                 position_in_robot_m: [local.x, local.y, 0.5],
                 covariance_m2: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],

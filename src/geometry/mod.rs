@@ -3,6 +3,7 @@
 //! Poses are `world_from_robot` transforms: a point `p_robot` maps to
 //! `p_world = R(theta) * p_robot + (x, y)`. Angles are radians, wrapped to (-pi, pi].
 
+pub mod homography;
 mod trajectory;
 
 pub use trajectory::{

@@ -189,7 +189,7 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
                 format!("`tags[{i}].size_m` must be positive, found {}", t.size_m),
             ));
         }
-        if !seen.insert((t.family.clone(), t.id)) {
+        if !seen.insert((t.family, t.id)) {
             return Err(IoError::content(
                 path,
                 format!("`tags[{i}]`: id {} of {} appears twice", t.id, t.family),

@@ -55,14 +55,14 @@ pub enum Board {
 impl Board {
     /// A Kalibr AprilGrid of `cols x rows` tag36h11 tags.
     pub fn aprilgrid(cols: u32, rows: u32, size_m: f64, spacing: f64) -> Result<Self, RenderError> {
-        let family = TagFamily::from_name("tag36h11").expect("tag36h11 is built in");
+        let family = TagFamily::Tag36h11;
         let cells = (0..cols * rows)
             .map(|id| {
                 let code = family
                     .code_image(id)
                     .ok_or_else(|| RenderError::IdOutOfRange {
                         id,
-                        family: "tag36h11".into(),
+                        family: TagFamily::Tag36h11,
                         count: family.code_count(),
                     })?;
                 // The library's image: 1 white, 1 black, 6 data, 1 black, 1 white cells. Kalibr

@@ -18,7 +18,7 @@ pub mod board;
 
 use crate::camera::{Camera, StereoRig};
 use crate::geometry::Pose2;
-use crate::visual::tags::TagFamily;
+use crate::visual::tags::{TagFamily, DETECTABLE_FAMILIES};
 use crate::world::{Tag, World};
 use image::GrayImage;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
@@ -68,7 +68,7 @@ pub enum RenderError {
         /// Tag id.
         id: u32,
         /// Its family.
-        family: String,
+        family: TagFamily,
     },
     /// A tag id beyond the family's codes.
     #[error("tag {id}: {family} has only {count} codes")]
@@ -76,7 +76,7 @@ pub enum RenderError {
         /// Tag id.
         id: u32,
         /// Family.
-        family: String,
+        family: TagFamily,
         /// Codes in the family.
         count: usize,
     },
@@ -88,7 +88,7 @@ pub struct TagTruth {
     /// Id.
     pub id: u32,
     /// Family.
-    pub family: String,
+    pub family: TagFamily,
     /// Corners in the world, metres (C library order).
     pub corners_world_m: [[f64; 3]; 4],
     /// Centre in the world, metres.
@@ -140,15 +140,17 @@ const TAG_STANDOFF_M: f64 = 0.001;
 const QUIET_ZONE_CELLS: i64 = 2;
 
 fn tag_paint(tag: &Tag) -> Result<TagPaint, RenderError> {
-    let family = TagFamily::from_name(&tag.family).ok_or_else(|| RenderError::UnknownFamily {
-        id: tag.id,
-        family: tag.family.clone(),
-    })?;
+    let family = Some(tag.family)
+        .filter(|f| DETECTABLE_FAMILIES.contains(f))
+        .ok_or(RenderError::UnknownFamily {
+            id: tag.id,
+            family: tag.family,
+        })?;
     let image = family
         .code_image(tag.id)
         .ok_or_else(|| RenderError::IdOutOfRange {
             id: tag.id,
-            family: tag.family.clone(),
+            family: tag.family,
             count: family.code_count(),
         })?;
     let tw = image.total_cells as i64;
@@ -1262,7 +1264,7 @@ fn truths(
         let c_left = wl.inverse_transform_point(&Point3::from(paint.centre));
         truth.push(TagTruth {
             id: tag.id,
-            family: tag.family.clone(),
+            family: tag.family,
             corners_world_m: corners.map(|c| [c.x, c.y, c.z]),
             centre_world_m: [paint.centre.x, paint.centre.y, paint.centre.z],
             left_corners_px: l,

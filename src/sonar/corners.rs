@@ -15,14 +15,11 @@
 //! jamb); one with the wall going on to both sides is dropped.
 
 use crate::sonar::grid::OccupancyMap;
+use crate::sonar::tangent::{cone_steps, LineVotes, ANGLE_STEP_DEG, DIST_STEP_M};
 use crate::sonar::PlacedReading;
 
 /// Tangent points farther than this from the candidate are ignored: 1.5 m.
 const SEARCH_RADIUS_M: f64 = 1.5;
-/// Angular cell of the line accumulator: 1 degree.
-const ANGLE_STEP_DEG: f64 = 1.0;
-/// Distance cell of the line accumulator: 3 cm (range noise is about 1-2 cm).
-const DIST_STEP_M: f64 = 0.03;
 /// A wall needs this many votes (readings): 6.
 const MIN_WALL_VOTES: u32 = 6;
 /// Walls closer than this in angle (and [`SUPPRESS_DIST_M`] in distance) are one.
@@ -64,17 +61,10 @@ fn tangents(
     let step = ANGLE_STEP_DEG.to_radians();
     let (range, p) = (r.range_m.unwrap_or(f64::NAN), r.world_from_sensor);
     let usable = range.is_finite() && range > 0.0;
-    let (lo, hi) = if usable {
-        (
-            ((p.theta - half_cone_rad) / step).ceil() as i64,
-            ((p.theta + half_cone_rad) / step).floor() as i64,
-        )
-    } else {
-        (1, 0)
-    };
-    (lo..=hi).filter_map(move |k| {
-        let a = k as f64 * step;
-        let (s, c) = a.sin_cos();
+    let steps = usable.then(|| cone_steps(p.theta, half_cone_rad));
+    steps.into_iter().flatten().filter_map(move |cs| {
+        let a = cs.k as f64 * step;
+        let (s, c) = (cs.sin, cs.cos);
         let t = (p.x + range * c, p.y + range * s);
         if (t.0 - centre.0).hypot(t.1 - centre.1) > SEARCH_RADIUS_M {
             return None;
@@ -139,7 +129,7 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
     // Cells symmetric about zero offset, so flipping a line's side flips its cell.
     let n_dist = (2.0 * (SEARCH_RADIUS_M + DIST_STEP_M) / DIST_STEP_M).ceil() as usize;
     let reach = 0.5 * n_dist as f64 * DIST_STEP_M;
-    let mut votes = vec![0u32; n_angle * n_dist];
+    let mut grid = LineVotes::new(n_angle, n_dist, reach);
     let mut sum_offset = vec![0f64; n_angle * n_dist];
     let step = ANGLE_STEP_DEG.to_radians();
     for t in tangents {
@@ -151,16 +141,15 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
             (k, t.offset)
         };
         let id = (((offset + reach) / DIST_STEP_M) as usize).min(n_dist - 1);
-        votes[ia * n_dist + id] += 1;
+        grid.counts[ia * n_dist + id] += 1;
         sum_offset[ia * n_dist + id] += offset;
     }
     let mut walls: Vec<LocalWall> = Vec::new();
     while walls.len() < MAX_WALLS {
         // The most votes, the first cell with them on a tie.
-        let Some(&v) = votes.iter().max() else {
+        let Some((best, v)) = grid.strongest() else {
             break;
         };
-        let best = votes.iter().position(|&x| x == v).unwrap_or(0);
         if v < MIN_WALL_VOTES {
             break;
         }
@@ -181,11 +170,11 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
                 };
                 let d = if flip { n_dist as i64 - 1 - d } else { d };
                 let j = a as usize * n_dist + d as usize;
-                if votes[j] == 0 {
+                if grid.counts[j] == 0 {
                     continue;
                 }
-                let off = sum_offset[j] / votes[j] as f64;
-                let vj = votes[j] as f64;
+                let off = sum_offset[j] / grid.counts[j] as f64;
+                let vj = grid.counts[j] as f64;
                 w += vj;
                 sa += vj * (ia + da) as f64 * step;
                 so += vj * if flip { -off } else { off };
@@ -205,16 +194,15 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
         // Suppress the wall's neighbourhood (both representations near 0 / 180 degrees), row by
         // row of angle, skipping the rows too far round to hold any of it.
         let suppress = SUPPRESS_ANGLE_DEG.to_radians();
-        for (ia, row) in votes.chunks_exact_mut(n_dist).enumerate() {
-            let a = ia as f64 * step;
+        for ia in 0..n_angle {
+            let a = grid.angle_rad(ia);
             let da = (a - normal).abs();
             if da > suppress && std::f64::consts::PI - da > suppress {
                 continue;
             }
-            for (id, v) in row.iter_mut().enumerate() {
-                let o = -reach + (id as f64 + 0.5) * DIST_STEP_M;
-                if same_wall(a, o, normal, offset) {
-                    *v = 0;
+            for id in 0..n_dist {
+                if same_wall(a, grid.offset_m(id), normal, offset) {
+                    grid.counts[ia * n_dist + id] = 0;
                 }
             }
         }

@@ -11,14 +11,11 @@
 //! to its readings by least squares.
 
 use crate::sonar::grid::OccupancyMap;
+use crate::sonar::tangent::{cone_steps, LineVotes, ANGLE_STEP_DEG, DIST_STEP_M};
 use crate::sonar::PlacedReading;
 use serde::Serialize;
 use std::f64::consts::TAU;
 
-/// Angular cell of the accumulator: 1 degree.
-const ANGLE_STEP_DEG: f64 = 1.0;
-/// Offset cell of the accumulator: 3 cm (range noise is 1-2 cm).
-const DIST_STEP_M: f64 = 0.03;
 /// A reading supports a wall when its tangent at the wall's angle (within one cell) is this close
 /// to the wall's line: 4.5 cm.
 const SUPPORT_M: f64 = 0.045;
@@ -113,36 +110,31 @@ struct Echo {
     range: f64,
 }
 
-/// The accumulator: normal angle (whole circle) by offset.
-struct Votes {
-    n_angle: usize,
-    n_dist: usize,
-    reach: f64,
-    counts: Vec<u32>,
+/// The cells of the whole-circle accumulator a reading votes for: for each direction `b` of
+/// its cone, the line tangent to its arc there has normal `-u(b)` and passes `s + r u(b)`, so
+/// the side it was seen from is kept.
+fn cells(votes: &LineVotes, e: &Echo, half_cone_rad: f64) -> impl Iterator<Item = (usize, usize)> {
+    let (s, range, n_angle, n_dist, reach) = (
+        e.s,
+        e.range,
+        votes.n_angle as i64,
+        votes.n_dist,
+        votes.reach_m,
+    );
+    cone_steps(e.beam, half_cone_rad).filter_map(move |c| {
+        let offset = -(c.cos * s[0] + c.sin * s[1]) - range;
+        let ia = (c.k + n_angle / 2).rem_euclid(n_angle) as usize;
+        let id = ((offset + reach) / DIST_STEP_M).floor();
+        (id >= 0.0 && (id as usize) < n_dist).then_some((ia, id as usize))
+    })
 }
 
-impl Votes {
-    fn cells(&self, e: &Echo, half_cone_rad: f64) -> impl Iterator<Item = (usize, usize)> + '_ {
-        let step = ANGLE_STEP_DEG.to_radians();
-        let lo = ((e.beam - half_cone_rad) / step).ceil() as i64;
-        let hi = ((e.beam + half_cone_rad) / step).floor() as i64;
-        let (s, range, n_angle) = (e.s, e.range, self.n_angle as i64);
-        (lo..=hi).filter_map(move |k| {
-            let (sin, cos) = (k as f64 * step).sin_cos();
-            // The tangent line at beam direction b has normal -u(b) and passes s + r u(b).
-            let offset = -(cos * s[0] + sin * s[1]) - range;
-            let ia = (k + n_angle / 2).rem_euclid(n_angle) as usize;
-            let id = ((offset + self.reach) / DIST_STEP_M).floor();
-            (id >= 0.0 && (id as usize) < self.n_dist).then_some((ia, id as usize))
-        })
-    }
-
-    fn add(&mut self, e: &Echo, half_cone_rad: f64, sign: i32) {
-        let cells: Vec<_> = self.cells(e, half_cone_rad).collect();
-        for (ia, id) in cells {
-            let c = &mut self.counts[ia * self.n_dist + id];
-            *c = c.saturating_add_signed(sign);
-        }
+/// Adds (`sign` 1) or takes back (-1) a reading's votes.
+fn vote(votes: &mut LineVotes, e: &Echo, half_cone_rad: f64, sign: i32) {
+    let found: Vec<_> = cells(votes, e, half_cone_rad).collect();
+    for (ia, id) in found {
+        let c = &mut votes.counts[ia * votes.n_dist + id];
+        *c = c.saturating_add_signed(sign);
     }
 }
 
@@ -187,33 +179,26 @@ pub fn map_walls(
         .map(|e| e.s[0].hypot(e.s[1]) + e.range)
         .fold(0.0, f64::max)
         + DIST_STEP_M;
-    let mut votes = Votes {
-        n_angle: (360.0 / ANGLE_STEP_DEG).round() as usize,
-        n_dist: (2.0 * reach / DIST_STEP_M).ceil() as usize + 1,
+    let mut votes = LineVotes::new(
+        (360.0 / ANGLE_STEP_DEG).round() as usize,
+        (2.0 * reach / DIST_STEP_M).ceil() as usize + 1,
         reach,
-        counts: Vec::new(),
-    };
-    votes.counts = vec![0; votes.n_angle * votes.n_dist];
+    );
     for e in &echoes {
-        votes.add(e, half_cone_rad, 1);
+        vote(&mut votes, e, half_cone_rad, 1);
     }
     let mut used = vec![false; echoes.len()];
     let mut walls = Vec::new();
     for _ in 0..MAX_WALLS {
-        let Some((best, &count)) = votes
-            .counts
-            .iter()
-            .enumerate()
-            .max_by_key(|(i, &v)| (v, usize::MAX - i))
-        else {
+        let Some((best, count)) = votes.strongest() else {
             break;
         };
         if (count as usize) < MIN_READINGS {
             break;
         }
         let step = ANGLE_STEP_DEG.to_radians();
-        let normal = (best / votes.n_dist) as f64 * step;
-        let offset = -reach + ((best % votes.n_dist) as f64 + 0.5) * DIST_STEP_M;
+        let normal = votes.angle_rad(best / votes.n_dist);
+        let offset = votes.offset_m(best % votes.n_dist);
         // Readings whose cone holds the normal (within a cell) and whose range fits the line.
         let support: Vec<usize> = (0..echoes.len())
             .filter(|&i| !used[i] && supports(&echoes[i], normal, offset, half_cone_rad + step))
@@ -221,7 +206,7 @@ pub fn map_walls(
         // Whatever the outcome, these readings have voted: take their votes back, and the cell's
         // own count, so the search moves on.
         for &i in &support {
-            votes.add(&echoes[i], half_cone_rad, -1);
+            vote(&mut votes, &echoes[i], half_cone_rad, -1);
             used[i] = true;
         }
         votes.counts[best] = 0;

@@ -3,7 +3,7 @@
 
 use crate::camera::{Rectification, StereoRig};
 use crate::visual::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig, StereoTag};
-use crate::visual::tags::{TagDetector, TagError};
+use crate::visual::tags::{TagDetector, TagError, TagFamily, TagId};
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use serde::Serialize;
 
@@ -27,7 +27,7 @@ pub struct TagSighting {
     /// Tag id.
     pub id: u32,
     /// Tag family.
-    pub family: String,
+    pub family: TagFamily,
     /// Triangulated edge length, metres.
     pub size_m: f64,
     /// Tag centre in the robot frame, metres.
@@ -63,7 +63,7 @@ impl TagSighting {
             t_s,
             frame,
             id: tag.id,
-            family: tag.family.to_string(),
+            family: tag.family,
             size_m: tag.size_m,
             position_in_robot_m: [p.x, p.y, p.z],
             covariance_m2: std::array::from_fn(|i| std::array::from_fn(|j| cov[(i, j)])),
@@ -74,8 +74,11 @@ impl TagSighting {
     }
 
     /// The tag seen: its family and id.
-    pub fn key(&self) -> (String, u32) {
-        (self.family.clone(), self.id)
+    pub fn key(&self) -> TagId {
+        TagId {
+            family: self.family,
+            id: self.id,
+        }
     }
 }
 
@@ -89,7 +92,7 @@ pub fn sightings_from_pair(
     left: &image::GrayImage,
     right: &image::GrayImage,
     (t_s, frame): (f64, usize),
-    known_size_m: &dyn Fn(&str, u32) -> Option<f64>,
+    known_size_m: &dyn Fn(TagFamily, u32) -> Option<f64>,
     config: &StereoConfig,
 ) -> Result<(Vec<TagSighting>, Vec<Rejection>), TagError> {
     let (in_left, in_right) = detect_pair(detector, left, right)?;

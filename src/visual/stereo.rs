@@ -13,7 +13,7 @@
 //! known tag size and the triangulated edge length differ by more than `max_size_error`.
 
 use crate::camera::{Camera, Rectification, StereoRig};
-use crate::visual::tags::TagDetection;
+use crate::visual::tags::{TagDetection, TagFamily};
 use nalgebra::{Isometry3, Matrix3, Point2, Rotation3, SMatrix, UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -45,7 +45,7 @@ pub struct StereoTag {
     /// Id.
     pub id: u32,
     /// Family.
-    pub family: &'static str,
+    pub family: TagFamily,
     /// Bits corrected in the left image.
     pub hamming: u32,
     /// Left corners, pixels (C order).
@@ -135,7 +135,7 @@ pub fn pnp_square(
 ) -> Option<Isometry3<f64>> {
     let h = 0.5 * size_m;
     let model = [[-h, h], [h, h], [h, -h], [-h, -h]];
-    crate::calib::plane_pose(camera, model.into_iter().zip(corners_px.iter().copied()))
+    crate::camera::plane_pose(camera, model.into_iter().zip(corners_px.iter().copied()))
 }
 
 /// Why a left detection found no partner.
@@ -426,7 +426,7 @@ mod tests {
         let (l, r) = project_tag(&rig, &corners);
         let det = |c: [[f64; 2]; 4]| TagDetection {
             id: 7,
-            family: "tag36h11",
+            family: TagFamily::Tag36h11,
             hamming: 0,
             corners_px: c,
             centre_px: [0.0, 0.0],
@@ -497,7 +497,7 @@ mod tests {
         let (l, r) = project_tag(&rig, &corners);
         let det = |c: [[f64; 2]; 4]| TagDetection {
             id: 1,
-            family: "tag36h11",
+            family: TagFamily::Tag36h11,
             hamming: 0,
             corners_px: c,
             centre_px: [0.0, 0.0],

@@ -4,10 +4,10 @@
 
 use super::{Error, Result};
 use crate::calib::{
-    calibrate_stereo, CalibConfig, CalibError, Calibration, LensModel, Target, TargetDetector,
-    TargetView, ViewCorners,
+    calibrate_stereo, CalibConfig, CalibError, Calibration, Target, TargetDetector, TargetView,
+    ViewCorners,
 };
-use crate::camera::StereoRig;
+use crate::camera::{LensModel, StereoRig};
 use crate::io::{self, OutputDir};
 use crate::progress::Progress;
 use crate::viz::{CalibrationScene, Recorder, Recording, RecordingRequest};

@@ -114,7 +114,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         Recording::Localization,
         &dir.path("localize.rrd"),
     )?;
-    let mut families: Vec<String> = landmarks.iter().map(|l| l.family.clone()).collect();
+    let mut families: Vec<_> = landmarks.iter().map(|l| l.family).collect();
     families.sort();
     families.dedup();
     let options = DetectOptions {

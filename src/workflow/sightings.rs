@@ -22,7 +22,7 @@ pub struct DetectOptions {
     /// The detector.
     pub backend: Backend,
     /// Tag families to look for; empty: the world's, else tag36h11.
-    pub families: Vec<String>,
+    pub families: Vec<TagFamily>,
     /// Decimation before quad detection (the C library takes fractions, kornia whole factors).
     pub decimate: f32,
     /// Smallest white-to-black grey difference around a tile for it to be searched.
@@ -114,32 +114,23 @@ fn compress_while_detecting(pairs: usize, pixels: usize) -> bool {
 }
 
 /// The families to look for: those asked, else the world's, else tag36h11.
-fn families(options: &DetectOptions, world: Option<&World>) -> Result<Vec<TagFamily>> {
-    let mut names: Vec<String> = options.families.clone();
-    if names.is_empty() {
-        names = world
-            .map(|w| w.tags.iter().map(|t| t.family.clone()).collect())
+fn families(options: &DetectOptions, world: Option<&World>) -> Vec<TagFamily> {
+    let mut families = options.families.clone();
+    if families.is_empty() {
+        families = world
+            .map(|w| w.tags.iter().map(|t| t.family).collect())
             .unwrap_or_default();
-        names.sort();
-        names.dedup();
+        families.sort();
+        families.dedup();
     }
-    if names.is_empty() {
-        names.push("tag36h11".into());
+    if families.is_empty() {
+        families.push(TagFamily::Tag36h11);
     }
-    names
-        .iter()
-        .map(|f| {
-            TagFamily::from_name(f).ok_or_else(|| {
-                Error::Request(format!(
-                    "family {f}: expected tag36h11, tag25h9, tag16h5 or tagStandard41h12"
-                ))
-            })
-        })
-        .collect()
+    families
 }
 
 /// The planned edge length of a tag (family, id) when known, metres.
-type KnownSize<'a> = Box<dyn Fn(&str, u32) -> Option<f64> + Sync + 'a>;
+type KnownSize<'a> = Box<dyn Fn(TagFamily, u32) -> Option<f64> + Sync + 'a>;
 
 /// Everything the pairs of one run share while they are worked through.
 struct Shared<'a> {
@@ -172,7 +163,7 @@ pub fn detect_run(
 ) -> Result<RunSightings> {
     check_decimate(options.decimate)?;
     let config = DetectorConfig {
-        families: families(options, world)?,
+        families: families(options, world),
         decimate: options.decimate,
         min_contrast: options.min_contrast,
         ..DetectorConfig::default()
@@ -202,7 +193,7 @@ pub fn detect_run(
         run,
         rig,
         rect: rig.rectify(),
-        known_size: Box::new(move |family: &str, id: u32| {
+        known_size: Box::new(move |family: TagFamily, id: u32| {
             world
                 .and_then(|w| w.tags.iter().find(|t| t.id == id && t.family == family))
                 .map(|t| t.size_m)

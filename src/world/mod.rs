@@ -9,6 +9,7 @@
 //! points that the sonar Hough transform is meant to find.
 
 use crate::geometry::{ray_hit_circle, Pose2, RayHit, Segment};
+use crate::visual::tags::TagFamily;
 use nalgebra::{Point2, Vector2};
 use serde::{Deserialize, Serialize};
 
@@ -32,7 +33,7 @@ pub struct Tag {
     pub id: u32,
     /// Tag family, as the AprilTag library names it.
     #[serde(default = "default_family")]
-    pub family: String,
+    pub family: TagFamily,
     /// Edge length of the black square, metres.
     pub size_m: f64,
     /// Centre of the tag in the world, metres.
@@ -44,8 +45,8 @@ pub struct Tag {
     pub corner_m: Option<[f64; 2]>,
 }
 
-fn default_family() -> String {
-    "tag36h11".to_string()
+fn default_family() -> TagFamily {
+    TagFamily::Tag36h11
 }
 
 /// A calibration target standing in the world (used by the calibration renderer).

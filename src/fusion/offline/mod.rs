@@ -9,6 +9,7 @@ use crate::fusion::measurement::sighting_measurement;
 use crate::fusion::{FuseConfig, Landmark, OnlineResult};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::visual::sightings::TagSighting;
+use crate::visual::tags::TagId;
 use crate::visual::vo::VisualTurn;
 use factors::{
     corrected_increment, sqrt_information, BetweenFactor, PriorFactor, TagFactor, TurnFactor,
@@ -297,11 +298,17 @@ pub(crate) fn run_offline_with_prior(
         );
         factors += 1;
     }
-    let slot_of: BTreeMap<(String, u32), usize> = online
+    let slot_of: BTreeMap<TagId, usize> = online
         .landmarks
         .iter()
         .enumerate()
-        .map(|(i, l)| ((l.family.clone(), l.id), i))
+        .map(|(i, l)| {
+            let tag = TagId {
+                family: l.family,
+                id: l.id,
+            };
+            (tag, i)
+        })
         .collect();
     for (&k, &kf) in &sighting_kf {
         let s = &sightings[k];

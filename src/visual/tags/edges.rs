@@ -1,5 +1,5 @@
-//! Sub-pixel image measurements shared by the tag and calibration-target detectors: a float
-//! image with bilinear sampling, and tag corners as the crossings of fitted edges.
+//! Sub-pixel tag corners, shared by the tag and calibration-target detectors: the crossings of
+//! tag edges fitted to the image gradient.
 //!
 //! **Edge fit.** Every pixel centre in a narrow band along an edge counts as a point of the edge,
 //! weighted by the image gradient across it (dark to bright). For any blur symmetric about the
@@ -8,9 +8,9 @@
 //! edge is a quadratic across its chord (lens distortion bends straight edges) and each corner is
 //! where two fitted edges cross.
 
-use image::GrayImage;
-
 /// Half-width of the band an edge is fitted in, as a share of the tag's dark border.
+use crate::imgproc::Plane;
+
 const EDGE_BAND_SHARE: f64 = 0.3;
 /// Narrowest and widest half-width of that band, pixels (the gradient of a sharp edge spreads
 /// over about 1.5 px either side).
@@ -30,65 +30,6 @@ const MAX_SPREAD_SHARE: f64 = 0.2;
 const EDGE_ROUNDS: usize = 4;
 /// Part of an edge left out at each end (and next to each gap square), as a share of its length.
 const EDGE_END_SHARE: f64 = 0.04;
-
-/// A grey image as floats with bilinear sampling.
-pub(crate) struct Plane {
-    pub(crate) w: usize,
-    pub(crate) h: usize,
-    pub(crate) data: Vec<f32>,
-}
-
-impl Plane {
-    pub(crate) fn from_gray(image: &GrayImage) -> Self {
-        Self {
-            w: image.width() as usize,
-            h: image.height() as usize,
-            data: image.as_raw().iter().map(|&v| v as f32).collect(),
-        }
-    }
-
-    pub(crate) fn at(&self, x: usize, y: usize) -> f32 {
-        self.data[y * self.w + x]
-    }
-
-    /// Bilinear sample, clamped at the border.
-    pub(crate) fn sample(&self, x: f64, y: f64) -> f32 {
-        let x = x.clamp(0.0, (self.w - 1) as f64);
-        let y = y.clamp(0.0, (self.h - 1) as f64);
-        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(self.w - 1), (y0 + 1).min(self.h - 1));
-        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-        let top = self.at(x0, y0) * (1.0 - fx) + self.at(x1, y0) * fx;
-        let bottom = self.at(x0, y1) * (1.0 - fx) + self.at(x1, y1) * fx;
-        top * (1.0 - fy) + bottom * fy
-    }
-
-    /// Separable binomial blur [1 4 6 4 1] / 16 (about a Gaussian of sigma 1), edges clamped.
-    pub(crate) fn blurred(&self) -> Self {
-        let (w, h) = (self.w, self.h);
-        let tap = |a: f32, b: f32, c: f32, d: f32, e: f32| (a + e + 4.0 * (b + d) + 6.0 * c) / 16.0;
-        let clamp = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
-        let mut tmp = vec![0.0f32; w * h];
-        for y in 0..h {
-            let src = &self.data[y * w..(y + 1) * w];
-            let dst = &mut tmp[y * w..(y + 1) * w];
-            for x in 0..w {
-                let at = |d: isize| src[clamp(x as isize + d, w)];
-                dst[x] = tap(at(-2), at(-1), at(0), at(1), at(2));
-            }
-        }
-        let mut out = vec![0.0f32; w * h];
-        for y in 0..h {
-            let rows: [&[f32]; 5] =
-                std::array::from_fn(|k| &tmp[clamp(y as isize + k as isize - 2, h) * w..][..w]);
-            let dst = &mut out[y * w..(y + 1) * w];
-            for x in 0..w {
-                dst[x] = tap(rows[0][x], rows[1][x], rows[2][x], rows[3][x], rows[4][x]);
-            }
-        }
-        Self { w, h, data: out }
-    }
-}
 
 /// A tag edge on the image: its offset `across` the chord from `origin` along `dir` (unit, the
 /// chord's length `len`), as a quadratic in the share `s` of the way along it:

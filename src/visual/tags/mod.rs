@@ -21,7 +21,7 @@ pub(crate) mod edges;
 pub(crate) mod quads;
 
 use image::GrayImage;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Shift from the libraries' pixel-corner convention to the pixel-centre convention.
 pub const LIBRARY_TO_CENTRE_PX: f64 = -0.5;
@@ -30,18 +30,63 @@ fn to_centre_convention(p: [f64; 2]) -> [f64; 2] {
     [p[0] + LIBRARY_TO_CENTRE_PX, p[1] + LIBRARY_TO_CENTRE_PX]
 }
 
-/// Tag families both backends support.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// The tag families: the four both backends detect, and Kalibr's AprilGrid tags. Written in
+/// files by the AprilTag library's names (`tag36h11`, ...), and ordered by them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum TagFamily {
     /// tag36h11, the default: the family of the paper's landmarks and of Kalibr's AprilGrid.
+    #[serde(rename = "tag36h11")]
     Tag36h11,
     /// tag25h9.
+    #[serde(rename = "tag25h9")]
     Tag25h9,
     /// tag16h5.
+    #[serde(rename = "tag16h5")]
     Tag16h5,
     /// tagStandard41h12.
+    #[serde(rename = "tagStandard41h12")]
     TagStandard41h12,
+    /// Kalibr's AprilGrid tags: tag36h11's codes with a 2-bit black border, found by the
+    /// AprilGrid detector ([`AprilGridDetector`]) alone.
+    #[serde(rename = "aprilgrid36h11")]
+    Aprilgrid36h11,
 }
+
+impl PartialOrd for TagFamily {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for TagFamily {
+    /// By name, as the files list them.
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.name().cmp(other.name())
+    }
+}
+
+impl std::fmt::Display for TagFamily {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A tag: its family and id (ids are unique within a family).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TagId {
+    /// The family.
+    pub family: TagFamily,
+    /// The id.
+    pub id: u32,
+}
+
+/// The families the tag detectors look for (not the AprilGrid's, which its own detector finds).
+pub const DETECTABLE_FAMILIES: [TagFamily; 4] = [
+    TagFamily::Tag36h11,
+    TagFamily::Tag25h9,
+    TagFamily::Tag16h5,
+    TagFamily::TagStandard41h12,
+];
 
 impl TagFamily {
     /// The name the AprilTag library uses.
@@ -51,25 +96,19 @@ impl TagFamily {
             TagFamily::Tag25h9 => "tag25h9",
             TagFamily::Tag16h5 => "tag16h5",
             TagFamily::TagStandard41h12 => "tagStandard41h12",
+            TagFamily::Aprilgrid36h11 => "aprilgrid36h11",
         }
     }
 
-    /// From the library's name.
+    /// A family the detectors look for, from the library's name.
     pub fn from_name(name: &str) -> Option<Self> {
-        [
-            TagFamily::Tag36h11,
-            TagFamily::Tag25h9,
-            TagFamily::Tag16h5,
-            TagFamily::TagStandard41h12,
-        ]
-        .into_iter()
-        .find(|f| f.name() == name)
+        DETECTABLE_FAMILIES.into_iter().find(|f| f.name() == name)
     }
 
     fn kornia(&self) -> kornia_apriltag::family::TagFamilyKind {
         use kornia_apriltag::family::TagFamilyKind as K;
         match self {
-            TagFamily::Tag36h11 => K::Tag36H11,
+            TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => K::Tag36H11,
             TagFamily::Tag25h9 => K::Tag25H9,
             TagFamily::Tag16h5 => K::Tag16H5,
             TagFamily::TagStandard41h12 => K::TagStandard41H12,
@@ -81,7 +120,7 @@ impl TagFamily {
         // SAFETY: the library's constructors take nothing and return an owned family.
         unsafe {
             match self {
-                TagFamily::Tag36h11 => apriltag_sys::tag36h11_create(),
+                TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => apriltag_sys::tag36h11_create(),
                 TagFamily::Tag25h9 => apriltag_sys::tag25h9_create(),
                 TagFamily::Tag16h5 => apriltag_sys::tag16h5_create(),
                 TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_create(),
@@ -97,7 +136,9 @@ impl TagFamily {
         // SAFETY: as the caller promises.
         unsafe {
             match self {
-                TagFamily::Tag36h11 => apriltag_sys::tag36h11_destroy(family),
+                TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => {
+                    apriltag_sys::tag36h11_destroy(family)
+                }
                 TagFamily::Tag25h9 => apriltag_sys::tag25h9_destroy(family),
                 TagFamily::Tag16h5 => apriltag_sys::tag16h5_destroy(family),
                 TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_destroy(family),
@@ -129,7 +170,7 @@ impl TagFamily {
         static T41: OnceLock<Option<K>> = OnceLock::new();
         type Cached = OnceLock<Option<K>>;
         let (cell, make): (&Cached, fn() -> Option<K>) = match self {
-            TagFamily::Tag36h11 => (&T36, || K::tag36_h11().ok()),
+            TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => (&T36, || K::tag36_h11().ok()),
             TagFamily::Tag25h9 => (&T25, || K::tag25_h9().ok()),
             TagFamily::Tag16h5 => (&T16, || K::tag16_h5().ok()),
             TagFamily::TagStandard41h12 => (&T41, || K::tagstandard41_h12().ok()),
@@ -182,6 +223,22 @@ impl TagFamily {
     }
 }
 
+impl DetectorConfig {
+    /// An error for a family only the AprilGrid detector finds.
+    fn check_families(&self) -> Result<(), TagError> {
+        match self
+            .families
+            .iter()
+            .find(|f| !DETECTABLE_FAMILIES.contains(f))
+        {
+            Some(f) => Err(TagError::Invalid(format!(
+                "family {f}: found by the AprilGrid detector, not the tag detectors"
+            ))),
+            None => Ok(()),
+        }
+    }
+}
+
 /// Detector settings shared by both backends.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetectorConfig {
@@ -228,8 +285,8 @@ impl Default for DetectorConfig {
 pub struct TagDetection {
     /// Tag id.
     pub id: u32,
-    /// Family name.
-    pub family: &'static str,
+    /// Family.
+    pub family: TagFamily,
     /// Bits corrected.
     pub hamming: u32,
     /// Corners in the C library's order, pixels.
@@ -297,12 +354,12 @@ pub trait TagDetector {
 
 /// Cells across the black square of a family (its `width_at_border`); `None` where the
 /// refinement does not apply (reversed-border families).
-fn border_cells(family: &str) -> Option<f64> {
+fn border_cells(family: TagFamily) -> Option<f64> {
     match family {
-        "tag36h11" => Some(8.0),
-        "tag25h9" => Some(7.0),
-        "tag16h5" => Some(6.0),
-        _ => None,
+        TagFamily::Tag36h11 => Some(8.0),
+        TagFamily::Tag25h9 => Some(7.0),
+        TagFamily::Tag16h5 => Some(6.0),
+        TagFamily::TagStandard41h12 | TagFamily::Aprilgrid36h11 => None,
     }
 }
 
@@ -312,7 +369,7 @@ fn refine_all(image: &GrayImage, detections: &mut [TagDetection]) {
     if detections.is_empty() {
         return;
     }
-    let plane = crate::visual::tags::edges::Plane::from_gray(image);
+    let plane = crate::imgproc::Plane::from_gray(image);
     for d in detections.iter_mut() {
         let Some(cells) = border_cells(d.family) else {
             continue;
@@ -398,6 +455,7 @@ impl KorniaDetector {
                 "needs at least one family and a decimation >= 1".into(),
             ));
         }
+        config.check_families()?;
         if config.decimate.fract() != 0.0 {
             return Err(TagError::Invalid(format!(
                 "decimation {}: kornia-apriltag decimates by whole factors (fractions need the \
@@ -425,7 +483,7 @@ impl KorniaDetector {
             .into_iter()
             .map(|d| TagDetection {
                 id: d.id,
-                family: self.config.families[d.family].name(),
+                family: self.config.families[d.family],
                 hamming: d.hamming,
                 corners_px: d.corners.map(to_centre_convention),
                 centre_px: to_centre_convention(d.centre),
@@ -479,7 +537,7 @@ impl KorniaDetector {
                 });
                 Some(TagDetection {
                     id: d.id as u32,
-                    family: family.name(),
+                    family: *family,
                     hamming: d.hamming as u32,
                     corners_px,
                     centre_px: to_centre_convention([d.center.x as f64, d.center.y as f64]),
@@ -542,6 +600,7 @@ impl CDetector {
                 "needs at least one family and a decimation >= 1".into(),
             ));
         }
+        config.check_families()?;
         // SAFETY: the detector comes from the library's constructor and is owned by the
         // `apriltag::Detector` made from it; each family comes from its constructor, is added to
         // that detector and freed after it in `drop` (or here, if construction fails).
@@ -604,7 +663,9 @@ impl TagDetector for CDetector {
         img.as_slice_mut().copy_from_slice(image.as_raw());
         // One family per detector is the common case; with several, the C library does not say
         // which family a detection came from in this binding, so report the first.
-        let family = self.owned.first().map_or("", |(f, _)| f.name());
+        let Some(family) = self.owned.first().map(|(f, _)| *f) else {
+            return Ok(Vec::new());
+        };
         let Some(detector) = self
             .detector
             .as_mut()
@@ -739,7 +800,7 @@ impl TagDetector for AprilGridDetector {
                     let d = *data.add(i);
                     out.push(TagDetection {
                         id: (*d).id.max(0) as u32,
-                        family: "aprilgrid36h11",
+                        family: TagFamily::Aprilgrid36h11,
                         hamming: (*d).hamming.max(0) as u32,
                         corners_px: (*d).p.map(to_centre_convention),
                         centre_px: to_centre_convention((*d).c),
@@ -858,7 +919,7 @@ pub fn refine_corners(
     border_cells: f64,
 ) -> Option<[[f64; 2]; 4]> {
     refine_on(
-        &crate::visual::tags::edges::Plane::from_gray(image),
+        &crate::imgproc::Plane::from_gray(image),
         corners,
         border_cells,
     )
@@ -866,7 +927,7 @@ pub fn refine_corners(
 
 /// [`refine_corners`] on an image already converted to floats.
 fn refine_on(
-    plane: &crate::visual::tags::edges::Plane,
+    plane: &crate::imgproc::Plane,
     corners: &[[f64; 2]; 4],
     border_cells: f64,
 ) -> Option<[[f64; 2]; 4]> {

@@ -16,9 +16,11 @@
 //! optional edge refinement, the homography, decoding against a grey model of the border,
 //! and the reconciliation of overlapping detections of one id.
 
+use crate::geometry::homography::Homography;
 use image::GrayImage;
 use kornia_apriltag::family::TagFamily as Family;
 use kornia_apriltag::utils::Pixel;
+use nalgebra::Matrix3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -764,58 +766,6 @@ fn refine_edges(im: &GrayImage, quad: &mut Quad, decimate: f64) {
     }
 }
 
-/// The homography from the tag square (-1..1) to the quad (`homography_compute2`), row-major.
-fn homography(p: &[[f64; 2]; 4]) -> Option<[f64; 9]> {
-    let tag = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
-    let mut a = [0.0f64; 72];
-    for i in 0..4 {
-        let (x, y, u, v) = (tag[i][0], tag[i][1], p[i][0], p[i][1]);
-        a[18 * i..18 * i + 9].copy_from_slice(&[x, y, 1.0, 0.0, 0.0, 0.0, -x * u, -y * u, u]);
-        a[18 * i + 9..18 * i + 18].copy_from_slice(&[0.0, 0.0, 0.0, x, y, 1.0, -x * v, -y * v, v]);
-    }
-    for col in 0..8 {
-        let (mut max_val, mut max_idx) = (0.0, None);
-        for row in col..8 {
-            let val = a[row * 9 + col].abs();
-            if val > max_val {
-                max_val = val;
-                max_idx = Some(row);
-            }
-        }
-        let max_idx = max_idx?;
-        if max_val < 1e-10 {
-            return None;
-        }
-        if max_idx != col {
-            for i in col..9 {
-                a.swap(col * 9 + i, max_idx * 9 + i);
-            }
-        }
-        for i in col + 1..8 {
-            let f = a[i * 9 + col] / a[col * 9 + col];
-            a[i * 9 + col] = 0.0;
-            for j in col + 1..9 {
-                a[i * 9 + j] -= f * a[col * 9 + j];
-            }
-        }
-    }
-    for col in (0..8).rev() {
-        let sum: f64 = (col + 1..8).map(|i| a[col * 9 + i] * a[i * 9 + 8]).sum();
-        a[col * 9 + 8] = (a[col * 9 + 8] - sum) / a[col * 9 + col];
-    }
-    let h = [a[8], a[17], a[26], a[35], a[44], a[53], a[62], a[71], 1.0];
-    let det = h[0] * (h[4] * h[8] - h[5] * h[7]) - h[1] * (h[3] * h[8] - h[5] * h[6])
-        + h[2] * (h[3] * h[7] - h[4] * h[6]);
-    (det != 0.0 && det.is_finite()).then_some(h)
-}
-
-fn project(h: &[f64; 9], x: f64, y: f64) -> [f64; 2] {
-    let xx = h[0] * x + h[1] * y + h[2];
-    let yy = h[3] * x + h[4] * y + h[5];
-    let zz = h[6] * x + h[7] * y + h[8];
-    [xx / zz, yy / zz]
-}
-
 /// A plane `c0 x + c1 y + c2` fitted to grey levels sampled in the tag frame (`graymodel`).
 #[derive(Default)]
 struct GrayModel {
@@ -885,7 +835,7 @@ fn rotate90(w: u64, nbits: usize) -> u64 {
 
 /// Decodes every family that fits the quad's border (`quad_decode_task`).
 fn decode_quad(im: &GrayImage, quad: &Quad, families: &[Family], sharpening: f64) -> Vec<Decoded> {
-    let Some(h) = homography(&quad.p) else {
+    let Some(h) = Homography::from_square(&quad.p) else {
         return Vec::new();
     };
     let mut out = Vec::new();
@@ -899,25 +849,25 @@ fn decode_quad(im: &GrayImage, quad: &Quad, families: &[Family], sharpening: f64
         let theta = rotation as f64 * std::f64::consts::FRAC_PI_2;
         let (c, s) = (theta.cos(), theta.sin());
         // H * R, R = [c -s 0; s c 0; 0 0 1].
-        let hr = [
-            h[0] * c + h[1] * s,
-            -h[0] * s + h[1] * c,
-            h[2],
-            h[3] * c + h[4] * s,
-            -h[3] * s + h[4] * c,
-            h[5],
-            h[6] * c + h[7] * s,
-            -h[6] * s + h[7] * c,
-            h[8],
-        ];
+        let hr = Homography(Matrix3::new(
+            h.0[(0, 0)] * c + h.0[(0, 1)] * s,
+            -h.0[(0, 0)] * s + h.0[(0, 1)] * c,
+            h.0[(0, 2)],
+            h.0[(1, 0)] * c + h.0[(1, 1)] * s,
+            -h.0[(1, 0)] * s + h.0[(1, 1)] * c,
+            h.0[(1, 2)],
+            h.0[(2, 0)] * c + h.0[(2, 1)] * s,
+            -h.0[(2, 0)] * s + h.0[(2, 1)] * c,
+            h.0[(2, 2)],
+        ));
         out.push(Decoded {
             family: fi,
             id,
             hamming,
             margin,
             corners: [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)]
-                .map(|(x, y)| project(&hr, x, y)),
-            centre: project(&hr, 0.0, 0.0),
+                .map(|(x, y)| hr.project(x, y)),
+            centre: hr.project(0.0, 0.0),
         });
     }
     out
@@ -927,7 +877,7 @@ fn decode_quad(im: &GrayImage, quad: &Quad, families: &[Family], sharpening: f64
 fn decode(
     im: &GrayImage,
     family: &Family,
-    h: &[f64; 9],
+    h: &Homography,
     sharpening: f64,
 ) -> Option<(u32, u32, u32, f64)> {
     let wb = family.width_at_border as f64;
@@ -949,7 +899,7 @@ fn decode(
         for i in 0..family.width_at_border {
             let tagx = 2.0 * ((x0 + i as f64 * dx) / wb - 0.5);
             let tagy = 2.0 * ((y0 + i as f64 * dy) / wb - 0.5);
-            let [px, py] = project(h, tagx, tagy);
+            let [px, py] = h.project(tagx, tagy);
             // Truncated, as the C library's (int) cast.
             let (ix, iy) = (px as i64, py as i64);
             if ix < 0 || iy < 0 || ix >= iw || iy >= ih {
@@ -982,7 +932,7 @@ fn decode(
         let (bx, by) = (family.bit_x[i], family.bit_y[i]);
         let tagx = 2.0 * ((bx as f64 + 0.5) / wb - 0.5);
         let tagy = 2.0 * ((by as f64 + 0.5) / wb - 0.5);
-        let [px, py] = project(h, tagx, tagy);
+        let [px, py] = h.project(tagx, tagy);
         let Some(v) = value_for_pixel(im, px, py) else {
             continue;
         };
@@ -1141,12 +1091,12 @@ mod tests {
     #[test]
     fn homography_maps_the_tag_square_onto_the_quad() {
         let p = [[10.0, 20.0], [50.0, 22.0], [48.0, 60.0], [12.0, 58.0]];
-        let h = homography(&p).unwrap();
+        let h = Homography::from_square(&p).unwrap();
         for (t, q) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
             .iter()
             .zip(p)
         {
-            let r = project(&h, t.0, t.1);
+            let r = h.project(t.0, t.1);
             assert!(dist(r, q) < 1e-9, "{r:?} vs {q:?}");
         }
     }

@@ -24,8 +24,10 @@
 
 use crate::camera::StereoRig;
 use crate::geometry::Pose2;
+use crate::imgproc::blur::binomial5_gray;
+use crate::imgproc::ncc::{dot, zero_mean_unit, LANES};
+use crate::imgproc::Plane;
 use crate::visual::stereo::triangulate_point;
-use kornia_image::{Image, ImageSize};
 use nalgebra::{Isometry3, Matrix3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 
 /// Settings of the visual odometry.
@@ -127,15 +129,15 @@ pub enum VoError {
 /// One level of an image pyramid, with its integral images (sums of values and of squares, for
 /// the mean and spread of any patch in constant time) where many patches are compared.
 struct Level {
-    image: Image<f32, 1>,
+    image: Plane,
     sums: Option<(Vec<f64>, Vec<f64>)>,
 }
 
 impl Level {
-    fn new(image: Image<f32, 1>, with_sums: bool) -> Self {
+    fn new(image: Plane, with_sums: bool) -> Self {
         let sums = with_sums.then(|| {
-            let (w, h) = (image.width(), image.height());
-            let s = image.as_slice();
+            let (w, h) = (image.w, image.h);
+            let s = image.data.as_slice();
             let mut sum = vec![0.0f64; (w + 1) * (h + 1)];
             let mut sum2 = vec![0.0f64; (w + 1) * (h + 1)];
             for (y, pixels) in s.chunks_exact(w).enumerate() {
@@ -158,11 +160,11 @@ impl Level {
     }
 
     fn width(&self) -> i64 {
-        self.image.width() as i64
+        self.image.w as i64
     }
 
     fn height(&self) -> i64 {
-        self.image.height() as i64
+        self.image.h as i64
     }
 
     fn inside(&self, x: i64, y: i64, half: i64) -> bool {
@@ -175,7 +177,7 @@ impl Level {
         let side = (2 * half + 1) as usize;
         match &self.sums {
             Some((sum, sum2)) => {
-                let w1 = self.image.width() + 1;
+                let w1 = self.image.w + 1;
                 let (x1, y1) = (x0 + side, y0 + side);
                 let at = |v: &[f64], xx: usize, yy: usize| v[yy * w1 + xx];
                 let box_of =
@@ -183,8 +185,8 @@ impl Level {
                 (box_of(sum), box_of(sum2))
             }
             None => {
-                let w = self.image.width();
-                let data = self.image.as_slice();
+                let w = self.image.w;
+                let data = self.image.data.as_slice();
                 (0..side).fold((0.0, 0.0), |(s, s2), row| {
                     let line = &data[(y0 + row) * w + x0..(y0 + row) * w + x0 + side];
                     let (a, b) = line
@@ -248,13 +250,13 @@ impl Level {
             return;
         }
         let side = (2 * half + 1) as usize;
-        let w = self.image.width();
+        let w = self.image.w;
         let (left, top) = ((x - half) as usize, (y - half) as usize);
         // Each lane of eight positions reads eight pixels past the first of its patches' rows:
         // past the last position, those of the image that follow, or zeros at its very end.
         let lanes = n.div_ceil(LANES);
         let reach = top * w + (side - 1) * w + left + lanes * LANES + side - 1;
-        let data = self.image.as_slice();
+        let data = self.image.data.as_slice();
         let padded;
         let (data, stride, origin) = if reach <= data.len() {
             (data, w, top * w + left)
@@ -309,10 +311,10 @@ impl Level {
                 .collect();
         }
         let side = (2 * half + 1) as usize;
-        let w = self.image.width();
+        let w = self.image.w;
         let (left, top) = ((x - half) as usize, (y - half) as usize);
         let span = n + side - 1;
-        let data = self.image.as_slice();
+        let data = self.image.data.as_slice();
         let row = |r: usize| &data[r * w + left..r * w + left + span];
         if columns.run == Some((x, y - 1, n, half)) {
             for ((c, &out), &new) in columns
@@ -362,18 +364,18 @@ impl Level {
         if spread < 1e-3 * n {
             return None;
         }
-        let w = self.image.width();
-        let data = self.image.as_slice();
+        let w = self.image.w;
+        let data = self.image.data.as_slice();
         let side = (2 * half + 1) as usize;
-        let mut dot = 0.0f32;
+        let mut sum = 0.0f32;
         for row in 0..side {
             let start = (y - half) as usize * w + row * w + (x - half) as usize;
-            dot += dot_product(
+            sum += dot(
                 &data[start..start + side],
                 &reference[row * side..(row + 1) * side],
             );
         }
-        Some((dot as f64 / spread) as f32)
+        Some((sum as f64 / spread) as f32)
     }
 }
 
@@ -383,27 +385,6 @@ impl Level {
 struct Columns {
     run: Option<(i64, i64, usize, i64)>,
     sums: Vec<(f64, f64)>,
-}
-
-/// Positions or products summed side by side in one vector register.
-const LANES: usize = 8;
-
-/// `a · b` in eight lanes (the compiler keeps them in one vector register).
-fn dot_product(a: &[f32], b: &[f32]) -> f32 {
-    let mut lanes = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            lanes[k] += x[k] * y[k];
-        }
-    }
-    lanes.iter().sum::<f32>() + tail
 }
 
 /// The pixels of the square of half-width `r` around `(cx, cy)`, row by row.
@@ -435,60 +416,6 @@ fn from_level(p: Point2<f64>, level: u32) -> Point2<f64> {
     Point2::new((p.x + 0.5) * s - 0.5, (p.y + 0.5) * s - 0.5)
 }
 
-/// A separable 5-tap binomial blur ([1 4 6 4 1] / 16 each way, sigma 1 px), borders clamped.
-/// Worked in integers (16 times the value after the rows, 256 times after the columns, at most
-/// 65280), which gives exactly the floating-point sums and lets the compiler use wide vectors.
-fn blur(src: &[u8], w: usize, h: usize) -> Vec<f32> {
-    let taps = |a: u16, b: u16, c: u16, d: u16, e: u16| a + e + 4 * (b + d) + 6 * c;
-    let mut rows = vec![0u16; w * h];
-    for (out, row) in rows.chunks_exact_mut(w).zip(src.chunks_exact(w)) {
-        let at = |x: usize| row[x.saturating_sub(2).min(w - 1)] as u16;
-        // Pixel `x` reads `at(x)` to `at(x + 4)`: source pixels `x - 2` to `x + 2`, clamped.
-        let clamped = |x: usize| taps(at(x), at(x + 1), at(x + 2), at(x + 3), at(x + 4));
-        let interior = if w >= 5 { 2..w - 2 } else { 0..0 };
-        for x in (0..w).filter(|x| !interior.contains(x)) {
-            out[x] = clamped(x);
-        }
-        for (o, t) in out[interior].iter_mut().zip(row.windows(5)) {
-            *o = taps(
-                t[0] as u16,
-                t[1] as u16,
-                t[2] as u16,
-                t[3] as u16,
-                t[4] as u16,
-            );
-        }
-    }
-    let mut out: Vec<f32> = Vec::with_capacity(w * h);
-    for y in 0..h {
-        let row = |k: usize| {
-            let yy = (y + k).saturating_sub(2).min(h - 1);
-            &rows[yy * w..(yy + 1) * w]
-        };
-        let (r0, r1, r2, r3, r4) = (row(0), row(1), row(2), row(3), row(4));
-        out.extend((0..w).map(|x| taps(r0[x], r1[x], r2[x], r3[x], r4[x]) as f32 * (1.0 / 256.0)));
-    }
-    out
-}
-
-/// Half the size by averaging 2 x 2 blocks (the odd last row or column dropped).
-fn halve(src: &[f32], w: usize, h: usize) -> (Vec<f32>, usize, usize) {
-    let (hw, hh) = (w / 2, h / 2);
-    let mut out = Vec::with_capacity(hw * hh);
-    for y in 0..hh {
-        let (a, b) = (
-            &src[2 * y * w..2 * y * w + 2 * hw],
-            &src[(2 * y + 1) * w..(2 * y + 1) * w + 2 * hw],
-        );
-        out.extend(
-            a.chunks_exact(2)
-                .zip(b.chunks_exact(2))
-                .map(|(a, b)| 0.25 * (a[0] + a[1] + b[0] + b[1])),
-        );
-    }
-    (out, hw, hh)
-}
-
 /// One camera image ready for the visual odometry: full resolution smoothed (the sensor noise
 /// against a soft texture would blur the matches), half and quarter resolution.
 pub struct VoImage {
@@ -502,23 +429,18 @@ impl VoImage {
     /// there cover many positions (a whole epipolar line, the tracking radius); the few at half
     /// and full resolution sum the columns of their own patches ([`Level::box_sums_row`]).
     pub fn new(gray: &image::GrayImage) -> Self {
-        let (w, h) = (gray.width() as usize, gray.height() as usize);
-        let full = blur(gray.as_raw(), w, h);
-        let (half, hw, hh) = halve(&full, w, h);
-        let (quarter, qw, qh) = halve(&half, hw, hh);
-        let level = |data: Vec<f32>, width: usize, height: usize, sums: bool| {
-            let image = Image::new(ImageSize { width, height }, data).expect("the pixels fill it");
-            Level::new(image, sums)
-        };
+        let full = binomial5_gray(gray);
+        let half = full.halved();
+        let quarter = half.halved();
         Self {
-            full: level(full, w, h, false),
-            half: level(half, hw, hh, false),
-            quarter: level(quarter, qw, qh, true),
+            full: Level::new(full, false),
+            half: Level::new(half, false),
+            quarter: Level::new(quarter, true),
         }
     }
 
     fn size(&self) -> (usize, usize) {
-        (self.full.image.width(), self.full.image.height())
+        (self.full.image.w, self.full.image.h)
     }
 }
 
@@ -528,22 +450,15 @@ fn patch_at(level: &Level, x: i64, y: i64, half: i64) -> Option<Vec<f32>> {
     if !level.inside(x, y, half) {
         return None;
     }
-    let w = level.image.width();
-    let data = level.image.as_slice();
+    let w = level.image.w;
+    let data = level.image.data.as_slice();
     let side = (2 * half + 1) as usize;
     let mut v = Vec::with_capacity(side * side);
     for row in 0..side {
         let start = ((y - half) as usize + row) * w + (x - half) as usize;
         v.extend_from_slice(&data[start..start + side]);
     }
-    let mean = v.iter().sum::<f32>() / v.len() as f32;
-    v.iter_mut().for_each(|a| *a -= mean);
-    let norm = v.iter().map(|a| a * a).sum::<f32>().sqrt();
-    if norm < 1e-3 * v.len() as f32 {
-        return None;
-    }
-    v.iter_mut().for_each(|a| *a /= norm);
-    Some(v)
+    zero_mean_unit(v)
 }
 
 /// [`patch_at`] sampled every `step` pixels (bilinear) instead of every pixel: the patch as it
@@ -556,41 +471,25 @@ fn patch_scaled(level: &Level, x: i64, y: i64, half: i64, step: f64) -> Option<V
     if !level.inside(x, y, reach) {
         return None;
     }
-    let w = level.image.width();
-    let data = level.image.as_slice();
-    let sample = |fx: f64, fy: f64| {
-        let (x0, y0) = (fx.floor(), fy.floor());
-        let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
-        let i = y0 as usize * w + x0 as usize;
-        let top = data[i] * (1.0 - tx) + data[i + 1] * tx;
-        let bottom = data[i + w] * (1.0 - tx) + data[i + w + 1] * tx;
-        top * (1.0 - ty) + bottom * ty
-    };
     let side = (2 * half + 1) as usize;
     let mut v = Vec::with_capacity(side * side);
     for j in -half..=half {
         for i in -half..=half {
-            v.push(sample(
-                x as f64 + i as f64 * step,
-                y as f64 + j as f64 * step,
-            ));
+            v.push(
+                level
+                    .image
+                    .sample(x as f64 + i as f64 * step, y as f64 + j as f64 * step),
+            );
         }
     }
-    let mean = v.iter().sum::<f32>() / v.len() as f32;
-    v.iter_mut().for_each(|a| *a -= mean);
-    let norm = v.iter().map(|a| a * a).sum::<f32>().sqrt();
-    if norm < 1e-3 * v.len() as f32 {
-        return None;
-    }
-    v.iter_mut().for_each(|a| *a /= norm);
-    Some(v)
+    zero_mean_unit(v)
 }
 
 /// Shi-Tomasi corner response (the smaller eigenvalue of the structure tensor: Sobel gradients
 /// summed over a 5 x 5 window) of every pixel of `level`; zero within 3 px of the border.
 fn corner_response(level: &Level) -> Vec<f32> {
-    let (w, h) = (level.image.width(), level.image.height());
-    let s = level.image.as_slice();
+    let (w, h) = (level.image.w, level.image.h);
+    let s = level.image.data.as_slice();
     let mut out = vec![0.0f32; w * h];
     if w < 5 || h < 5 {
         return out;
@@ -666,7 +565,7 @@ fn sum5(rows: [&[f32]; 5], out: &mut [f32]) {
 /// The strongest corner of each grid cell, found at half resolution, in full-resolution pixels.
 fn corners(image: &VoImage, config: &VoConfig) -> Vec<Point2<f64>> {
     let level = &image.half;
-    let (w, h) = (level.image.width(), level.image.height());
+    let (w, h) = (level.image.w, level.image.h);
     let r = corner_response(level);
     let floor = r.iter().cloned().fold(0.0f32, f32::max) * config.min_response_share;
     let (cols, rows) = config.grid;
@@ -1243,48 +1142,10 @@ mod tests {
     use crate::render::{RenderConfig, Renderer};
     use std::path::Path;
 
-    /// The blur in floating point, tap by tap, as it reads.
-    fn float_blur(src: &[u8], w: usize, h: usize) -> Vec<f32> {
-        const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-        let at = |x: i64, y: i64| {
-            src[(y.clamp(0, h as i64 - 1) as usize) * w + x.clamp(0, w as i64 - 1) as usize] as f32
-        };
-        let rows: Vec<f32> = (0..h as i64)
-            .flat_map(|y| (0..w as i64).map(move |x| (y, x)))
-            .map(|(y, x)| (0..5).map(|k| K[k] * at(x + k as i64 - 2, y)).sum())
-            .collect();
-        let row = |x: i64, y: i64| rows[(y.clamp(0, h as i64 - 1) as usize) * w + x as usize];
-        (0..h as i64)
-            .flat_map(|y| (0..w as i64).map(move |x| (y, x)))
-            .map(|(y, x)| (0..5).map(|k| K[k] * row(x, y + k as i64 - 2)).sum())
-            .collect()
-    }
-
-    #[test]
-    fn the_integer_blur_is_the_floating_point_one_exactly() {
-        let mut state = 12345u32;
-        for (w, h) in [(1, 1), (2, 3), (4, 4), (5, 7), (17, 9), (64, 48)] {
-            let src: Vec<u8> = (0..w * h)
-                .map(|i| {
-                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    // Extremes too: all-white rows reach the integer sums' largest value.
-                    if i % 7 == 0 {
-                        255
-                    } else {
-                        (state >> 24) as u8
-                    }
-                })
-                .collect();
-            assert_eq!(blur(&src, w, h), float_blur(&src, w, h), "{w} x {h}");
-        }
-        let white = vec![255u8; 30 * 20];
-        assert!(blur(&white, 30, 20).iter().all(|&v| v == 255.0));
-    }
-
     /// The corner response as first written, pixel by pixel.
     fn plain_corner_response(level: &Level) -> Vec<f32> {
-        let (w, h) = (level.image.width(), level.image.height());
-        let s = level.image.as_slice();
+        let (w, h) = (level.image.w, level.image.h);
+        let s = level.image.data.as_slice();
         let mut gxx = vec![0.0f32; w * h];
         let mut gyy = vec![0.0f32; w * h];
         let mut gxy = vec![0.0f32; w * h];
