@@ -5,7 +5,7 @@
 use crate::fusion::ekf::Ekf;
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::sighting_measurement;
-use crate::fusion::{FuseConfig, Landmark, OdometryCalibration};
+use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
 use crate::sonar::{SonarLayout, SonarReading};
@@ -180,155 +180,209 @@ fn fuse_range(
 /// starts at its odometry's first pose in the survey's frame (the robot leaves from the same
 /// place).
 pub fn localize(
-    odometry: &[StampedPose],
-    visual: &[VisualTurn],
-    sightings: &[TagSighting],
+    obs: &Observations<'_>,
     landmarks: &[Landmark],
     sonar: Option<SonarInput<'_>>,
     config: &FuseConfig,
 ) -> LocalizeResult {
-    let (mut ekf, start) = Ekf::at_start(odometry);
-    let first_t = odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
-    let mut pending = events(sightings, visual, first_t, config)
+    let mut filter = Localizer::new(obs.odometry, config);
+    let first_t = obs.odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
+    let mut pending = events(obs.sightings, obs.visual, first_t, config)
         .into_iter()
         .peekable();
-    let mut cloned_for: Option<usize> = None;
     let mut ranges: Vec<(usize, &SonarReading)> =
         sonar.map_or(Vec::new(), |s| s.readings.iter().enumerate().collect());
     ranges.sort_by(|a, b| a.1.t_s.total_cmp(&b.1.t_s));
     let mut ranges = ranges.into_iter().peekable();
-    let mut out = LocalizeResult {
-        trajectory: Vec::with_capacity(odometry.len()),
-        sigma_m: Vec::with_capacity(odometry.len()),
-        since_sighting_m: Vec::with_capacity(odometry.len()),
-        accepted: Vec::new(),
-        rejected: Vec::new(),
-        unknown: Vec::new(),
-        range_outcomes: Vec::new(),
-        relocalised_t_s: Vec::new(),
-        visual_fused: 0,
-        visual_rejected: 0,
-    };
-    let mut last = start;
-    let mut travelled = 0.0;
-    // Gated-out sightings since the last fused one: the pose each gives and the odometry then.
-    let mut lost: Vec<(Pose2, Pose2)> = Vec::new();
-    for sample in odometry {
-        while let Some(&(t, event)) = pending.peek() {
-            if t > sample.t_s {
-                break;
+    for sample in obs.odometry {
+        while let Some((t, event)) = pending.next_if(|&(t, _)| t <= sample.t_s) {
+            let odom = pose_at(obs.odometry, t).unwrap_or(sample.pose);
+            filter.advance(odom);
+            match event {
+                Event::TurnStarts(j) => filter.turn_starts(j),
+                Event::TurnEnds(j) => filter.turn_ends(j, &obs.visual[j]),
+                Event::Sighting(k) => filter.sighting(k, &obs.sightings[k], landmarks, odom),
             }
-            pending.next();
-            let odom = pose_at(odometry, t).unwrap_or(sample.pose);
-            travelled += ekf.advance(&mut last, odom, config);
-            let k = match event {
-                Event::TurnStarts(j) => {
-                    ekf.clone_heading();
-                    cloned_for = Some(j);
-                    continue;
-                }
-                Event::TurnEnds(j) => {
-                    if cloned_for == Some(j) {
-                        let v = &visual[j];
-                        if ekf.update_turn(v.turn_rad, v.sigma_rad.powi(2), config.visual_gate_chi2)
-                        {
-                            out.visual_fused += 1;
-                        } else {
-                            out.visual_rejected += 1;
-                        }
-                    }
-                    ekf.drop_clone();
-                    cloned_for = None;
-                    continue;
-                }
-                Event::Sighting(k) => k,
-            };
-            // A sighting updates the pose alone: a heading copy is let go (the turn under way is
-            // not fused).
-            ekf.drop_clone();
-            cloned_for = None;
-            let s = &sightings[k];
-            let Some(l) = landmarks
-                .iter()
-                .find(|l| l.id == s.id && l.family == s.family)
-            else {
-                out.unknown.push(k);
-                continue;
-            };
-            // The landmark as a fixed state slot: a pose-only filter with the landmark's
-            // uncertainty moved into the measurement noise.
-            let mut full = Ekf {
-                x: DVector::from_vec(vec![
-                    ekf.x[0],
-                    ekf.x[1],
-                    ekf.x[2],
-                    l.position_m[0],
-                    l.position_m[1],
-                    l.yaw_rad,
-                ]),
-                p: DMatrix::zeros(6, 6),
-                slots: vec![TagId {
-                    family: l.family,
-                    id: l.id,
-                }],
-            };
-            full.p
-                .fixed_view_mut::<3, 3>(0, 0)
-                .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
-            let c = &l.covariance_m2;
-            full.p[(3, 3)] = c[0][0];
-            full.p[(3, 4)] = c[0][1];
-            full.p[(4, 3)] = c[1][0];
-            full.p[(4, 4)] = c[1][1];
-            full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
-            let (z, r) = sighting_measurement(s, config);
-            let (y, sm, jac) = full.innovation(0, &z, &r);
-            let d2 = sm
-                .try_inverse()
-                .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
-            if d2 > config.gate_chi2 {
-                out.rejected.push(k);
-                let (pose, cov) = pose_from_sighting(s, l, config);
-                lost.push((pose, odom));
-                let agree = lost.len() >= RELOCALISE_AFTER
-                    && lost[lost.len() - RELOCALISE_AFTER..].iter().all(|(p, o)| {
-                        let moved = p.compose(&o.between(&odom));
-                        (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
-                            && wrap_angle(moved.theta - pose.theta).abs() <= RELOCALISE_AGREE_RAD
-                    });
-                if agree {
-                    ekf.x[0] = pose.x;
-                    ekf.x[1] = pose.y;
-                    ekf.x[2] = pose.theta;
-                    ekf.p.copy_from(&cov);
-                    out.relocalised_t_s.push(s.t_s);
-                    lost.clear();
-                    travelled = 0.0;
-                }
-                continue;
-            }
-            full.update(&y, &sm, &jac, &r);
-            ekf.x.copy_from(&full.x.rows(0, 3));
-            ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
-            out.accepted.push(k);
-            lost.clear();
-            travelled = 0.0;
         }
-        travelled += ekf.advance(&mut last, sample.pose, config);
+        filter.advance(sample.pose);
         // The sonar sampled with this odometry pose (or before it).
         while let Some((i, reading)) = ranges.next_if(|r| r.1.t_s <= sample.t_s) {
-            if let Some(fused) = sonar.and_then(|s| fuse_range(&mut ekf, reading, &s, config)) {
-                out.range_outcomes.push((i, fused));
+            if let Some(s) = &sonar {
+                filter.range(i, reading, s);
             }
         }
-        out.trajectory.push(StampedPose {
-            t_s: sample.t_s,
-            pose: ekf.pose(),
-        });
-        out.sigma_m.push(ekf.position_sigma_m());
-        out.since_sighting_m.push(travelled);
+        filter.record(sample.t_s);
     }
-    out
+    filter.out
+}
+
+/// The localisation filter's state as it works through a run.
+struct Localizer<'a> {
+    config: &'a FuseConfig,
+    ekf: Ekf,
+    /// The odometry pose predicted to.
+    last: Pose2,
+    /// Distance travelled since the last fused sighting (or relocalisation), metres.
+    travelled: f64,
+    /// Gated-out sightings since the last fused one: the pose each gives and the odometry then.
+    lost: Vec<(Pose2, Pose2)>,
+    /// The visual turn whose start the heading copy holds.
+    cloned_for: Option<usize>,
+    out: LocalizeResult,
+}
+
+impl<'a> Localizer<'a> {
+    /// A filter sure of its start, the odometry's first pose.
+    fn new(odometry: &[StampedPose], config: &'a FuseConfig) -> Self {
+        let (ekf, start) = Ekf::at_start(odometry);
+        let n = odometry.len();
+        Self {
+            config,
+            ekf,
+            last: start,
+            travelled: 0.0,
+            lost: Vec::new(),
+            cloned_for: None,
+            out: LocalizeResult {
+                trajectory: Vec::with_capacity(n),
+                sigma_m: Vec::with_capacity(n),
+                since_sighting_m: Vec::with_capacity(n),
+                accepted: Vec::new(),
+                rejected: Vec::new(),
+                unknown: Vec::new(),
+                range_outcomes: Vec::new(),
+                relocalised_t_s: Vec::new(),
+                visual_fused: 0,
+                visual_rejected: 0,
+            },
+        }
+    }
+
+    /// Predicts with the odometry up to `odom`.
+    fn advance(&mut self, odom: Pose2) {
+        self.travelled += self.ekf.advance(&mut self.last, odom, self.config);
+    }
+
+    /// Visual turn `j` starts: the heading is copied.
+    fn turn_starts(&mut self, j: usize) {
+        self.ekf.clone_heading();
+        self.cloned_for = Some(j);
+    }
+
+    /// Visual turn `j` ends: fused when it started with the copy held.
+    fn turn_ends(&mut self, j: usize, v: &VisualTurn) {
+        if self.cloned_for == Some(j) {
+            let gate = self.config.visual_gate_chi2;
+            if self.ekf.update_turn(v.turn_rad, v.sigma_rad.powi(2), gate) {
+                self.out.visual_fused += 1;
+            } else {
+                self.out.visual_rejected += 1;
+            }
+        }
+        self.ekf.drop_clone();
+        self.cloned_for = None;
+    }
+
+    /// Sighting `k` (`s`), with the odometry at `odom`: fused against its surveyed landmark, or
+    /// gated out (and, [`RELOCALISE_AFTER`] in a row agreeing, taken for where the robot is).
+    fn sighting(&mut self, k: usize, s: &TagSighting, landmarks: &[Landmark], odom: Pose2) {
+        // A sighting updates the pose alone: a heading copy is let go (the turn under way is
+        // not fused).
+        self.ekf.drop_clone();
+        self.cloned_for = None;
+        let Some(l) = landmarks
+            .iter()
+            .find(|l| l.id == s.id && l.family == s.family)
+        else {
+            self.out.unknown.push(k);
+            return;
+        };
+        if self.fuse_sighting(s, l) {
+            self.out.accepted.push(k);
+            self.lost.clear();
+            self.travelled = 0.0;
+            return;
+        }
+        self.out.rejected.push(k);
+        let (pose, cov) = pose_from_sighting(s, l, self.config);
+        self.lost.push((pose, odom));
+        let agree = self.lost.len() >= RELOCALISE_AFTER
+            && self.lost[self.lost.len() - RELOCALISE_AFTER..]
+                .iter()
+                .all(|(p, o)| {
+                    let moved = p.compose(&o.between(&odom));
+                    (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
+                        && wrap_angle(moved.theta - pose.theta).abs() <= RELOCALISE_AGREE_RAD
+                });
+        if agree {
+            self.ekf.x[0] = pose.x;
+            self.ekf.x[1] = pose.y;
+            self.ekf.x[2] = pose.theta;
+            self.ekf.p.copy_from(&cov);
+            self.out.relocalised_t_s.push(s.t_s);
+            self.lost.clear();
+            self.travelled = 0.0;
+        }
+    }
+
+    /// Updates the pose with a sighting of surveyed landmark `l`, held fixed (a pose-only filter
+    /// with the landmark's uncertainty moved into the measurement noise); false when gated out.
+    fn fuse_sighting(&mut self, s: &TagSighting, l: &Landmark) -> bool {
+        let (ekf, config) = (&mut self.ekf, self.config);
+        let mut full = Ekf {
+            x: DVector::from_vec(vec![
+                ekf.x[0],
+                ekf.x[1],
+                ekf.x[2],
+                l.position_m[0],
+                l.position_m[1],
+                l.yaw_rad,
+            ]),
+            p: DMatrix::zeros(6, 6),
+            slots: vec![TagId {
+                family: l.family,
+                id: l.id,
+            }],
+        };
+        full.p
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
+        let c = &l.covariance_m2;
+        full.p[(3, 3)] = c[0][0];
+        full.p[(3, 4)] = c[0][1];
+        full.p[(4, 3)] = c[1][0];
+        full.p[(4, 4)] = c[1][1];
+        full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
+        let (z, r) = sighting_measurement(s, config);
+        let (y, sm, jac) = full.innovation(0, &z, &r);
+        let d2 = sm
+            .try_inverse()
+            .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
+        if d2 > config.gate_chi2 {
+            return false;
+        }
+        full.update(&y, &sm, &jac, &r);
+        ekf.x.copy_from(&full.x.rows(0, 3));
+        ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
+        true
+    }
+
+    /// Reading `i` of the run, matched against the surveyed walls.
+    fn range(&mut self, i: usize, reading: &SonarReading, sonar: &SonarInput<'_>) {
+        if let Some(fused) = fuse_range(&mut self.ekf, reading, sonar, self.config) {
+            self.out.range_outcomes.push((i, fused));
+        }
+    }
+
+    /// Notes the pose, its sigma and the distance since the last sighting at odometry time `t_s`.
+    fn record(&mut self, t_s: f64) {
+        self.out.trajectory.push(StampedPose {
+            t_s,
+            pose: self.ekf.pose(),
+        });
+        self.out.sigma_m.push(self.ekf.position_sigma_m());
+        self.out.since_sighting_m.push(self.travelled);
+    }
 }
 
 /// Holds the end of a survey's offline trajectory, after its last fused sighting at `last_t_s`, to
@@ -367,9 +421,11 @@ pub fn hold_tail_to_walls(
         .copied()
         .collect();
     let held = localize(
-        &tail,
-        visual,
-        &[],
+        &Observations {
+            odometry: &tail,
+            sightings: &[],
+            visual,
+        },
         &[],
         Some(SonarInput {
             readings: &readings,
@@ -388,6 +444,7 @@ pub fn hold_tail_to_walls(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fusion::testing::obs;
     use crate::fusion::testing::{corridor, square_run};
     use crate::fusion::{run_offline, run_online};
     use crate::metrics::ate_m;
@@ -403,8 +460,8 @@ mod tests {
             walls: std::slice::from_ref(&wall),
         };
         let config = FuseConfig::default();
-        let with = localize(&odometry, &[], &[], &[], Some(sonar), &config);
-        let without = localize(&odometry, &[], &[], &[], None, &config);
+        let with = localize(&obs(&odometry, &[], &[]), &[], Some(sonar), &config);
+        let without = localize(&obs(&odometry, &[], &[]), &[], None, &config);
         let end = |r: &LocalizeResult| r.trajectory.last().unwrap().pose.y;
         assert!(end(&without).abs() > 0.4, "{}", end(&without));
         assert!(end(&with).abs() < 0.03, "{}", end(&with));
@@ -418,8 +475,8 @@ mod tests {
     fn a_lost_filter_starts_again_from_sightings_that_agree() {
         let (odom, truth, sightings, _) = square_run(0.01, 2);
         let config = FuseConfig::default();
-        let online = run_online(&odom, &sightings, &[], &config);
-        let survey = run_offline(&odom, &[], &sightings, &online, &config);
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         // Halfway round, the odometry jumps 1 m to the robot's left.
         let half = odom.len() / 2;
         let jump = odom[half].pose.compose(&Pose2::new(0.0, 1.0, 0.0));
@@ -435,7 +492,12 @@ mod tests {
                 },
             })
             .collect();
-        let result = localize(&jumped, &[], &sightings, &survey.landmarks, None, &config);
+        let result = localize(
+            &obs(&jumped, &sightings, &[]),
+            &survey.landmarks,
+            None,
+            &config,
+        );
         assert_eq!(
             result.relocalised_t_s.len(),
             1,
@@ -600,10 +662,15 @@ mod tests {
     fn localisation_against_a_survey_bounds_the_drift() {
         let (odom, truth, sightings, _) = square_run(0.01, 2);
         let config = FuseConfig::default();
-        let online = run_online(&odom, &sightings, &[], &config);
-        let survey = run_offline(&odom, &[], &sightings, &online, &config);
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         // A second run with the same drift, localised against the first run's landmarks.
-        let result = localize(&odom, &[], &sightings, &survey.landmarks, None, &config);
+        let result = localize(
+            &obs(&odom, &sightings, &[]),
+            &survey.landmarks,
+            None,
+            &config,
+        );
         let ate = ate_m(&result.trajectory, &truth).unwrap();
         assert!(
             ate < 0.2 * ate_m(&odom, &truth).unwrap(),

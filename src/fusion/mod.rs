@@ -31,6 +31,7 @@ mod events;
 mod landmark;
 mod localize;
 mod measurement;
+mod observations;
 mod offline;
 mod online;
 mod survey;
@@ -44,6 +45,7 @@ pub use localize::{
     hold_tail_to_walls, localize, wall_in_beam, LocalizeResult, SonarInput, WallMatch,
     RELOCALISE_AFTER, RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, WALL_CONE_MARGIN_RAD, WALL_INSET_M,
 };
+pub use observations::Observations;
 pub use offline::{run_offline, OdometryCalibration, OfflineResult};
-pub use online::{run_online, run_online_calibrated, OnlineResolve, OnlineResult};
-pub use survey::{survey, Survey};
+pub use online::{run_online, OnlineResolve, OnlineResult};
+pub use survey::{survey, Survey, SurveySettings};

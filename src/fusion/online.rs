@@ -5,12 +5,12 @@ use crate::fusion::ekf::Ekf;
 use crate::fusion::events::{events, Event};
 use crate::fusion::landmark::Extras;
 use crate::fusion::measurement::sighting_measurement;
-use crate::fusion::offline::run_offline_with_prior;
-use crate::fusion::{associate, Conflict, FuseConfig, Landmark, OdometryCalibration};
+use crate::fusion::{
+    associate, run_offline, Conflict, FuseConfig, Landmark, Observations, OdometryCalibration,
+};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::hough::Feature;
 use crate::visual::sightings::TagSighting;
-use crate::visual::vo::VisualTurn;
 use nalgebra::Vector2;
 
 /// The result of the online filter.
@@ -62,163 +62,224 @@ const RESOLVE_MIN_TRAVEL_M: f64 = 5.0;
 /// online ATE within 1 cm of this one's on the office and museum sample runs).
 const RESOLVE_SHARE: f64 = 0.25;
 
-/// Runs the online filter over odometry and time-ordered sightings; `corners` are the Hough
-/// features a new landmark is matched with.
+/// Runs the online filter over a run: odometry predicts, sightings and visual turns update as
+/// they arrive, and now and then the graph of the run so far is re-solved
+/// ([`FuseConfig::online_resolve`]). `corners` are the Hough features a new landmark is matched
+/// with; `calibration` (the same robot's odometry errors, found by an earlier survey) corrects
+/// the odometry from the start until a re-solve finds the run's own.
 pub fn run_online(
-    odometry: &[StampedPose],
-    sightings: &[TagSighting],
-    corners: &[Feature],
-    config: &FuseConfig,
-) -> OnlineResult {
-    run_online_calibrated(odometry, &[], sightings, corners, config, None)
-}
-
-/// [`run_online`] with the turns the cameras measured (`visual`, fused as they end) and
-/// predicting from the start with `calibration` (the same robot's odometry errors found by an
-/// earlier survey) until a re-solve finds the run's own.
-pub fn run_online_calibrated(
-    odometry: &[StampedPose],
-    visual: &[VisualTurn],
-    sightings: &[TagSighting],
+    obs: &Observations<'_>,
     corners: &[Feature],
     config: &FuseConfig,
     calibration: Option<OdometryCalibration>,
 ) -> OnlineResult {
-    let (mut ekf, start) = Ekf::at_start(odometry);
-    let mut extras: Vec<Extras> = Vec::new();
-    let mut result = OnlineResult {
-        trajectory: Vec::with_capacity(odometry.len()),
-        landmarks: Vec::new(),
-        accepted: Vec::new(),
-        rejected: Vec::new(),
-        conflicts: Vec::new(),
-        pose_at_sighting: vec![start; sightings.len()],
-        nis: Vec::new(),
-        sigma_m: Vec::with_capacity(odometry.len()),
-        resolves: Vec::new(),
-        visual_fused: 0,
-        visual_rejected: 0,
-    };
-    let mut last_odom = start;
-    let first_t = odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
-    let mut pending = events(sightings, visual, first_t, config)
+    let mut filter = OnlineFilter::new(obs, corners, config, calibration);
+    let first_t = obs.odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
+    let mut pending = events(obs.sightings, obs.visual, first_t, config)
         .into_iter()
         .peekable();
-    // The visual turn whose start the heading copy holds.
-    let mut cloned_for: Option<usize> = None;
-    let prior = calibration;
-    let mut calibration = calibration;
-    let (mut travel, mut travel_at_solve) = (0.0, 0.0);
-    let resolve = config.online_resolve && config.calibrate_odometry;
-    for (i, sample) in odometry.iter().enumerate() {
+    for (i, sample) in obs.odometry.iter().enumerate() {
         let mut seen_again = false;
-        while let Some(&(t, event)) = pending.peek() {
-            if t > sample.t_s {
-                break;
-            }
-            pending.next();
-            let odom = pose_at(odometry, t).unwrap_or(sample.pose);
-            travel += ekf.advance_calibrated(&mut last_odom, odom, calibration.as_ref(), config);
-            match event {
-                Event::TurnStarts(j) => {
-                    ekf.clone_heading();
-                    cloned_for = Some(j);
-                }
-                Event::TurnEnds(j) => {
-                    if cloned_for == Some(j) {
-                        let v = &visual[j];
-                        let var = v.sigma_rad * v.sigma_rad;
-                        if ekf.update_turn(v.turn_rad, var, config.visual_gate_chi2) {
-                            result.visual_fused += 1;
-                        } else {
-                            result.visual_rejected += 1;
-                        }
-                    }
-                    ekf.drop_clone();
-                    cloned_for = None;
-                }
-                Event::Sighting(k) => {
-                    result.pose_at_sighting[k] = ekf.pose();
-                    let known = ekf.slot(&sightings[k].key()).is_some();
-                    let fused = fuse_sighting(
-                        &mut ekf,
-                        &mut extras,
-                        &sightings[k],
-                        k,
-                        corners,
-                        config,
-                        &mut result,
-                    );
-                    seen_again |= known && fused;
-                }
-            }
+        while let Some((t, event)) = pending.next_if(|&(t, _)| t <= sample.t_s) {
+            let odom = pose_at(obs.odometry, t).unwrap_or(sample.pose);
+            filter.advance(odom);
+            seen_again |= filter.handle(event);
         }
-        travel += ekf.advance_calibrated(&mut last_odom, sample.pose, calibration.as_ref(), config);
-        result.trajectory.push(StampedPose {
-            t_s: sample.t_s,
-            pose: ekf.pose(),
-        });
-        result.sigma_m.push(ekf.position_sigma_m());
-        let since = travel - travel_at_solve;
-        if resolve && seen_again && since >= RESOLVE_MIN_TRAVEL_M.max(RESOLVE_SHARE * travel) {
-            travel_at_solve = travel;
-            let so_far = OnlineResult {
-                landmarks: ekf.landmarks(&extras),
-                ..result.clone()
-            };
-            let solved = run_offline_with_prior(
-                &odometry[..=i],
-                visual,
-                sightings,
-                &so_far,
-                config,
-                prior.as_ref(),
-            );
-            if let (Some(c), Some(now)) = (solved.odometry_calibration, solved.trajectory.last()) {
-                let was = ekf.pose();
-                result.resolves.push(OnlineResolve {
-                    t_s: sample.t_s,
-                    odometry_calibration: c,
-                    moved_m: (now.pose.x - was.x).hypot(now.pose.y - was.y),
-                    turned_rad: wrap_angle(now.pose.theta - was.theta),
-                });
-                if let Some(last) = result.trajectory.last_mut() {
-                    last.pose = now.pose;
-                }
-                calibration = Some(c);
-                ekf.x[0] = now.pose.x;
-                ekf.x[1] = now.pose.y;
-                ekf.x[2] = now.pose.theta;
-                for (slot, l) in solved.landmarks.iter().enumerate() {
-                    ekf.x[3 + 3 * slot] = l.position_m[0];
-                    ekf.x[3 + 3 * slot + 1] = l.position_m[1];
-                    ekf.x[3 + 3 * slot + 2] = l.yaw_rad;
-                }
-                // The heading copy belongs to the state before the solve: the turn under way
-                // is left to the next solve.
-                ekf.drop_clone();
-                cloned_for = None;
-            }
+        filter.advance(sample.pose);
+        filter.record(sample.t_s);
+        if filter.resolve_due(seen_again) {
+            filter.resolve(i, sample.t_s);
         }
     }
     // Sightings after the last odometry sample: fused at the last pose.
     for (_, event) in pending {
         if let Event::Sighting(k) = event {
-            result.pose_at_sighting[k] = ekf.pose();
-            fuse_sighting(
-                &mut ekf,
-                &mut extras,
-                &sightings[k],
-                k,
-                corners,
-                config,
-                &mut result,
-            );
+            filter.sighting(k);
         }
     }
-    result.landmarks = ekf.landmarks(&extras);
-    result.conflicts = find_conflicts(sightings, &result, config);
-    result
+    filter.finish()
+}
+
+/// The online filter's state as it works through a run.
+struct OnlineFilter<'a> {
+    obs: &'a Observations<'a>,
+    corners: &'a [Feature],
+    config: &'a FuseConfig,
+    ekf: Ekf,
+    extras: Vec<Extras>,
+    result: OnlineResult,
+    last_odom: Pose2,
+    /// The visual turn whose start the heading copy holds.
+    cloned_for: Option<usize>,
+    /// The earlier survey's odometry calibration, the re-solves' prior.
+    prior: Option<OdometryCalibration>,
+    /// The calibration the odometry is corrected with now.
+    calibration: Option<OdometryCalibration>,
+    travel: f64,
+    travel_at_solve: f64,
+}
+
+impl<'a> OnlineFilter<'a> {
+    fn new(
+        obs: &'a Observations<'a>,
+        corners: &'a [Feature],
+        config: &'a FuseConfig,
+        calibration: Option<OdometryCalibration>,
+    ) -> Self {
+        let (ekf, start) = Ekf::at_start(obs.odometry);
+        let n = obs.odometry.len();
+        Self {
+            obs,
+            corners,
+            config,
+            ekf,
+            extras: Vec::new(),
+            result: OnlineResult {
+                trajectory: Vec::with_capacity(n),
+                landmarks: Vec::new(),
+                accepted: Vec::new(),
+                rejected: Vec::new(),
+                conflicts: Vec::new(),
+                pose_at_sighting: vec![start; obs.sightings.len()],
+                nis: Vec::new(),
+                sigma_m: Vec::with_capacity(n),
+                resolves: Vec::new(),
+                visual_fused: 0,
+                visual_rejected: 0,
+            },
+            last_odom: start,
+            cloned_for: None,
+            prior: calibration,
+            calibration,
+            travel: 0.0,
+            travel_at_solve: 0.0,
+        }
+    }
+
+    /// Predicts with the odometry up to `odom`.
+    fn advance(&mut self, odom: Pose2) {
+        self.travel += self.ekf.advance_calibrated(
+            &mut self.last_odom,
+            odom,
+            self.calibration.as_ref(),
+            self.config,
+        );
+    }
+
+    /// Handles one event; true when it was a sighting of a landmark seen before, fused.
+    fn handle(&mut self, event: Event) -> bool {
+        match event {
+            Event::TurnStarts(j) => {
+                self.ekf.clone_heading();
+                self.cloned_for = Some(j);
+                false
+            }
+            Event::TurnEnds(j) => {
+                if self.cloned_for == Some(j) {
+                    let v = &self.obs.visual[j];
+                    let var = v.sigma_rad * v.sigma_rad;
+                    if self
+                        .ekf
+                        .update_turn(v.turn_rad, var, self.config.visual_gate_chi2)
+                    {
+                        self.result.visual_fused += 1;
+                    } else {
+                        self.result.visual_rejected += 1;
+                    }
+                }
+                self.ekf.drop_clone();
+                self.cloned_for = None;
+                false
+            }
+            Event::Sighting(k) => {
+                let known = self.ekf.slot(&self.obs.sightings[k].key()).is_some();
+                let fused = self.sighting(k);
+                known && fused
+            }
+        }
+    }
+
+    /// Fuses sighting `k` at the current pose; true when fused.
+    fn sighting(&mut self, k: usize) -> bool {
+        self.result.pose_at_sighting[k] = self.ekf.pose();
+        fuse_sighting(
+            &mut self.ekf,
+            &mut self.extras,
+            &self.obs.sightings[k],
+            k,
+            self.corners,
+            self.config,
+            &mut self.result,
+        )
+    }
+
+    /// Notes the filtered pose and its sigma at odometry time `t_s`.
+    fn record(&mut self, t_s: f64) {
+        self.result.trajectory.push(StampedPose {
+            t_s,
+            pose: self.ekf.pose(),
+        });
+        self.result.sigma_m.push(self.ekf.position_sigma_m());
+    }
+
+    /// Whether to re-solve now: a landmark was seen again and the robot has travelled far
+    /// enough since the last solve.
+    fn resolve_due(&self, seen_again: bool) -> bool {
+        let since = self.travel - self.travel_at_solve;
+        self.config.online_resolve
+            && self.config.calibrate_odometry
+            && seen_again
+            && since >= RESOLVE_MIN_TRAVEL_M.max(RESOLVE_SHARE * self.travel)
+    }
+
+    /// Re-solves the graph of the run up to odometry sample `i` (at `t_s`) and goes on from its
+    /// pose, landmarks and odometry calibration.
+    fn resolve(&mut self, i: usize, t_s: f64) {
+        self.travel_at_solve = self.travel;
+        let so_far = OnlineResult {
+            landmarks: self.ekf.landmarks(&self.extras),
+            ..self.result.clone()
+        };
+        let up_to_now = Observations {
+            odometry: &self.obs.odometry[..=i],
+            ..*self.obs
+        };
+        let solved = run_offline(&up_to_now, &so_far, self.config, self.prior.as_ref());
+        let (Some(c), Some(now)) = (solved.odometry_calibration, solved.trajectory.last()) else {
+            return;
+        };
+        let was = self.ekf.pose();
+        self.result.resolves.push(OnlineResolve {
+            t_s,
+            odometry_calibration: c,
+            moved_m: (now.pose.x - was.x).hypot(now.pose.y - was.y),
+            turned_rad: wrap_angle(now.pose.theta - was.theta),
+        });
+        if let Some(last) = self.result.trajectory.last_mut() {
+            last.pose = now.pose;
+        }
+        self.calibration = Some(c);
+        let x = &mut self.ekf.x;
+        x[0] = now.pose.x;
+        x[1] = now.pose.y;
+        x[2] = now.pose.theta;
+        for (slot, l) in solved.landmarks.iter().enumerate() {
+            x[3 + 3 * slot] = l.position_m[0];
+            x[3 + 3 * slot + 1] = l.position_m[1];
+            x[3 + 3 * slot + 2] = l.yaw_rad;
+        }
+        // The heading copy belongs to the state before the solve: the turn under way is left to
+        // the next solve.
+        self.ekf.drop_clone();
+        self.cloned_for = None;
+    }
+
+    /// The result, with the landmarks at the end and the conflicts found.
+    fn finish(mut self) -> OnlineResult {
+        self.result.landmarks = self.ekf.landmarks(&self.extras);
+        self.result.conflicts = find_conflicts(self.obs.sightings, &self.result, self.config);
+        self.result
+    }
 }
 
 /// Fuses one sighting (a new landmark, or an update when it passes the gate); true when fused.
@@ -336,6 +397,7 @@ fn find_conflicts(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fusion::testing::obs;
     use crate::fusion::testing::square_run;
     use crate::metrics::ate_m;
 
@@ -355,11 +417,14 @@ mod tests {
             heading_drift_rad_per_m: -0.01,
             distance_scale_error: 1.0 / 1.01 - 1.0,
         };
-        let plain = first_lap(&run_online(&odom, &sightings, &[], &config));
-        let given = first_lap(&run_online_calibrated(
-            &odom,
+        let plain = first_lap(&run_online(
+            &obs(&odom, &sightings, &[]),
             &[],
-            &sightings,
+            &config,
+            None,
+        ));
+        let given = first_lap(&run_online(
+            &obs(&odom, &sightings, &[]),
             &[],
             &config,
             Some(known),
@@ -380,15 +445,20 @@ mod tests {
             ate_m(&r.trajectory[half..], &truth[half..]).unwrap()
         };
         let plain = run_online(
-            &odom,
-            &sightings,
+            &obs(&odom, &sightings, &[]),
             &[],
             &FuseConfig {
                 online_resolve: false,
                 ..FuseConfig::default()
             },
+            None,
         );
-        let resolved = run_online(&odom, &sightings, &[], &FuseConfig::default());
+        let resolved = run_online(
+            &obs(&odom, &sightings, &[]),
+            &[],
+            &FuseConfig::default(),
+            None,
+        );
         assert!(plain.resolves.is_empty());
         assert!(resolved.resolves.len() >= 2, "{:?}", resolved.resolves);
         // The last re-solve found the wheels' errors: turns 3% long, 0.01 rad of false turn per
@@ -418,7 +488,12 @@ mod tests {
                 .transform_point(nalgebra::Point2::new(4.0, 5.0));
             s.position_in_robot_m = [moved.x, moved.y, 0.5];
         }
-        let online = run_online(&odom, &sightings, &[], &FuseConfig::default());
+        let online = run_online(
+            &obs(&odom, &sightings, &[]),
+            &[],
+            &FuseConfig::default(),
+            None,
+        );
         assert_eq!(online.conflicts.len(), 1, "{:?}", online.conflicts);
         let c = &online.conflicts[0];
         assert_eq!((c.id, c.kind.as_str()), (1, "moved"));
@@ -439,7 +514,12 @@ mod tests {
             kind: crate::sonar::hough::FeatureKind::Corner,
         };
         let corners = vec![corner(4.95, 0.1), corner(2.5, 2.5)];
-        let online = run_online(&odom, &sightings, &corners, &FuseConfig::default());
+        let online = run_online(
+            &obs(&odom, &sightings, &[]),
+            &corners,
+            &FuseConfig::default(),
+            None,
+        );
         let tag0 = online.landmarks.iter().find(|l| l.id == 0).unwrap();
         let m = tag0.matched_corner.expect("tag 0 matched");
         assert_eq!((m.x_m, m.y_m), (4.95, 0.1));

@@ -4,7 +4,7 @@
 
 use crate::dataset::RunDataset;
 use crate::fusion::{
-    associate, hold_tail_to_walls, run_offline, run_online_calibrated, FuseConfig, Landmark,
+    associate, hold_tail_to_walls, run_offline, run_online, FuseConfig, Landmark, Observations,
     OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
 };
 use crate::progress::timed;
@@ -38,35 +38,44 @@ pub struct Survey {
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// Runs the survey over a run, its raw map (the grid and features with the odometry's poses), its tag sightings and the turns its cameras
-/// measured: online filter (predicting with `calibration` until it finds the run's own, when an
-/// earlier survey of the robot gives one), offline pass, and the map rebuilt from the corrected
-/// poses.
+/// How a survey is made.
+#[derive(Debug, Clone, Copy)]
+pub struct SurveySettings<'a> {
+    /// The grid and Hough settings of the maps.
+    pub mapping: &'a MappingConfig,
+    /// The fusion settings.
+    pub fuse: &'a FuseConfig,
+    /// The same robot's odometry errors found by an earlier survey: the online filter predicts
+    /// with them until it finds the run's own.
+    pub calibration: Option<OdometryCalibration>,
+}
+
+/// Runs the survey over a run, its raw map (the grid and features with the odometry's poses),
+/// its tag sightings and the turns its cameras measured: online filter, offline pass, the tail
+/// after the last sighting held to the walls, and the map rebuilt from the corrected poses.
 pub fn survey(
     run: &RunDataset,
     raw: SonarMap,
-    (sightings, visual): (&[TagSighting], &[VisualTurn]),
-    mapping: &MappingConfig,
-    fuse: &FuseConfig,
-    calibration: Option<OdometryCalibration>,
+    sightings: &[TagSighting],
+    visual: &[VisualTurn],
+    settings: &SurveySettings<'_>,
 ) -> Result<Survey, GridError> {
+    let (mapping, fuse) = (settings.mapping, settings.fuse);
+    let obs = Observations {
+        odometry: &run.odometry,
+        sightings,
+        visual,
+    };
     let mut timings_s = BTreeMap::new();
     let times = &mut timings_s;
     let online = timed("fuse_online", times, || {
-        run_online_calibrated(
-            &run.odometry,
-            visual,
-            sightings,
-            &raw.features_online,
-            fuse,
-            calibration,
-        )
+        run_online(&obs, &raw.features_online, fuse, settings.calibration)
     });
     let online_map = timed("map_online", times, || {
         counting_map_along(&run.sonar_log(), &online.trajectory, mapping)
     })?;
     let mut offline = timed("fuse_offline", times, || {
-        run_offline(&run.odometry, visual, sightings, &online, fuse)
+        run_offline(&obs, &online, fuse, None)
     });
     if fuse.hold_tail_to_walls {
         timed("fuse_tail", times, || {

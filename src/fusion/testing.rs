@@ -137,3 +137,16 @@ pub(crate) fn turns_of(truth: &[StampedPose], every: usize, sigma: f64) -> Vec<V
         })
         .collect()
 }
+
+/// The observations of a run: its odometry, sightings and visual turns.
+pub(crate) fn obs<'a>(
+    odometry: &'a [StampedPose],
+    sightings: &'a [TagSighting],
+    visual: &'a [VisualTurn],
+) -> crate::fusion::Observations<'a> {
+    crate::fusion::Observations {
+        odometry,
+        sightings,
+        visual,
+    }
+}

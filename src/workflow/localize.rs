@@ -147,10 +147,13 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         layout: &run.meta.robot.sonar,
         walls: &walls,
     };
+    let obs = fusion::Observations {
+        odometry: &odometry,
+        sightings: &seen.sightings,
+        visual: &seen.visual,
+    };
     let result = fusion::localize(
-        &odometry,
-        &seen.visual,
-        &seen.sightings,
+        &obs,
         &landmarks,
         (!walls.is_empty()).then_some(sonar),
         &config,

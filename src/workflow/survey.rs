@@ -161,14 +161,12 @@ pub fn survey_into(
             (compress_pairs(images), t.elapsed().as_secs_f64())
         },
         || {
-            fusion::survey(
-                &run,
-                raw,
-                (&sightings[..], &visual[..]),
-                &mapping,
-                &fuse,
+            let settings = fusion::SurveySettings {
+                mapping: &mapping,
+                fuse: &fuse,
                 calibration,
-            )
+            };
+            fusion::survey(&run, raw, &sightings, &visual, &settings)
         },
     );
     let result = result?;

@@ -3,20 +3,14 @@
 //! odometry.
 
 mod factors;
+mod graph;
+mod interpolate;
+mod keyframes;
 
-use crate::fusion::measurement::odometry_covariance;
-use crate::fusion::measurement::sighting_measurement;
-use crate::fusion::{FuseConfig, Landmark, OnlineResult};
-use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
-use crate::visual::sightings::TagSighting;
-use crate::visual::tags::TagId;
-use crate::visual::vo::VisualTurn;
-use factors::{
-    corrected_increment, sqrt_information, BetweenFactor, PriorFactor, TagFactor, TurnFactor,
-};
+use crate::fusion::{FuseConfig, Landmark, Observations, OnlineResult};
+use crate::geometry::{wrap_angle, Pose2, StampedPose};
+use factors::corrected_increment;
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeMap, HashMap};
-use tiny_solver::na as sna;
 
 /// The result of the offline pass.
 #[derive(Debug, Clone)]
@@ -88,47 +82,17 @@ impl OdometryCalibration {
     }
 }
 
-/// Name of the odometry calibration variable of the offline graph.
-const CALIBRATION: &str = "odometry_calibration";
-/// Prior sigmas of the odometry calibration `[a, c, s]`: 5% turn scale, 0.02 rad/m heading drift,
-/// 2% distance scale (weak: wheel errors of a few percent at most).
-const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
-
-/// One keyframe: the time, the odometry pose and the starting estimate.
-struct Keyframe {
-    t_s: f64,
-    odom: Pose2,
-    init: Pose2,
-}
-
-/// The method's a-posteriori pass: a pose graph over the whole run, started from `online`, with
-/// the turns the cameras measured (`visual`) beside the odometry.
+/// The method's a-posteriori pass: a pose graph over the whole run (keyframes, odometry, tag
+/// sightings, visual turns), started from the `online` estimate and solved by
+/// Levenberg-Marquardt; with `prior` (an earlier survey's odometry calibration) the calibration
+/// is estimated near it instead of near no error.
 pub fn run_offline(
-    odometry: &[StampedPose],
-    visual: &[VisualTurn],
-    sightings: &[TagSighting],
-    online: &OnlineResult,
-    config: &FuseConfig,
-) -> OfflineResult {
-    run_offline_with_prior(odometry, visual, sightings, online, config, None)
-}
-
-/// Prior sigmas of the odometry calibration when an earlier survey of the same robot gives it:
-/// about what one survey's estimate scatters by (turn scale 0.0066-0.0106 for 0.0100 over the
-/// office's and museum's sample runs, heading drift -0.0059 to -0.0082 for -0.0067 rad/m).
-const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
-
-/// [`run_offline`] with the odometry calibration's prior centred on `prior` (an earlier survey's)
-/// instead of on no error.
-pub(crate) fn run_offline_with_prior(
-    odometry: &[StampedPose],
-    visual: &[VisualTurn],
-    sightings: &[TagSighting],
+    obs: &Observations<'_>,
     online: &OnlineResult,
     config: &FuseConfig,
     prior: Option<&OdometryCalibration>,
 ) -> OfflineResult {
-    let Some(first) = odometry.first() else {
+    let Some(first) = obs.odometry.first() else {
         return OfflineResult {
             trajectory: Vec::new(),
             landmarks: online.landmarks.clone(),
@@ -138,298 +102,44 @@ pub(crate) fn run_offline_with_prior(
             odometry_calibration: None,
         };
     };
-    // Keyframes: the odometry thinned by travel and turn, plus one at every fused sighting and at
-    // both ends of every visual turn within the odometry.
-    let end_t = odometry.last().map_or(first.t_s, |p| p.t_s);
-    let visual: Vec<&VisualTurn> = visual
-        .iter()
-        .filter(|v| config.visual_odometry && v.from_t_s >= first.t_s && v.to_t_s <= end_t)
-        .collect();
-    let mut anchors: Vec<(f64, Option<usize>)> = online
-        .accepted
-        .iter()
-        .map(|&k| (sightings[k].t_s, Some(k)))
-        .chain(
-            visual
-                .iter()
-                .flat_map(|v| [(v.from_t_s, None), (v.to_t_s, None)]),
-        )
-        .collect();
-    anchors.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut keyframes: Vec<Keyframe> = Vec::new();
-    // Ordered: the tag factors go into the graph in the order of the sightings, so that the
-    // solution does not depend on a hash order (it did in its last digits).
-    let mut sighting_kf: BTreeMap<usize, usize> = BTreeMap::new();
-    let mut time_kf: HashMap<u64, usize> = HashMap::new();
-    let mut anchors = anchors.into_iter().peekable();
-    let mut last_kf = first.pose;
-    for (i, sample) in odometry.iter().enumerate() {
-        while let Some(&(t, sighting)) = anchors.peek() {
-            if t > sample.t_s && i + 1 < odometry.len() {
-                break;
-            }
-            anchors.next();
-            let odom = pose_at(odometry, t).unwrap_or(sample.pose);
-            let same = keyframes.last().is_some_and(|kf| (kf.t_s - t).abs() < 1e-9);
-            if !same {
-                let init = match sighting {
-                    Some(k) => online.pose_at_sighting[k],
-                    None => pose_at(&online.trajectory, t).unwrap_or(odom),
-                };
-                keyframes.push(Keyframe { t_s: t, odom, init });
-                last_kf = odom;
-            }
-            let kf = keyframes.len() - 1;
-            time_kf.insert(t.to_bits(), kf);
-            if let Some(k) = sighting {
-                sighting_kf.insert(k, kf);
-            }
-        }
-        let d = last_kf.between(&sample.pose);
-        let is_end = i == 0 || i + 1 == odometry.len();
-        if is_end
-            || d.x.hypot(d.y) >= config.keyframe_spacing_m
-            || wrap_angle(d.theta).abs() >= config.keyframe_turn_rad
-        {
-            if keyframes.last().is_some_and(|kf| kf.t_s >= sample.t_s) {
-                continue;
-            }
-            keyframes.push(Keyframe {
-                t_s: sample.t_s,
-                odom: sample.pose,
-                init: online.trajectory.get(i).map_or(sample.pose, |p| p.pose),
-            });
-            last_kf = sample.pose;
-        }
-    }
-
-    let pose_name = |i: usize| format!("p{i}");
-    let landmark_name = |i: usize| format!("l{i}");
-    let mut problem = tiny_solver::Problem::new();
-    let mut init: HashMap<String, sna::DVector<f64>> = HashMap::new();
-    for (i, kf) in keyframes.iter().enumerate() {
-        init.insert(
-            pose_name(i),
-            sna::DVector::from_vec(vec![kf.init.x, kf.init.y, kf.init.theta]),
-        );
-    }
-    for (i, l) in online.landmarks.iter().enumerate() {
-        init.insert(
-            landmark_name(i),
-            sna::DVector::from_vec(vec![l.position_m[0], l.position_m[1], l.yaw_rad]),
-        );
-    }
-    let mut factors = 0;
-    if config.calibrate_odometry {
-        let (mean, sigma) = match prior {
-            Some(c) => (
-                vec![
-                    c.turn_scale_error,
-                    c.heading_drift_rad_per_m,
-                    c.distance_scale_error,
-                ],
-                CALIBRATION_FROM_SURVEY_SIGMA,
-            ),
-            None => (vec![0.0; 3], CALIBRATION_PRIOR_SIGMA),
-        };
-        init.insert(CALIBRATION.into(), sna::DVector::from_vec(mean.clone()));
-        problem.add_residual_block(
-            3,
-            &[CALIBRATION],
-            Box::new(PriorFactor {
-                measured: mean,
-                sqrt_info: sigma.iter().map(|s| 1.0 / s).collect(),
-            }),
-            None,
-        );
-        factors += 1;
-    }
-    problem.add_residual_block(
-        3,
-        &[&pose_name(0)],
-        Box::new(PriorFactor {
-            measured: vec![first.pose.x, first.pose.y, first.pose.theta],
-            sqrt_info: vec![1e3; 3],
-        }),
-        None,
+    let visual = keyframes::turns_used(obs, config);
+    let keyframes = keyframes::choose(obs, &visual, online, config, first.pose);
+    let graph = graph::build(
+        obs,
+        &keyframes,
+        &visual,
+        online,
+        config,
+        (first.pose, prior),
     );
-    factors += 1;
-    // Odometry factors; path and turn summed over the samples between the keyframes.
-    let mut sample = 0;
-    for i in 1..keyframes.len() {
-        let (a, b) = (&keyframes[i - 1], &keyframes[i]);
-        let mut path = 0.0;
-        let mut turn = 0.0;
-        let mut signed_turn = 0.0;
-        let mut prev = a.odom;
-        while sample < odometry.len() && odometry[sample].t_s <= a.t_s {
-            sample += 1;
-        }
-        let mut j = sample;
-        while j < odometry.len() && odometry[j].t_s < b.t_s {
-            let d = prev.between(&odometry[j].pose);
-            path += d.x.hypot(d.y);
-            turn += wrap_angle(d.theta).abs();
-            signed_turn += wrap_angle(d.theta);
-            prev = odometry[j].pose;
-            j += 1;
-        }
-        let d = prev.between(&b.odom);
-        path += d.x.hypot(d.y);
-        turn += wrap_angle(d.theta).abs();
-        signed_turn += wrap_angle(d.theta);
-        let delta = a.odom.between(&b.odom);
-        let cov = odometry_covariance(path, turn, config);
-        let (p0, p1) = (pose_name(i - 1), pose_name(i));
-        let mut vars: Vec<&str> = vec![&p0, &p1];
-        if config.calibrate_odometry {
-            vars.push(CALIBRATION);
-        }
-        problem.add_residual_block(
-            3,
-            &vars,
-            Box::new(BetweenFactor {
-                measured: [delta.x, delta.y, wrap_angle(delta.theta)],
-                sqrt_info: sqrt_information(&cov),
-                turn_rad: signed_turn,
-                path_m: path,
-            }),
-            None,
-        );
-        factors += 1;
-    }
-    let slot_of: BTreeMap<TagId, usize> = online
-        .landmarks
-        .iter()
-        .enumerate()
-        .map(|(i, l)| {
-            let tag = TagId {
-                family: l.family,
-                id: l.id,
-            };
-            (tag, i)
-        })
-        .collect();
-    for (&k, &kf) in &sighting_kf {
-        let s = &sightings[k];
-        let Some(&l) = slot_of.get(&s.key()) else {
-            continue;
-        };
-        let (z, r) = sighting_measurement(s, config);
-        problem.add_residual_block(
-            3,
-            &[&pose_name(kf), &landmark_name(l)],
-            Box::new(TagFactor {
-                measured: [z.x, z.y, z.z],
-                sqrt_info: sqrt_information(&r),
-            }),
-            Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
-                config.huber_sigma.max(1e-3),
-            ))),
-        );
-        factors += 1;
-    }
-    for v in &visual {
-        let (Some(&a), Some(&b)) = (
-            time_kf.get(&v.from_t_s.to_bits()),
-            time_kf.get(&v.to_t_s.to_bits()),
-        ) else {
-            continue;
-        };
-        if a == b {
-            continue;
-        }
-        problem.add_residual_block(
-            1,
-            &[&pose_name(a), &pose_name(b)],
-            Box::new(TurnFactor {
-                measured: v.turn_rad,
-                sqrt_info: 1.0 / v.sigma_rad.max(1e-6),
-            }),
-            Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
-                config.huber_sigma.max(1e-3),
-            ))),
-        );
-        factors += 1;
-    }
-    if config.corner_factors {
-        for (i, l) in online.landmarks.iter().enumerate() {
-            if let Some(c) = l.matched_corner {
-                problem.add_residual_block(
-                    2,
-                    &[&landmark_name(i)],
-                    Box::new(PriorFactor {
-                        measured: vec![c.x_m, c.y_m],
-                        sqrt_info: vec![1.0 / config.corner_sigma_m; 2],
-                    }),
-                    None,
-                );
-                factors += 1;
-            }
-        }
-    }
     let options = tiny_solver::OptimizerOptions {
         max_iteration: config.max_iterations,
         ..Default::default()
     };
     use tiny_solver::Optimizer;
     let solution = tiny_solver::LevenbergMarquardtOptimizer::default().optimize(
-        &problem,
-        &init,
+        &graph.problem,
+        &graph.init,
         Some(options),
     );
     let converged = solution.is_some();
-    let values = solution.unwrap_or(init);
-    let kf_pose = |i: usize| {
-        values.get(&pose_name(i)).map_or(keyframes[i].init, |v| {
-            Pose2::new(v[0], v[1], wrap_angle(v[2]))
+    let values = solution.unwrap_or(graph.init);
+    let solved: Vec<Pose2> = (0..keyframes.frames.len())
+        .map(|i| {
+            values
+                .get(&graph::pose_name(i))
+                .map_or(keyframes.frames[i].init, |v| {
+                    Pose2::new(v[0], v[1], wrap_angle(v[2]))
+                })
         })
-    };
-    // Every odometry sample: the keyframe corrections (world_from_odometry) interpolated by
-    // distance travelled between the keyframes around it.
-    let corrections: Vec<Pose2> = (0..keyframes.len())
-        .map(|i| kf_pose(i).compose(&keyframes[i].odom.inverse()))
         .collect();
-    let mut trajectory = Vec::with_capacity(odometry.len());
-    let mut kf = 0;
-    for sample in odometry {
-        while kf + 1 < keyframes.len() && keyframes[kf + 1].t_s < sample.t_s {
-            kf += 1;
-        }
-        let correction = if kf + 1 < keyframes.len() && sample.t_s >= keyframes[kf].t_s {
-            let (a, b) = (&keyframes[kf], &keyframes[kf + 1]);
-            let span = a
-                .odom
-                .position()
-                .coords
-                .metric_distance(&b.odom.position().coords);
-            let done = a
-                .odom
-                .position()
-                .coords
-                .metric_distance(&sample.pose.position().coords);
-            let f = if span > 1e-9 {
-                (done / span).clamp(0.0, 1.0)
-            } else {
-                ((sample.t_s - a.t_s) / (b.t_s - a.t_s).max(1e-9)).clamp(0.0, 1.0)
-            };
-            corrections[kf].lerp(&corrections[kf + 1], f)
-        } else {
-            corrections[kf.min(corrections.len() - 1)]
-        };
-        let pose = correction.compose(&sample.pose);
-        trajectory.push(StampedPose {
-            t_s: sample.t_s,
-            pose: Pose2::new(pose.x, pose.y, wrap_angle(pose.theta)),
-        });
-    }
     let landmarks = online
         .landmarks
         .iter()
         .enumerate()
         .map(|(i, l)| {
             let mut l = l.clone();
-            if let Some(v) = values.get(&landmark_name(i)) {
+            if let Some(v) = values.get(&graph::landmark_name(i)) {
                 l.position_m[0] = v[0];
                 l.position_m[1] = v[1];
                 l.yaw_rad = wrap_angle(v[2]);
@@ -438,13 +148,13 @@ pub(crate) fn run_offline_with_prior(
         })
         .collect();
     OfflineResult {
-        trajectory,
+        trajectory: interpolate::corrected(obs.odometry, &keyframes.frames, &solved),
         landmarks,
-        keyframes: keyframes.len(),
-        factors,
+        keyframes: keyframes.frames.len(),
+        factors: graph.factors,
         converged,
         odometry_calibration: values
-            .get(CALIBRATION)
+            .get(graph::CALIBRATION)
             .filter(|_| converged && config.calibrate_odometry)
             .map(|v| OdometryCalibration {
                 turn_scale_error: v[0],
@@ -457,8 +167,9 @@ pub(crate) fn run_offline_with_prior(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fusion::run_online;
+    use crate::fusion::testing::obs;
     use crate::fusion::testing::{square_run, turns_of};
-    use crate::fusion::{run_online, run_online_calibrated};
     use crate::metrics::ate_m;
 
     /// The calibration model matches the wheels: the office simulated with the default wheel
@@ -503,8 +214,8 @@ mod tests {
         let (odom, truth, _, _) = square_run(0.01, 2);
         let turns = turns_of(&truth, 5, 0.001);
         let config = FuseConfig::default();
-        let online = run_online_calibrated(&odom, &turns, &[], &[], &config, None);
-        let offline = run_offline(&odom, &turns, &[], &online, &config);
+        let online = run_online(&obs(&odom, &[], &turns), &[], &config, None);
+        let offline = run_offline(&obs(&odom, &[], &turns), &online, &config, None);
         let raw = ate_m(&odom, &truth).unwrap();
         let on = ate_m(&online.trajectory, &truth).unwrap();
         let off = ate_m(&offline.trajectory, &truth).unwrap();
@@ -518,7 +229,7 @@ mod tests {
             visual_odometry: false,
             ..config
         };
-        let blind = run_online_calibrated(&odom, &turns, &[], &[], &off_config, None);
+        let blind = run_online(&obs(&odom, &[], &turns), &[], &off_config, None);
         assert_eq!(blind.visual_fused, 0);
         assert!(ate_m(&blind.trajectory, &truth).unwrap() > 0.5 * raw);
     }
@@ -527,8 +238,8 @@ mod tests {
     fn online_and_offline_beat_odometry_on_a_biased_loop() {
         let (odom, truth, sightings, tags) = square_run(0.01, 2);
         let config = FuseConfig::default();
-        let online = run_online(&odom, &sightings, &[], &config);
-        let offline = run_offline(&odom, &[], &sightings, &online, &config);
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let offline = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         let ate_odom = ate_m(&odom, &truth).unwrap();
         let ate_online = ate_m(&online.trajectory, &truth).unwrap();
         let ate_offline = ate_m(&offline.trajectory, &truth).unwrap();

@@ -1,0 +1,260 @@
+//! The offline pose graph: a variable per keyframe pose and per landmark (and the odometry
+//! calibration), and its factors, added in a fixed order so that the solution is reproducible:
+//! the calibration's prior, the first pose's, the odometry between keyframes, the tag
+//! sightings, the visual turns, the corner priors.
+
+use super::factors::{sqrt_information, BetweenFactor, PriorFactor, TagFactor, TurnFactor};
+use super::keyframes::Keyframes;
+use super::OdometryCalibration;
+use crate::fusion::measurement::{odometry_covariance, sighting_measurement};
+use crate::fusion::{FuseConfig, Observations, OnlineResult};
+use crate::geometry::{wrap_angle, Pose2};
+use crate::visual::tags::TagId;
+use crate::visual::vo::VisualTurn;
+use std::collections::{BTreeMap, HashMap};
+use tiny_solver::na as sna;
+
+/// Name of the odometry calibration variable.
+pub(super) const CALIBRATION: &str = "odometry_calibration";
+/// Prior sigmas of the odometry calibration `[a, c, s]`: 5% turn scale, 0.02 rad/m heading drift,
+/// 2% distance scale (weak: wheel errors of a few percent at most).
+const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
+/// Prior sigmas of the odometry calibration when an earlier survey of the same robot gives it:
+/// about what one survey's estimate scatters by (turn scale 0.0066-0.0106 for 0.0100 over the
+/// office's and museum's sample runs, heading drift -0.0059 to -0.0082 for -0.0067 rad/m).
+const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
+/// Inverse sigma of the prior that anchors the first pose where the odometry starts (1 mm,
+/// 1 mrad: the survey's frame is its start).
+const START_SQRT_INFO: f64 = 1e3;
+
+/// Name of keyframe `i`'s pose variable.
+pub(super) fn pose_name(i: usize) -> String {
+    format!("p{i}")
+}
+
+/// Name of landmark `i`'s variable.
+pub(super) fn landmark_name(i: usize) -> String {
+    format!("l{i}")
+}
+
+/// A problem ready for the solver: its factors, its variables' starting values, and how many
+/// factors it holds.
+pub(super) struct Graph {
+    pub(super) problem: tiny_solver::Problem,
+    pub(super) init: HashMap<String, sna::DVector<f64>>,
+    pub(super) factors: usize,
+}
+
+impl Graph {
+    fn add(
+        &mut self,
+        dim: usize,
+        variables: &[&str],
+        factor: Box<dyn tiny_solver::factors::FactorImpl + Send>,
+        robust: bool,
+        config: &FuseConfig,
+    ) {
+        let loss = robust.then(|| {
+            Box::new(tiny_solver::loss_functions::HuberLoss::new(
+                config.huber_sigma.max(1e-3),
+            )) as Box<dyn tiny_solver::loss_functions::Loss + Send>
+        });
+        self.problem
+            .add_residual_block(dim, variables, factor, loss);
+        self.factors += 1;
+    }
+}
+
+/// The graph of a run over its keyframes, started from `online`, anchored at the odometry's
+/// first pose, with the odometry calibration's prior centred on `prior` when given (an earlier
+/// survey's) or on no error.
+pub(super) fn build(
+    obs: &Observations<'_>,
+    keyframes: &Keyframes,
+    visual: &[&VisualTurn],
+    online: &OnlineResult,
+    config: &FuseConfig,
+    (first, prior): (Pose2, Option<&OdometryCalibration>),
+) -> Graph {
+    let mut graph = Graph {
+        problem: tiny_solver::Problem::new(),
+        init: HashMap::new(),
+        factors: 0,
+    };
+    for (i, kf) in keyframes.frames.iter().enumerate() {
+        graph.init.insert(
+            pose_name(i),
+            sna::DVector::from_vec(vec![kf.init.x, kf.init.y, kf.init.theta]),
+        );
+    }
+    for (i, l) in online.landmarks.iter().enumerate() {
+        graph.init.insert(
+            landmark_name(i),
+            sna::DVector::from_vec(vec![l.position_m[0], l.position_m[1], l.yaw_rad]),
+        );
+    }
+    if config.calibrate_odometry {
+        add_calibration_prior(&mut graph, prior, config);
+    }
+    let start = PriorFactor {
+        measured: vec![first.x, first.y, first.theta],
+        sqrt_info: vec![START_SQRT_INFO; 3],
+    };
+    graph.add(3, &[&pose_name(0)], Box::new(start), false, config);
+    add_odometry(&mut graph, obs, keyframes, config);
+    add_sightings(&mut graph, obs, keyframes, online, config);
+    add_turns(&mut graph, keyframes, visual, config);
+    if config.corner_factors {
+        add_corner_priors(&mut graph, online, config);
+    }
+    graph
+}
+
+/// The odometry calibration's variable and its prior.
+fn add_calibration_prior(
+    graph: &mut Graph,
+    prior: Option<&OdometryCalibration>,
+    config: &FuseConfig,
+) {
+    let (mean, sigma) = match prior {
+        Some(c) => (
+            vec![
+                c.turn_scale_error,
+                c.heading_drift_rad_per_m,
+                c.distance_scale_error,
+            ],
+            CALIBRATION_FROM_SURVEY_SIGMA,
+        ),
+        None => (vec![0.0; 3], CALIBRATION_PRIOR_SIGMA),
+    };
+    graph
+        .init
+        .insert(CALIBRATION.into(), sna::DVector::from_vec(mean.clone()));
+    let factor = PriorFactor {
+        measured: mean,
+        sqrt_info: sigma.iter().map(|s| 1.0 / s).collect(),
+    };
+    graph.add(3, &[CALIBRATION], Box::new(factor), false, config);
+}
+
+/// Odometry between consecutive keyframes; path and turn summed over the samples between them.
+fn add_odometry(
+    graph: &mut Graph,
+    obs: &Observations<'_>,
+    keyframes: &Keyframes,
+    config: &FuseConfig,
+) {
+    let (odometry, frames) = (obs.odometry, &keyframes.frames);
+    let mut sample = 0;
+    for i in 1..frames.len() {
+        let (a, b) = (&frames[i - 1], &frames[i]);
+        let mut path = 0.0;
+        let mut turn = 0.0;
+        let mut signed_turn = 0.0;
+        let mut prev = a.odom;
+        while sample < odometry.len() && odometry[sample].t_s <= a.t_s {
+            sample += 1;
+        }
+        let mut j = sample;
+        while j < odometry.len() && odometry[j].t_s < b.t_s {
+            let d = prev.between(&odometry[j].pose);
+            path += d.x.hypot(d.y);
+            turn += wrap_angle(d.theta).abs();
+            signed_turn += wrap_angle(d.theta);
+            prev = odometry[j].pose;
+            j += 1;
+        }
+        let d = prev.between(&b.odom);
+        path += d.x.hypot(d.y);
+        turn += wrap_angle(d.theta).abs();
+        signed_turn += wrap_angle(d.theta);
+        let delta = a.odom.between(&b.odom);
+        let cov = odometry_covariance(path, turn, config);
+        let (p0, p1) = (pose_name(i - 1), pose_name(i));
+        let mut vars: Vec<&str> = vec![&p0, &p1];
+        if config.calibrate_odometry {
+            vars.push(CALIBRATION);
+        }
+        let factor = BetweenFactor {
+            measured: [delta.x, delta.y, wrap_angle(delta.theta)],
+            sqrt_info: sqrt_information(&cov),
+            turn_rad: signed_turn,
+            path_m: path,
+        };
+        graph.add(3, &vars, Box::new(factor), false, config);
+    }
+}
+
+/// Each fused sighting between its keyframe and its landmark, under the Huber kernel.
+fn add_sightings(
+    graph: &mut Graph,
+    obs: &Observations<'_>,
+    keyframes: &Keyframes,
+    online: &OnlineResult,
+    config: &FuseConfig,
+) {
+    let slot_of: BTreeMap<TagId, usize> = online
+        .landmarks
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let tag = TagId {
+                family: l.family,
+                id: l.id,
+            };
+            (tag, i)
+        })
+        .collect();
+    for (&k, &kf) in &keyframes.of_sighting {
+        let s = &obs.sightings[k];
+        let Some(&l) = slot_of.get(&s.key()) else {
+            continue;
+        };
+        let (z, r) = sighting_measurement(s, config);
+        let factor = TagFactor {
+            measured: [z.x, z.y, z.z],
+            sqrt_info: sqrt_information(&r),
+        };
+        let vars = [pose_name(kf), landmark_name(l)];
+        graph.add(3, &[&vars[0], &vars[1]], Box::new(factor), true, config);
+    }
+}
+
+/// Each visual turn between the keyframes at its ends, under the Huber kernel.
+fn add_turns(
+    graph: &mut Graph,
+    keyframes: &Keyframes,
+    visual: &[&VisualTurn],
+    config: &FuseConfig,
+) {
+    for v in visual {
+        let (Some(&a), Some(&b)) = (
+            keyframes.at_time.get(&v.from_t_s.to_bits()),
+            keyframes.at_time.get(&v.to_t_s.to_bits()),
+        ) else {
+            continue;
+        };
+        if a == b {
+            continue;
+        }
+        let factor = TurnFactor {
+            measured: v.turn_rad,
+            sqrt_info: 1.0 / v.sigma_rad.max(1e-6),
+        };
+        let vars = [pose_name(a), pose_name(b)];
+        graph.add(1, &[&vars[0], &vars[1]], Box::new(factor), true, config);
+    }
+}
+
+/// A prior on each landmark matched with a Hough corner, at the corner.
+fn add_corner_priors(graph: &mut Graph, online: &OnlineResult, config: &FuseConfig) {
+    for (i, l) in online.landmarks.iter().enumerate() {
+        if let Some(c) = l.matched_corner {
+            let factor = PriorFactor {
+                measured: vec![c.x_m, c.y_m],
+                sqrt_info: vec![1.0 / config.corner_sigma_m; 2],
+            };
+            graph.add(2, &[&landmark_name(i)], Box::new(factor), false, config);
+        }
+    }
+}
