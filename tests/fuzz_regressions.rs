@@ -15,7 +15,7 @@ fn detect_everything(image: &GrayImage) {
     let mut grid = AprilGridMultiScale::new().unwrap();
     let found = grid.detect(image).unwrap();
     assert!(found.is_empty());
-    assert!(stereotag::calib::chessboard::refine_aprilgrid(image, &found, 6, 0.3).is_empty());
+    assert!(stereotag::calib::aprilgrid::refine_aprilgrid(image, &found, 6, 0.3).is_empty());
     assert!(stereotag::calib::chessboard::detect_chessboard(image, 9, 6).is_err());
 }
 

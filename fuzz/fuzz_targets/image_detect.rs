@@ -33,7 +33,7 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     }
     if let Ok(mut grid) = AprilGridMultiScale::new() {
         if let Ok(found) = grid.detect(&image) {
-            let _ = stereotag::calib::chessboard::refine_aprilgrid(&image, &found, 6, 0.3);
+            let _ = stereotag::calib::aprilgrid::refine_aprilgrid(&image, &found, 6, 0.3);
         }
     }
     let _ = stereotag::calib::chessboard::detect_chessboard(&image, 9, 6);

@@ -23,10 +23,9 @@
 //!    solves `Σ w g gᵀ p = Σ w g gᵀ q`, iterated to 0.005 px. The window is sized from the local
 //!    square size (at most 23 x 23 px, OpenCV's usual 11 half-width).
 
-use crate::geometry::homography::Homography;
+use crate::calib::xcorner::{refine_x_corner, MAX_REFINE_HALF_WIDTH};
 use crate::imgproc::blur::{binomial5, binomial5_gray};
 use crate::imgproc::Plane;
-use crate::visual::tags::edges::fit_quad;
 use image::GrayImage;
 use std::collections::{HashMap, VecDeque};
 
@@ -59,16 +58,6 @@ const SEARCH_FRACTION: f64 = 0.3;
 const EDGE_CONTRAST_FRACTION: f32 = 0.3;
 /// Seeds tried before giving up.
 const MAX_SEEDS: usize = 40;
-/// An AprilGrid corner this far from the prediction of its neighbours is refined from the
-/// prediction too, and may end this far from it at least, pixels.
-const KEEP_NEAR_PREDICTION_PX: f64 = 1.0;
-/// Width of an AprilGrid tag's black border (2 of its 10 cells), as a share of its edge.
-const GRID_BORDER: f64 = 0.2;
-/// A corner of a tag without enough neighbours to predict it is kept only when its edge and
-/// X-corner estimates agree within this, pixels.
-const UNCHECKED_AGREEMENT_PX: f64 = 0.5;
-/// Largest half-width of the sub-pixel window (OpenCV's usual `winSize` 11).
-const MAX_REFINE_HALF_WIDTH: i32 = 11;
 
 /// A candidate corner: integer position, ChESS response and local contrast.
 #[derive(Debug, Clone, Copy)]
@@ -276,162 +265,6 @@ fn grow(blur: &Plane, cands: &[Candidate], seed: usize) -> Option<Grid> {
     Some(grid)
 }
 
-/// The refined corner from `p` if it converges within `max_move_px`.
-fn refine_near(plane: &Plane, p: [f64; 2], hw: i32, max_move_px: f64) -> Option<[f64; 2]> {
-    refine(plane, p[0], p[1], hw).filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) <= max_move_px)
-}
-
-/// Refines the corners of detected AprilGrid tags (Kalibr layout: tag `id` at column
-/// `id % cols`, row `id / cols`, pitch `1 + spacing` tag edges).
-///
-/// A detector sometimes closes a tag's quad around one of the small black squares in the gaps,
-/// putting a corner a square's width off. So each corner is also predicted by a homography
-/// fitted to the corners of the tags around it. Then two refinements:
-/// 1. **X-corner**, where the tag's black border meets a gap square diagonally (window 15% of the
-///    tag's edge, inside its 2-cell border, on the image blurred once): from the detection and,
-///    when the detection is more than 1 px off the prediction, from the prediction too; the
-///    refined point nearest the prediction is kept if within a tenth of the tag's edge of it
-///    (lens distortion bends the prediction; a square's width is three tenths).
-/// 2. **Edges**, from those corners: each of the tag's four border edges is fitted (a quadratic
-///    across its chord, `subpixel::fit_edge`) together with the edges of the two gap squares that carry
-///    it on past its ends, and each corner is where two fitted edges cross. This uses every
-///    pixel along the edges rather than a small window at the corner, and places the corner
-///    inside the fitted stretch rather than at its end; it is kept when it lies within a tenth
-///    of the tag's edge of the prediction, else the X-corner is. On 30 rendered views the
-///    median error fell from 0.105 to 0.038 px and the 95th percentile from 0.30 to 0.083 px.
-///
-/// A tag with too few neighbours for a prediction keeps a corner only when its edge and X-corner
-/// estimates agree within half a pixel; other corners that fail their checks are dropped (their
-/// tag loses them; the others stay).
-pub fn refine_aprilgrid(
-    image: &GrayImage,
-    detections: &[crate::visual::tags::TagDetection],
-    cols: u32,
-    spacing: f64,
-) -> Vec<(u32, [f64; 2])> {
-    let sharp = Plane::from_gray(image);
-    let plane = binomial5_gray(image);
-    // Board positions in tag edges (the homographies need no metres).
-    let board = |tag: u32, k: usize| -> [f64; 2] {
-        let p = crate::calib::aprilgrid_board_point(tag * 4 + k as u32, cols, 1.0, spacing);
-        [p[0], p[1]]
-    };
-    let apply = |h: &Homography, b: [f64; 2]| h.project(b[0], b[1]);
-    let dist = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
-    let mut out = Vec::with_capacity(detections.len() * 4);
-    for d in detections {
-        let (c, r) = ((d.id % cols) as i64, (d.id / cols) as i64);
-        let near: Vec<([f64; 2], [f64; 2])> = detections
-            .iter()
-            .filter(|o| {
-                let (oc, or) = ((o.id % cols) as i64, (o.id / cols) as i64);
-                o.id != d.id && (oc - c).abs() <= 1 && (or - r).abs() <= 1
-            })
-            .flat_map(|o| (0..4).map(move |k| (board(o.id, k), o.corners_px[k])))
-            .collect();
-        // Fit, drop the worst-fitting neighbours (their own bad corners), fit again.
-        let h = Homography::from_pairs(&near).and_then(|h| {
-            let mut kept: Vec<_> = near
-                .iter()
-                .filter(|(b, p)| dist(apply(&h, *b), *p) < 1.5)
-                .cloned()
-                .collect();
-            if kept.len() < 8 {
-                kept = near.clone();
-            }
-            Homography::from_pairs(&kept)
-        });
-        let cp = &d.corners_px;
-        let side = (0..4).map(|k| dist(cp[k], cp[(k + 1) % 4])).sum::<f64>() / 4.0;
-        let hw = ((0.15 * side).round() as i32).clamp(2, MAX_REFINE_HALF_WIDTH);
-        let keep_px = (0.1 * side).max(KEEP_NEAR_PREDICTION_PX);
-        let predicted: [Option<[f64; 2]>; 4] = std::array::from_fn(|k| {
-            h.filter(|_| near.len() >= 8)
-                .map(|h| apply(&h, board(d.id, k)))
-        });
-        // X-corners: from the detection and, when that is off, from the prediction.
-        let x_corners: [Option<[f64; 2]>; 4] = std::array::from_fn(|k| {
-            let p = cp[k];
-            let from_detection = refine_near(&plane, p, hw, 2.0);
-            let Some(g) = predicted[k] else {
-                return Some(from_detection.unwrap_or(p));
-            };
-            let from_prediction = (dist(p, g) > KEEP_NEAR_PREDICTION_PX)
-                .then(|| refine_near(&plane, g, hw, 2.0 * keep_px))
-                .flatten();
-            [from_detection, from_prediction]
-                .into_iter()
-                .flatten()
-                .filter(|q| dist(*q, g) <= keep_px)
-                .min_by(|a, b| dist(*a, g).total_cmp(&dist(*b, g)))
-        });
-        // Edges: the tag's four border lines, each carried on by the gap squares' edges.
-        let start: [[f64; 2]; 4] =
-            std::array::from_fn(|k| x_corners[k].or(predicted[k]).unwrap_or(cp[k]));
-        let edges = fit_quad(&sharp, &start, GRID_BORDER, Some(spacing))
-            .and_then(|q| fit_quad(&sharp, &q, GRID_BORDER, Some(spacing)));
-        for k in 0..4 {
-            let edge = edges.map(|e| e[k]);
-            let kept = match predicted[k] {
-                Some(g) => edge.filter(|e| dist(*e, g) <= keep_px).or(x_corners[k]),
-                // Nothing to check against but the X-corner: both must agree.
-                None => edge.filter(|e| {
-                    x_corners[k].is_some_and(|x| dist(*e, x) <= UNCHECKED_AGREEMENT_PX)
-                }),
-            };
-            if let Some(q) = kept {
-                out.push((d.id * 4 + k as u32, q));
-            }
-        }
-    }
-    out
-}
-
-fn refine(plane: &Plane, x: f64, y: f64, half_width: i32) -> Option<[f64; 2]> {
-    let hw = half_width.max(1);
-    let inv = 1.0 / (hw as f64 * hw as f64);
-    let (mut cx, mut cy) = (x, y);
-    for _ in 0..30 {
-        let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        // Gradients at whole pixels (no interpolation, which would bias the corner towards
-        // pixel centres); weights from the distance to the current estimate.
-        let (ix, iy) = (cx.round() as i64, cy.round() as i64);
-        for qy in iy - hw as i64..=iy + hw as i64 {
-            for qx in ix - hw as i64..=ix + hw as i64 {
-                if qx < 1 || qy < 1 || qx + 1 >= plane.w as i64 || qy + 1 >= plane.h as i64 {
-                    continue;
-                }
-                let (ux, uy) = (qx as usize, qy as usize);
-                let gx = 0.5 * (plane.at(ux + 1, uy) - plane.at(ux - 1, uy)) as f64;
-                let gy = 0.5 * (plane.at(ux, uy + 1) - plane.at(ux, uy - 1)) as f64;
-                let (qx, qy) = (qx as f64, qy as f64);
-                let w = (-((qx - cx).powi(2) + (qy - cy).powi(2)) * inv).exp();
-                let (gxx, gxy, gyy) = (w * gx * gx, w * gx * gy, w * gy * gy);
-                a11 += gxx;
-                a12 += gxy;
-                a22 += gyy;
-                b1 += gxx * qx + gxy * qy;
-                b2 += gxy * qx + gyy * qy;
-            }
-        }
-        let det = a11 * a22 - a12 * a12;
-        if det.abs() <= 1e-9 * (a11 + a22).powi(2).max(1e-30) {
-            return None;
-        }
-        let nx = (a22 * b1 - a12 * b2) / det;
-        let ny = (a11 * b2 - a12 * b1) / det;
-        let moved = (nx - cx).hypot(ny - cy);
-        (cx, cy) = (nx, ny);
-        if (cx - x).hypot(cy - y) > hw as f64 {
-            return None;
-        }
-        if moved < 0.005 {
-            break;
-        }
-    }
-    Some([cx, cy])
-}
-
 /// Finds a `cols x rows` inner-corner chessboard; corners in board order (index `r · cols + c`,
 /// see the module notes), refined to sub-pixel.
 pub fn detect_chessboard(
@@ -584,10 +417,40 @@ fn refine_all(plane: &Plane, at: &[[f64; 2]], cols: usize, rows: usize) -> Vec<[
                 }
             }
             let hw = ((0.4 * nearest) as i32).clamp(2, MAX_REFINE_HALF_WIDTH);
-            out.push(refine(plane, p[0], p[1], hw).unwrap_or(p));
+            out.push(refine_x_corner(plane, p[0], p[1], hw).unwrap_or(p));
         }
     }
     out
+}
+
+/// Position on the board of chessboard corner `k` (index `r · cols + c`): `(c · col_spacing,
+/// r · row_spacing, 0)`, as Kalibr's checkerboard target places it.
+pub fn chessboard_board_point(
+    k: u32,
+    cols: u32,
+    col_spacing_m: f64,
+    row_spacing_m: f64,
+) -> [f64; 3] {
+    let (c, r) = (k % cols, k / cols);
+    [c as f64 * col_spacing_m, r as f64 * row_spacing_m, 0.0]
+}
+
+/// Board corners of a chessboard found by [`detect_chessboard`] (index
+/// `r · cols + c`; layout: [`chessboard_board_point`]).
+pub fn chessboard_board_corners(
+    px: &[[f64; 2]],
+    cols: u32,
+    col_spacing_m: f64,
+    row_spacing_m: f64,
+) -> Vec<crate::calib::Corner> {
+    px.iter()
+        .enumerate()
+        .map(|(k, p)| crate::calib::Corner {
+            id: k as u32,
+            board_m: chessboard_board_point(k as u32, cols, col_spacing_m, row_spacing_m),
+            px: *p,
+        })
+        .collect()
 }
 
 #[cfg(test)]

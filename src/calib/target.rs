@@ -1,7 +1,8 @@
 //! Calibration targets (Kalibr's target YAML: AprilGrid, checkerboard) and the one detector that
 //! finds any target's corners in an image, each with its position on the board.
 
-use crate::calib::chessboard::{detect_chessboard, refine_aprilgrid};
+use crate::calib::aprilgrid::refine_aprilgrid;
+use crate::calib::chessboard::detect_chessboard;
 use crate::calib::{aprilgrid_corners, chessboard_board_corners, Corner};
 use crate::visual::tags::{AprilGridMultiScale, TagDetection, TagDetector, TagError};
 use image::GrayImage;

@@ -1,0 +1,367 @@
+//! The bundle adjustment: both cameras' intrinsics and distortion, every board pose and
+//! `right_from_left`, adjusted by Levenberg-Marquardt (tiny-solver, automatic derivatives)
+//! under a Huber kernel to minimise every corner's reprojection error in both cameras,
+//! `π(K, D, right_from_left · left_from_board · P) − x` (the lens models of
+//! [`crate::camera::lens`]); and the parameters' sigmas from `(JᵀJ)⁻¹` scaled by the residual
+//! variance, `J` by central differences at the solution.
+
+use super::{CalibConfig, CalibError, View};
+use crate::camera::{lens, Camera, Distortion, LensModel};
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use std::collections::{BTreeMap, HashMap};
+use tiny_solver::na as sna;
+
+/// What the adjustment changes.
+pub(super) struct State {
+    pub(super) left: Camera,
+    pub(super) right: Camera,
+    pub(super) right_from_left: Isometry3<f64>,
+    pub(super) poses: Vec<Isometry3<f64>>,
+}
+
+/// `[fx, fy, cx, cy, d0, d1, d2, d3]`: radtan k1, k2, p1, p2 or equidistant k1..k4.
+pub(super) fn intrinsics_vec(c: &Camera) -> Vec<f64> {
+    let d = match c.distortion {
+        Distortion::Radtan { k1, k2, p1, p2, .. } => [k1, k2, p1, p2],
+        Distortion::Equidistant { k1, k2, k3, k4 } => [k1, k2, k3, k4],
+        Distortion::None => [0.0; 4],
+    };
+    vec![c.fx, c.fy, c.cx, c.cy, d[0], d[1], d[2], d[3]]
+}
+
+/// The camera of an intrinsics vector, in the model of `like`.
+pub(super) fn camera_from_vec(v: &[f64], like: &Camera) -> Camera {
+    let distortion = match like.distortion {
+        Distortion::Equidistant { .. } => Distortion::Equidistant {
+            k1: v[4],
+            k2: v[5],
+            k3: v[6],
+            k4: v[7],
+        },
+        Distortion::Radtan { k3, .. } => Distortion::Radtan {
+            k1: v[4],
+            k2: v[5],
+            p1: v[6],
+            p2: v[7],
+            k3,
+        },
+        Distortion::None => Distortion::Radtan {
+            k1: v[4],
+            k2: v[5],
+            p1: v[6],
+            p2: v[7],
+            k3: 0.0,
+        },
+    };
+    Camera {
+        fx: v[0],
+        fy: v[1],
+        cx: v[2],
+        cy: v[3],
+        distortion,
+        width: like.width,
+        height: like.height,
+    }
+}
+
+/// Names of the intrinsics vector's entries.
+pub(super) fn intrinsics_names(c: &Camera) -> [&'static str; 8] {
+    match c.distortion {
+        Distortion::Equidistant { .. } => ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
+        _ => ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"],
+    }
+}
+
+pub(super) fn pose_vec(p: &Isometry3<f64>) -> Vec<f64> {
+    let r = p.rotation.scaled_axis();
+    let t = p.translation.vector;
+    vec![r.x, r.y, r.z, t.x, t.y, t.z]
+}
+
+pub(super) fn pose_from_vec(v: &[f64]) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(v[3], v[4], v[5]),
+        UnitQuaternion::from_scaled_axis(Vector3::new(v[0], v[1], v[2])),
+    )
+}
+
+pub(super) fn c<T: sna::RealField>(v: f64) -> T {
+    T::from_f64(v).unwrap_or_else(T::zero)
+}
+
+/// Rotates `p` by the rotation vector `r` (Rodrigues), generic for automatic derivatives.
+pub(super) fn rotate<T: sna::RealField>(r: [T; 3], p: [T; 3]) -> [T; 3] {
+    let theta2 =
+        r[0].clone() * r[0].clone() + r[1].clone() * r[1].clone() + r[2].clone() * r[2].clone();
+    let theta = (theta2.clone() + c::<T>(1e-24)).sqrt();
+    let (s, co) = (theta.clone().sin(), theta.clone().cos());
+    let k = [
+        r[0].clone() / theta.clone(),
+        r[1].clone() / theta.clone(),
+        r[2].clone() / theta,
+    ];
+    let dot =
+        k[0].clone() * p[0].clone() + k[1].clone() * p[1].clone() + k[2].clone() * p[2].clone();
+    let cross = [
+        k[1].clone() * p[2].clone() - k[2].clone() * p[1].clone(),
+        k[2].clone() * p[0].clone() - k[0].clone() * p[2].clone(),
+        k[0].clone() * p[1].clone() - k[1].clone() * p[0].clone(),
+    ];
+    std::array::from_fn(|i| {
+        p[i].clone() * co.clone()
+            + cross[i].clone() * s.clone()
+            + k[i].clone() * dot.clone() * (T::one() - co.clone())
+    })
+}
+
+pub(super) fn transform<T: sna::RealField>(pose: &sna::DVector<T>, p: [T; 3]) -> [T; 3] {
+    let r = rotate([pose[0].clone(), pose[1].clone(), pose[2].clone()], p);
+    [
+        r[0].clone() + pose[3].clone(),
+        r[1].clone() + pose[4].clone(),
+        r[2].clone() + pose[5].clone(),
+    ]
+}
+
+/// One corner in the left image: params [intrinsics_left, board pose].
+pub(super) struct LeftCorner {
+    board: [f64; 3],
+    px: [f64; 2],
+    model: LensModel,
+}
+
+/// One corner in the right image: params [intrinsics_right, board pose, right_from_left].
+pub(super) struct RightCorner {
+    board: [f64; 3],
+    px: [f64; 2],
+    model: LensModel,
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for LeftCorner {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let p = transform(&params[1], self.board.map(c::<T>));
+        let q = lens::project(params[0].as_slice(), self.model, p);
+        sna::DVector::from_vec(vec![
+            q[0].clone() - c::<T>(self.px[0]),
+            q[1].clone() - c::<T>(self.px[1]),
+        ])
+    }
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for RightCorner {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let p = transform(&params[2], transform(&params[1], self.board.map(c::<T>)));
+        let q = lens::project(params[0].as_slice(), self.model, p);
+        sna::DVector::from_vec(vec![
+            q[0].clone() - c::<T>(self.px[0]),
+            q[1].clone() - c::<T>(self.px[1]),
+        ])
+    }
+}
+
+pub(super) fn lens_model(cam: &Camera) -> LensModel {
+    match cam.distortion {
+        Distortion::Equidistant { .. } => LensModel::Equidistant,
+        Distortion::Radtan { .. } | Distortion::None => LensModel::Radtan,
+    }
+}
+
+pub(super) const LEFT: &str = "intrinsics_left";
+pub(super) const RIGHT: &str = "intrinsics_right";
+pub(super) const EXTRINSICS: &str = "right_from_left";
+
+pub(super) fn view_name(i: usize) -> String {
+    format!("board_{i}")
+}
+
+/// One bundle adjustment from the current state.
+pub(super) fn solve(
+    state: &mut State,
+    views: &[View<'_>],
+    config: &CalibConfig,
+) -> Result<(), CalibError> {
+    let mut problem = tiny_solver::Problem::new();
+    let mut init: HashMap<String, sna::DVector<f64>> = HashMap::new();
+    init.insert(
+        LEFT.into(),
+        sna::DVector::from_vec(intrinsics_vec(&state.left)),
+    );
+    init.insert(
+        RIGHT.into(),
+        sna::DVector::from_vec(intrinsics_vec(&state.right)),
+    );
+    init.insert(
+        EXTRINSICS.into(),
+        sna::DVector::from_vec(pose_vec(&state.right_from_left)),
+    );
+    for (
+        i,
+        View {
+            left: l, right: r, ..
+        },
+    ) in views.iter().enumerate()
+    {
+        let name = view_name(i);
+        init.insert(
+            name.clone(),
+            sna::DVector::from_vec(pose_vec(&state.poses[i])),
+        );
+        for corner in l {
+            problem.add_residual_block(
+                2,
+                &[LEFT, &name],
+                Box::new(LeftCorner {
+                    board: corner.board_m,
+                    px: corner.px,
+                    model: lens_model(&state.left),
+                }),
+                Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
+                    config.huber_px.max(1e-3),
+                ))),
+            );
+        }
+        for corner in r {
+            problem.add_residual_block(
+                2,
+                &[RIGHT, &name, EXTRINSICS],
+                Box::new(RightCorner {
+                    board: corner.board_m,
+                    px: corner.px,
+                    model: lens_model(&state.right),
+                }),
+                Some(Box::new(tiny_solver::loss_functions::HuberLoss::new(
+                    config.huber_px.max(1e-3),
+                ))),
+            );
+        }
+    }
+    if config.fixed_intrinsics.is_some() {
+        for k in 0..8 {
+            problem.fix_variable(LEFT, k);
+            problem.fix_variable(RIGHT, k);
+        }
+    }
+    let options = tiny_solver::OptimizerOptions {
+        max_iteration: config.max_iterations,
+        ..Default::default()
+    };
+    use tiny_solver::Optimizer;
+    let values = tiny_solver::LevenbergMarquardtOptimizer::default()
+        .optimize(&problem, &init, Some(options))
+        .ok_or(CalibError::Solver)?;
+    let get = |k: &str| values.get(k).map(|v| v.as_slice().to_vec());
+    if config.fixed_intrinsics.is_none() {
+        if let Some(v) = get(LEFT) {
+            state.left = camera_from_vec(&v, &state.left);
+        }
+        if let Some(v) = get(RIGHT) {
+            state.right = camera_from_vec(&v, &state.right);
+        }
+    }
+    if let Some(v) = get(EXTRINSICS) {
+        state.right_from_left = pose_from_vec(&v);
+    }
+    for i in 0..views.len() {
+        if let Some(v) = get(&view_name(i)) {
+            state.poses[i] = pose_from_vec(&v);
+        }
+    }
+    Ok(())
+}
+
+/// Parameter sigmas: `σ² = rms² · diag((JᵀJ)⁻¹)` over intrinsics, extrinsics and board poses,
+/// with `J` by central differences of the reprojections.
+pub(super) fn parameter_sigmas(
+    state: &State,
+    views: &[View<'_>],
+    config: &CalibConfig,
+    rms_px: f64,
+) -> BTreeMap<String, f64> {
+    let free_intrinsics = config.fixed_intrinsics.is_none();
+    let mut x: Vec<f64> = Vec::new();
+    if free_intrinsics {
+        x.extend(intrinsics_vec(&state.left));
+        x.extend(intrinsics_vec(&state.right));
+    }
+    let base = x.len();
+    x.extend(pose_vec(&state.right_from_left));
+    for p in &state.poses {
+        x.extend(pose_vec(p));
+    }
+    let residuals = |x: &[f64]| -> Vec<f64> {
+        let (cl, cr) = if free_intrinsics {
+            (
+                camera_from_vec(&x[0..8], &state.left),
+                camera_from_vec(&x[8..16], &state.right),
+            )
+        } else {
+            (state.left, state.right)
+        };
+        let rl = pose_from_vec(&x[base..base + 6]);
+        let mut out = Vec::new();
+        for (
+            i,
+            View {
+                left: l, right: r, ..
+            },
+        ) in views.iter().enumerate()
+        {
+            let o = base + 6 + 6 * i;
+            let pl = pose_from_vec(&x[o..o + 6]);
+            let pr = rl * pl;
+            for (cam, pose, corners) in [(&cl, pl, l), (&cr, pr, r)] {
+                for corner in corners {
+                    let p = pose * Point3::from(corner.board_m);
+                    let q = cam
+                        .project(&p.coords)
+                        .unwrap_or(nalgebra::Point2::new(0.0, 0.0));
+                    out.push(q.x - corner.px[0]);
+                    out.push(q.y - corner.px[1]);
+                }
+            }
+        }
+        out
+    };
+    let r0 = residuals(&x);
+    let mut jac = DMatrix::zeros(r0.len(), x.len());
+    for j in 0..x.len() {
+        let h = 1e-6 * x[j].abs().max(1e-3);
+        let mut xp = x.clone();
+        xp[j] += h;
+        let rp = residuals(&xp);
+        xp[j] -= 2.0 * h;
+        let rm = residuals(&xp);
+        for i in 0..r0.len() {
+            jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * h);
+        }
+    }
+    let info = jac.transpose() * &jac;
+    let mut out = BTreeMap::new();
+    let Some(cov) = info.try_inverse() else {
+        return out;
+    };
+    let cov: DMatrix<f64> = cov * rms_px * rms_px;
+    if free_intrinsics {
+        for (k, n) in intrinsics_names(&state.left).iter().enumerate() {
+            out.insert(format!("left.{n}"), cov[(k, k)].max(0.0).sqrt());
+        }
+        for (k, n) in intrinsics_names(&state.right).iter().enumerate() {
+            out.insert(format!("right.{n}"), cov[(8 + k, 8 + k)].max(0.0).sqrt());
+        }
+    }
+    for (k, n) in ["rx", "ry", "rz", "tx", "ty", "tz"].iter().enumerate() {
+        out.insert(
+            format!("right_from_left.{n}"),
+            cov[(base + k, base + k)].max(0.0).sqrt(),
+        );
+    }
+    // The baseline's sigma by propagation through its norm.
+    let t = state.right_from_left.translation.vector;
+    let g = DVector::from_vec(vec![t.x, t.y, t.z]) / t.norm().max(1e-12);
+    let ct = cov.view((base + 3, base + 3), (3, 3));
+    out.insert(
+        "baseline_m".into(),
+        (g.transpose() * ct * &g)[(0, 0)].max(0.0).sqrt(),
+    );
+    out
+}
