@@ -1,0 +1,197 @@
+//! The tag families: their names, the code tables both backends decode with, and each tag's
+//! printed pattern (what the renderer draws).
+
+use serde::{Deserialize, Serialize};
+
+/// The tag families: the four both backends detect, and Kalibr's AprilGrid tags. Written in
+/// files by the AprilTag library's names (`tag36h11`, ...), and ordered by them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum TagFamily {
+    /// tag36h11, the default: the family of the paper's landmarks and of Kalibr's AprilGrid.
+    #[serde(rename = "tag36h11")]
+    Tag36h11,
+    /// tag25h9.
+    #[serde(rename = "tag25h9")]
+    Tag25h9,
+    /// tag16h5.
+    #[serde(rename = "tag16h5")]
+    Tag16h5,
+    /// tagStandard41h12.
+    #[serde(rename = "tagStandard41h12")]
+    TagStandard41h12,
+    /// Kalibr's AprilGrid tags: tag36h11's codes with a 2-bit black border, found by the
+    /// AprilGrid detector ([`AprilGridDetector`]) alone.
+    #[serde(rename = "aprilgrid36h11")]
+    Aprilgrid36h11,
+}
+
+impl PartialOrd for TagFamily {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for TagFamily {
+    /// By name, as the files list them.
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.name().cmp(other.name())
+    }
+}
+
+impl std::fmt::Display for TagFamily {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A tag: its family and id (ids are unique within a family).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TagId {
+    /// The family.
+    pub family: TagFamily,
+    /// The id.
+    pub id: u32,
+}
+
+/// The families the tag detectors look for (not the AprilGrid's, which its own detector finds).
+pub const DETECTABLE_FAMILIES: [TagFamily; 4] = [
+    TagFamily::Tag36h11,
+    TagFamily::Tag25h9,
+    TagFamily::Tag16h5,
+    TagFamily::TagStandard41h12,
+];
+
+impl TagFamily {
+    /// The name the AprilTag library uses.
+    pub fn name(&self) -> &'static str {
+        match self {
+            TagFamily::Tag36h11 => "tag36h11",
+            TagFamily::Tag25h9 => "tag25h9",
+            TagFamily::Tag16h5 => "tag16h5",
+            TagFamily::TagStandard41h12 => "tagStandard41h12",
+            TagFamily::Aprilgrid36h11 => "aprilgrid36h11",
+        }
+    }
+
+    /// A family the detectors look for, from the library's name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        DETECTABLE_FAMILIES.into_iter().find(|f| f.name() == name)
+    }
+
+    pub(super) fn kornia(&self) -> kornia_apriltag::family::TagFamilyKind {
+        use kornia_apriltag::family::TagFamilyKind as K;
+        match self {
+            TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => K::Tag36H11,
+            TagFamily::Tag25h9 => K::Tag25H9,
+            TagFamily::Tag16h5 => K::Tag16H5,
+            TagFamily::TagStandard41h12 => K::TagStandard41H12,
+        }
+    }
+
+    /// The C library's family (null if its constructor fails); free it with [`Self::c_destroy`].
+    pub(super) fn c_create(&self) -> *mut apriltag_sys::apriltag_family_t {
+        // SAFETY: the library's constructors take nothing and return an owned family.
+        unsafe {
+            match self {
+                TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => apriltag_sys::tag36h11_create(),
+                TagFamily::Tag25h9 => apriltag_sys::tag25h9_create(),
+                TagFamily::Tag16h5 => apriltag_sys::tag16h5_create(),
+                TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_create(),
+            }
+        }
+    }
+
+    /// Frees a family from [`Self::c_create`] of the same kind.
+    ///
+    /// # Safety
+    /// `family` came from `self.c_create()`, is not null, and is used by no live detector.
+    pub(super) unsafe fn c_destroy(&self, family: *mut apriltag_sys::apriltag_family_t) {
+        // SAFETY: as the caller promises.
+        unsafe {
+            match self {
+                TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => {
+                    apriltag_sys::tag36h11_destroy(family)
+                }
+                TagFamily::Tag25h9 => apriltag_sys::tag25h9_destroy(family),
+                TagFamily::Tag16h5 => apriltag_sys::tag16h5_destroy(family),
+                TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_destroy(family),
+            }
+        }
+    }
+}
+
+/// A tag's printed pattern as the AprilTag library draws it (`apriltag_to_image`): a square of
+/// cells, row-major from the top-left, `true` where white.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TagImage {
+    /// Cells across the whole pattern, the library's 1-cell white border included.
+    pub total_cells: usize,
+    /// Cells across the black square whose corners are the tag's corners.
+    pub black_square_cells: usize,
+    /// Row-major, `total_cells²` entries.
+    pub white: Vec<bool>,
+}
+
+impl TagFamily {
+    /// The family's code tables (built once per process: kornia builds a decoding table with them).
+    pub(super) fn tables(&self) -> Option<&'static kornia_apriltag::family::TagFamily> {
+        use kornia_apriltag::family::TagFamily as K;
+        use std::sync::OnceLock;
+        static T36: OnceLock<Option<K>> = OnceLock::new();
+        static T25: OnceLock<Option<K>> = OnceLock::new();
+        static T16: OnceLock<Option<K>> = OnceLock::new();
+        static T41: OnceLock<Option<K>> = OnceLock::new();
+        type Cached = OnceLock<Option<K>>;
+        let (cell, make): (&Cached, fn() -> Option<K>) = match self {
+            TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => (&T36, || K::tag36_h11().ok()),
+            TagFamily::Tag25h9 => (&T25, || K::tag25_h9().ok()),
+            TagFamily::Tag16h5 => (&T16, || K::tag16_h5().ok()),
+            TagFamily::TagStandard41h12 => (&T41, || K::tagstandard41_h12().ok()),
+        };
+        cell.get_or_init(make).as_ref()
+    }
+
+    /// Number of ids in the family.
+    pub fn code_count(&self) -> usize {
+        self.tables().map_or(0, |f| f.code_data.len())
+    }
+
+    /// The printed pattern of tag `id`, from the family's true code bits; `None` past the last id.
+    pub fn code_image(&self, id: u32) -> Option<TagImage> {
+        let family = self.tables()?;
+        let code = *family.code_data.get(id as usize)?;
+        let tw = family.total_width as i64;
+        let border = (tw - family.width_at_border as i64) / 2;
+        let inside = |v: i64| v >= border && v < tw - border;
+        let mut white: Vec<bool> = (0..tw * tw)
+            .map(|i| {
+                let (x, y) = (i % tw, i / tw);
+                if family.reversed_border {
+                    // Reversed-border families: black but for a one-cell white ring around the
+                    // corner square (`apriltag_to_image`); the code bits lie inside and outside
+                    // it.
+                    let ring = |v: i64| v == border || v == tw - 1 - border;
+                    (ring(x) && inside(y)) || (ring(y) && inside(x))
+                } else {
+                    !(inside(x) && inside(y))
+                }
+            })
+            .collect();
+        for i in 0..family.nbits {
+            if code & (1usize << (family.nbits - i - 1)) != 0 {
+                let (x, y) = (
+                    family.bit_x[i] as i64 + border,
+                    family.bit_y[i] as i64 + border,
+                );
+                if (0..tw).contains(&x) && (0..tw).contains(&y) {
+                    white[(y * tw + x) as usize] = true;
+                }
+            }
+        }
+        Some(TagImage {
+            total_cells: tw as usize,
+            black_square_cells: family.width_at_border,
+            white,
+        })
+    }
+}
