@@ -25,8 +25,9 @@ pub struct SonarScores {
 }
 
 /// Scores a survey against the world and the run's ground truth: the sonar scores of the raw map,
-/// the corrected map and the map built with ground-truth poses; ATE of each trajectory; the
-/// landmark position errors.
+/// the online and corrected maps and the map built with ground-truth poses; ATE of each
+/// trajectory; the landmark position errors (also after aligning the whole survey); the visual
+/// turns' errors.
 pub fn score_survey(
     survey: &Survey,
     run: &RunDataset,
@@ -34,33 +35,20 @@ pub fn score_survey(
     mapping: &MappingConfig,
 ) -> Result<BTreeMap<String, f64>, GridError> {
     let mut m = score_sonar_map(&survey.raw, run, world).metrics();
-    let online = score_map(&survey.online_map, world);
-    m.insert(
-        "map_online.occupied_precision".into(),
-        online.occupied_precision,
-    );
-    m.insert("map_online.occupied_recall".into(), online.occupied_recall);
-    let corrected = score_map(&survey.corrected.counting, world);
-    m.insert(
-        "map_corrected.occupied_precision".into(),
-        corrected.occupied_precision,
-    );
-    m.insert(
-        "map_corrected.occupied_recall".into(),
-        corrected.occupied_recall,
-    );
+    let mut occupied = |name: &str, map: &crate::sonar::grid::OccupancyMap| {
+        let score = score_map(map, world);
+        m.insert(
+            format!("{name}.occupied_precision"),
+            score.occupied_precision,
+        );
+        m.insert(format!("{name}.occupied_recall"), score.occupied_recall);
+    };
+    occupied("map_online", &survey.online_map);
+    occupied("map_corrected", &survey.corrected.counting);
     if let Some(truth) = &run.ground_truth {
         // Only its counting grid is scored: not the Hough passes and walls a full map builds.
         let gt_map = counting_map_along(&run.sonar_log(), truth, mapping)?;
-        let gt = score_map(&gt_map, world);
-        m.insert(
-            "map_ground_truth.occupied_precision".into(),
-            gt.occupied_precision,
-        );
-        m.insert(
-            "map_ground_truth.occupied_recall".into(),
-            gt.occupied_recall,
-        );
+        occupied("map_ground_truth", &gt_map);
         for (key, estimate) in [
             ("ate_m.odometry", &run.odometry),
             ("ate_m.online", &survey.online.trajectory),
@@ -71,75 +59,93 @@ pub fn score_survey(
             }
         }
     }
-    let landmark_errors = |align: Pose2| -> Vec<f64> {
-        let mut errors: Vec<f64> = survey
-            .landmarks
-            .iter()
-            .filter_map(|l| {
-                let tag = world
-                    .tags
-                    .iter()
-                    .find(|t| t.id == l.id && t.family == l.family)?;
-                let p =
-                    align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
-                let d = nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
-                    - nalgebra::Vector3::from(tag.position_m);
-                Some(d.norm())
-            })
-            .collect();
-        errors.sort_by(f64::total_cmp);
-        errors
-    };
-    let errors = landmark_errors(Pose2::new(0.0, 0.0, 0.0));
-    if let Some(median) = median_sorted(&errors) {
-        m.insert("landmarks.median_error_m".into(), median);
-        m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
-    }
-    // Diagnostics: the same after the best rigid alignment of the offline trajectory with the
-    // truth, i.e. with the shift and turn of the whole survey (its anchoring) taken out.
-    if let Some(align) = run
-        .ground_truth
-        .as_deref()
-        .and_then(|t| align_se2(&survey.offline.trajectory, t))
-    {
-        if let Some(median) = median_sorted(&landmark_errors(align)) {
-            m.insert("landmarks.median_error_aligned_m".into(), median);
-        }
-        let aligned: Vec<StampedPose> = survey
-            .offline
-            .trajectory
-            .iter()
-            .map(|p| StampedPose {
-                t_s: p.t_s,
-                pose: align.compose(&p.pose),
-            })
-            .collect();
-        if let Some(ate) = run.ground_truth.as_deref().and_then(|t| ate_m(&aligned, t)) {
-            m.insert("ate_m.offline_aligned".into(), ate);
-        }
-    }
+    m.extend(landmark_metrics(survey, run, world));
     if let Some(truth) = run.ground_truth.as_deref() {
-        let errors: Vec<(f64, f64)> = survey
-            .visual
-            .iter()
-            .filter_map(|v| {
-                let a = crate::geometry::pose_at(truth, v.from_t_s)?;
-                let b = crate::geometry::pose_at(truth, v.to_t_s)?;
-                let e = crate::geometry::wrap_angle(v.turn_rad - (b.theta - a.theta));
-                Some((e, v.sigma_rad))
-            })
-            .collect();
-        if !errors.is_empty() {
-            let n = errors.len() as f64;
-            let rms = (errors.iter().map(|(e, _)| e * e).sum::<f64>() / n).sqrt();
-            let nees = errors.iter().map(|(e, s)| (e / s).powi(2)).sum::<f64>() / n;
-            m.insert("visual.turn_error_rms_deg".into(), rms.to_degrees());
-            m.insert("visual.turn_nees".into(), nees);
-        }
+        m.extend(visual_turn_metrics(&survey.visual, truth));
     }
     m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
     m.insert("landmarks.planned".into(), world.tags.len() as f64);
     Ok(m)
+}
+
+/// The distance of each landmark from its tag in the world, after moving the survey by
+/// `align`, sorted.
+fn landmark_errors(survey: &Survey, world: &World, align: Pose2) -> Vec<f64> {
+    let mut errors: Vec<f64> = survey
+        .landmarks
+        .iter()
+        .filter_map(|l| {
+            let tag = world
+                .tags
+                .iter()
+                .find(|t| t.id == l.id && t.family == l.family)?;
+            let p = align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
+            let d = nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
+                - nalgebra::Vector3::from(tag.position_m);
+            Some(d.norm())
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    errors
+}
+
+/// The landmarks' median and largest error; and, as diagnostics, the median and the offline
+/// ATE after the best rigid alignment of the offline trajectory with the truth (the shift and
+/// turn of the whole survey, its anchoring, taken out).
+fn landmark_metrics(survey: &Survey, run: &RunDataset, world: &World) -> BTreeMap<String, f64> {
+    let mut m = BTreeMap::new();
+    let errors = landmark_errors(survey, world, Pose2::new(0.0, 0.0, 0.0));
+    if let Some(median) = median_sorted(&errors) {
+        m.insert("landmarks.median_error_m".into(), median);
+        m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
+    }
+    let Some(truth) = run.ground_truth.as_deref() else {
+        return m;
+    };
+    let Some(align) = align_se2(&survey.offline.trajectory, truth) else {
+        return m;
+    };
+    if let Some(median) = median_sorted(&landmark_errors(survey, world, align)) {
+        m.insert("landmarks.median_error_aligned_m".into(), median);
+    }
+    let aligned: Vec<StampedPose> = survey
+        .offline
+        .trajectory
+        .iter()
+        .map(|p| StampedPose {
+            t_s: p.t_s,
+            pose: align.compose(&p.pose),
+        })
+        .collect();
+    if let Some(ate) = ate_m(&aligned, truth) {
+        m.insert("ate_m.offline_aligned".into(), ate);
+    }
+    m
+}
+
+/// The visual turns' RMS error against the truth, degrees, and their NEES.
+fn visual_turn_metrics(
+    visual: &[crate::visual::vo::VisualTurn],
+    truth: &[StampedPose],
+) -> BTreeMap<String, f64> {
+    let mut m = BTreeMap::new();
+    let errors: Vec<(f64, f64)> = visual
+        .iter()
+        .filter_map(|v| {
+            let a = crate::geometry::pose_at(truth, v.from_t_s)?;
+            let b = crate::geometry::pose_at(truth, v.to_t_s)?;
+            let e = crate::geometry::wrap_angle(v.turn_rad - (b.theta - a.theta));
+            Some((e, v.sigma_rad))
+        })
+        .collect();
+    if !errors.is_empty() {
+        let n = errors.len() as f64;
+        let rms = (errors.iter().map(|(e, _)| e * e).sum::<f64>() / n).sqrt();
+        let nees = errors.iter().map(|(e, s)| (e / s).powi(2)).sum::<f64>() / n;
+        m.insert("visual.turn_error_rms_deg".into(), rms.to_degrees());
+        m.insert("visual.turn_nees".into(), nees);
+    }
+    m
 }
 
 /// Median of a sorted list.

@@ -10,7 +10,8 @@ use crate::fusion::{self, OdometryCalibration, Survey};
 use crate::io::{self, OutputDir};
 use crate::metrics::{score_survey, survey_metrics};
 use crate::progress::{timed, Progress};
-use crate::sonar::map::map_trajectory;
+use crate::sonar::grid::GridError;
+use crate::sonar::map::{map_trajectory, SonarMap};
 use crate::viz::{Recorder, Recording, RecordingRequest, SurveyScene};
 use crate::world::World;
 use rayon::prelude::*;
@@ -98,6 +99,32 @@ pub fn load_run_rig(run_dir: &Path, run: &RunDataset) -> Result<Option<StereoRig
     Ok(Some(rig))
 }
 
+/// A run and what surveying it needs, loaded.
+struct Inputs {
+    run: RunDataset,
+    world: Option<World>,
+    fuse: fusion::FuseConfig,
+    calibration: Option<OdometryCalibration>,
+    mapping: crate::sonar::map::MappingConfig,
+}
+
+impl Inputs {
+    fn load(request: &SurveyRequest<'_>) -> Result<Self> {
+        let run = load_run(request.run_dir)?;
+        let world = load_world_of_run(request.world, request.run_dir, &run)?;
+        let fuse = io::load_fuse_config(request.config)?;
+        let calibration = request.calibration_from.map(calibration_of).transpose()?;
+        let mapping = run.meta.mapping.clone().unwrap_or_default();
+        Ok(Self {
+            run,
+            world,
+            fuse,
+            calibration,
+            mapping,
+        })
+    }
+}
+
 /// [`survey`] writing into an output directory under construction (not committed here).
 pub fn survey_into(
     request: &SurveyRequest<'_>,
@@ -105,34 +132,95 @@ pub fn survey_into(
     progress: &dyn Progress,
 ) -> Result<SurveyOutput> {
     let started = std::time::Instant::now();
-    let run = load_run(request.run_dir)?;
-    let world = load_world_of_run(request.world, request.run_dir, &run)?;
-    let fuse = io::load_fuse_config(request.config)?;
-    let calibration = request.calibration_from.map(calibration_of).transpose()?;
-    let mapping = run.meta.mapping.clone().unwrap_or_default();
+    let inputs = Inputs::load(request)?;
     let recorder = Recorder::open(
         &request.recording,
         Recording::Survey,
         &dir.path("survey.rrd"),
     )?;
-    let rig = load_run_rig(request.run_dir, &run)?;
-    let detect_start = std::time::Instant::now();
+    let rig = load_run_rig(request.run_dir, &inputs.run)?;
     let options = DetectOptions {
         keep_images: recorder.is_some(),
-        visual_odometry: fuse.visual_odometry,
+        visual_odometry: inputs.fuse.visual_odometry,
         ..request.detect.clone()
     };
-    // The raw map needs no pictures: it is built on whichever core the detectors leave it.
-    let (detected, (raw, map_raw_s)) = rayon::join(
-        || match &rig {
-            Some(rig) => detect_run(
-                &options,
-                request.run_dir,
-                &run,
-                rig,
-                world.as_ref(),
-                progress,
-            ),
+    let mut timings = BTreeMap::new();
+    let (seen, raw, map_raw_s) = timed("detect", &mut timings, || {
+        detect_and_map(&inputs, &options, request.run_dir, rig.as_ref(), progress)
+    });
+    let seen = seen?;
+    // Both alongside each other: "detect" is their wall time, "map_raw" the map's alone.
+    timings.insert("map_raw".into(), map_raw_s);
+    let raw = raw?;
+    let (run, world, mapping) = (&inputs.run, inputs.world.as_ref(), &inputs.mapping);
+    // The pairs are compressed for the recording while the survey runs: it is mostly one thread
+    // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
+    let ((images, compress_s), result) = rayon::join(
+        || {
+            let t = std::time::Instant::now();
+            (compress_pairs(seen.images), t.elapsed().as_secs_f64())
+        },
+        || {
+            let settings = fusion::SurveySettings {
+                mapping,
+                fuse: &inputs.fuse,
+                calibration: inputs.calibration,
+            };
+            fusion::survey(run, raw, &seen.sightings, &seen.visual, &settings)
+        },
+    );
+    let result = result?;
+    let mut metrics = survey_metrics(&result, seen.sightings.len());
+    metrics.insert(
+        "online.calibration_from_earlier_survey".into(),
+        f64::from(u8::from(inputs.calibration.is_some())),
+    );
+    if let Some(w) = world {
+        metrics.extend(score_survey(&result, run, w, mapping)?);
+    }
+    timings.extend(result.timings_s.clone());
+    if let Some(rec) = &recorder {
+        // Alongside the survey's stages above, which it slows down on a two-core machine.
+        timings.insert("record_compress".into(), compress_s);
+        let scene = SurveyScene {
+            run,
+            world,
+            survey: &result,
+            sightings: &seen.sightings,
+            metrics: &metrics,
+            mapping,
+            rig: rig.as_ref(),
+            images: &images,
+        };
+        timed("record", &mut timings, || rec.log_survey(&scene))
+            .map_err(|e| Error::from(e).during("recording the survey"))?;
+    }
+    timings.insert("total".into(), started.elapsed().as_secs_f64());
+    io::save_survey(&dir.path(""), run, world, &result, &metrics, &timings)?;
+    if let Some(rec) = recorder {
+        rec.finish()
+            .map_err(|e| Error::from(e).during("finishing the recording"))?;
+    }
+    Ok(SurveyOutput {
+        survey: result,
+        metrics,
+        world: inputs.world,
+    })
+}
+
+/// The run's sightings and visual turns (none without a rig) and, alongside them on the other
+/// core, its raw map (the odometry's poses: it needs no pictures), with the map's seconds.
+fn detect_and_map(
+    inputs: &Inputs,
+    options: &DetectOptions,
+    run_dir: &Path,
+    rig: Option<&StereoRig>,
+    progress: &dyn Progress,
+) -> (Result<RunSightings>, RawMap, f64) {
+    let run = &inputs.run;
+    let (seen, (raw, seconds)) = rayon::join(
+        || match rig {
+            Some(rig) => detect_run(options, run_dir, run, rig, inputs.world.as_ref(), progress),
             None => Ok(RunSightings {
                 sightings: Vec::new(),
                 visual: Vec::new(),
@@ -141,82 +229,15 @@ pub fn survey_into(
         },
         || {
             let t = std::time::Instant::now();
-            let raw = map_trajectory(&run.sonar_log(), &run.odometry, &mapping);
+            let raw = map_trajectory(&run.sonar_log(), &run.odometry, &inputs.mapping);
             (raw, t.elapsed().as_secs_f64())
         },
     );
-    let RunSightings {
-        sightings,
-        visual,
-        images,
-    } = detected?;
-    let raw = raw?;
-    let detect_s = detect_start.elapsed().as_secs_f64();
-
-    // The pairs are compressed for the recording while the survey runs: it is mostly one thread
-    // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
-    let ((images, compress_s), result) = rayon::join(
-        || {
-            let t = std::time::Instant::now();
-            (compress_pairs(images), t.elapsed().as_secs_f64())
-        },
-        || {
-            let settings = fusion::SurveySettings {
-                mapping: &mapping,
-                fuse: &fuse,
-                calibration,
-            };
-            fusion::survey(&run, raw, &sightings, &visual, &settings)
-        },
-    );
-    let result = result?;
-    let mut metrics = survey_metrics(&result, sightings.len());
-    metrics.insert(
-        "online.calibration_from_earlier_survey".into(),
-        f64::from(u8::from(calibration.is_some())),
-    );
-    if let Some(w) = &world {
-        metrics.extend(score_survey(&result, &run, w, &mapping)?);
-    }
-    let mut timings = result.timings_s.clone();
-    // Both alongside each other: "detect" is their wall time, "map_raw" the map's alone.
-    timings.insert("detect".into(), detect_s);
-    timings.insert("map_raw".into(), map_raw_s);
-    if let Some(rec) = &recorder {
-        // Alongside the survey's stages above, which it slows down on a two-core machine.
-        timings.insert("record_compress".into(), compress_s);
-        let scene = SurveyScene {
-            run: &run,
-            world: world.as_ref(),
-            survey: &result,
-            sightings: &sightings,
-            metrics: &metrics,
-            mapping: &mapping,
-            rig: rig.as_ref(),
-            images: &images,
-        };
-        timed("record", &mut timings, || rec.log_survey(&scene))
-            .map_err(|e| Error::from(e).during("recording the survey"))?;
-    }
-    timings.insert("total".into(), started.elapsed().as_secs_f64());
-    io::save_survey(
-        &dir.path(""),
-        &run,
-        world.as_ref(),
-        &result,
-        &metrics,
-        &timings,
-    )?;
-    if let Some(rec) = recorder {
-        rec.finish()
-            .map_err(|e| Error::from(e).during("finishing the recording"))?;
-    }
-    Ok(SurveyOutput {
-        survey: result,
-        metrics,
-        world,
-    })
+    (seen, raw, seconds)
 }
+
+/// The map along the odometry, before any correction.
+type RawMap = std::result::Result<SonarMap, GridError>;
 
 /// The kept pairs compressed for the recording, in parallel, each freed once compressed.
 fn compress_pairs(images: Vec<Option<KeptPair>>) -> Vec<Option<(Vec<u8>, Vec<u8>)>> {
