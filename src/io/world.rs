@@ -117,63 +117,56 @@ fn finite(path: &Path, key: &str, values: &[f64]) -> Result<(), IoError> {
     }
 }
 
-/// Loads a world file, tracing its ROS map into walls if it has one.
-pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
-    let file: WorldFile = parse_yaml(path, &read_text(path)?)?;
-    let base = path.parent().unwrap_or(Path::new("."));
-    let mut walls = Vec::new();
-    for (i, w) in file.walls.iter().enumerate() {
-        let key = format!("walls[{i}]");
-        if w.polyline_m.len() < 2 {
-            return Err(IoError::content(
-                path,
-                format!("`{key}.polyline_m` needs at least two points"),
-            ));
-        }
-        let height = w.height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M);
-        if !(height.is_finite() && height > 0.0) {
-            return Err(IoError::content(
-                path,
-                format!("`{key}.height_m` must be positive"),
-            ));
-        }
-        let mut pts: Vec<Point2<f64>> = Vec::new();
-        for p in &w.polyline_m {
-            finite(path, &format!("{key}.polyline_m"), p)?;
-            pts.push(Point2::new(p[0], p[1]));
-        }
-        if w.closed {
-            pts.push(pts[0]);
-        }
-        for s in pts.windows(2) {
-            if (s[1] - s[0]).norm() > 1e-9 {
-                walls.push(Wall {
-                    segment: Segment::new(s[0], s[1]),
-                    height_m: height,
-                });
-            }
-        }
-    }
-    if let Some(m) = &file.map {
-        let yaml = base.join(&m.yaml);
-        let mut raster = load_ros_map(&yaml)?;
-        raster.remove_specks(m.min_blob_cells.unwrap_or(4));
-        let simplify = m.simplify_m.unwrap_or(0.05);
-        if !(simplify.is_finite() && simplify >= 0.0) {
-            return Err(IoError::content(path, "`map.simplify_m` must be >= 0"));
-        }
-        walls.extend(walls_from_raster(
-            &raster,
-            simplify,
-            m.wall_height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M),
-        ));
-    }
-    if walls.is_empty() {
+/// The walls along one polyline of the world file (`key` names it in errors).
+fn polyline_walls(path: &Path, key: &str, w: &WallSpec) -> Result<Vec<Wall>, IoError> {
+    if w.polyline_m.len() < 2 {
         return Err(IoError::content(
             path,
-            "the world has no walls: give `walls` or `map`",
+            format!("`{key}.polyline_m` needs at least two points"),
         ));
     }
+    let height = w.height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M);
+    if !(height.is_finite() && height > 0.0) {
+        return Err(IoError::content(
+            path,
+            format!("`{key}.height_m` must be positive"),
+        ));
+    }
+    let mut pts: Vec<Point2<f64>> = Vec::new();
+    for p in &w.polyline_m {
+        finite(path, &format!("{key}.polyline_m"), p)?;
+        pts.push(Point2::new(p[0], p[1]));
+    }
+    if w.closed {
+        pts.push(pts[0]);
+    }
+    Ok(pts
+        .windows(2)
+        .filter(|s| (s[1] - s[0]).norm() > 1e-9)
+        .map(|s| Wall {
+            segment: Segment::new(s[0], s[1]),
+            height_m: height,
+        })
+        .collect())
+}
+
+/// The walls traced from the world's ROS map.
+fn map_walls(path: &Path, yaml: &Path, m: &MapSpec) -> Result<Vec<Wall>, IoError> {
+    let mut raster = load_ros_map(yaml)?;
+    raster.remove_specks(m.min_blob_cells.unwrap_or(4));
+    let simplify = m.simplify_m.unwrap_or(0.05);
+    if !(simplify.is_finite() && simplify >= 0.0) {
+        return Err(IoError::content(path, "`map.simplify_m` must be >= 0"));
+    }
+    Ok(walls_from_raster(
+        &raster,
+        simplify,
+        m.wall_height_m.unwrap_or(DEFAULT_WALL_HEIGHT_M),
+    ))
+}
+
+/// The start, the tags and the people: finite, sized, each tag once.
+fn check_placements(path: &Path, file: &WorldFile) -> Result<(), IoError> {
     finite(
         path,
         "start",
@@ -207,6 +200,27 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
             finite(path, &format!("people[{i}].path_m"), q)?;
         }
     }
+    Ok(())
+}
+
+/// Loads a world file, tracing its ROS map into walls if it has one.
+pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
+    let file: WorldFile = parse_yaml(path, &read_text(path)?)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut walls = Vec::new();
+    for (i, w) in file.walls.iter().enumerate() {
+        walls.extend(polyline_walls(path, &format!("walls[{i}]"), w)?);
+    }
+    if let Some(m) = &file.map {
+        walls.extend(map_walls(path, &base.join(&m.yaml), m)?);
+    }
+    if walls.is_empty() {
+        return Err(IoError::content(
+            path,
+            "the world has no walls: give `walls` or `map`",
+        ));
+    }
+    check_placements(path, &file)?;
     file.mapping
         .grid
         .validate()

@@ -278,3 +278,78 @@ pub(super) fn log_surveyed_walls(
     }
     Ok(())
 }
+
+/// The height the sonar's beams and ranges are drawn at, m (about the transducers').
+pub(super) const SONAR_Z_M: f32 = 0.3;
+
+/// How much of the run one batch of sonar lines covers: one log call a second rather than one a
+/// reading keeps the recording small and the viewer's time line light.
+pub(super) const BATCH_S: f64 = 1.0;
+
+/// Line strips logged to one entity in batches of [`BATCH_S`] of the run, each at the time of its
+/// last strip.
+pub(super) struct StripBatches<'a> {
+    rec: &'a rerun::RecordingStream,
+    path: &'static str,
+    strips: Vec<Vec<[f32; 3]>>,
+    colors: Vec<rerun::Color>,
+    started_s: f64,
+    last_s: f64,
+}
+
+impl<'a> StripBatches<'a> {
+    /// No strips yet, for the entity at `path`.
+    pub(super) fn new(rec: &'a rerun::RecordingStream, path: &'static str) -> Self {
+        Self {
+            rec,
+            path,
+            strips: Vec::new(),
+            colors: Vec::new(),
+            started_s: f64::NEG_INFINITY,
+            last_s: 0.0,
+        }
+    }
+
+    /// Adds a strip seen at `t_s`, logging the batch before it when that one is full.
+    pub(super) fn push(
+        &mut self,
+        t_s: f64,
+        strip: Vec<[f32; 3]>,
+        color: rerun::Color,
+    ) -> Result<(), VizError> {
+        if t_s >= self.started_s + BATCH_S {
+            self.flush()?;
+            self.started_s = t_s;
+        }
+        self.last_s = t_s;
+        self.strips.push(strip);
+        self.colors.push(color);
+        Ok(())
+    }
+
+    /// Logs the strips not logged yet.
+    pub(super) fn flush(&mut self) -> Result<(), VizError> {
+        if self.strips.is_empty() {
+            return Ok(());
+        }
+        self.rec.set_duration_secs("time", self.last_s);
+        self.rec.log(
+            self.path,
+            &rerun::LineStrips3D::new(std::mem::take(&mut self.strips))
+                .with_colors(std::mem::take(&mut self.colors)),
+        )?;
+        Ok(())
+    }
+}
+
+/// A markdown table of `metric | value` rows under a title.
+pub(super) fn metrics_markdown<'m>(
+    title: &str,
+    metrics: impl IntoIterator<Item = (&'m String, &'m f64)>,
+) -> String {
+    let mut md = format!("# {title}\n\n| metric | value |\n|---|---|\n");
+    for (k, v) in metrics {
+        md.push_str(&format!("| {k} | {v:.4} |\n"));
+    }
+    md
+}

@@ -38,148 +38,154 @@ impl Recorder {
     /// Logs a localisation of a later run against a survey.
     pub fn log_localization(&self, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
         let rec = self.stream();
-        let r = scene.result;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         log_world(rec, scene.world)?;
         log_surveyed_walls(rec, scene.walls, None)?;
         for l in scene.landmarks {
             log_landmark(rec, l)?;
         }
-        let mut lines: Vec<(&str, &[StampedPose], rerun::Color)> = vec![
-            ("odometry", &scene.run.odometry, palette::ODOMETRY),
-            ("localized", &r.trajectory, palette::OFFLINE),
-        ];
-        if let Some(calibrated) = scene.calibrated_odometry {
-            lines.push(("odometry_calibrated", calibrated, palette::ONLINE));
-        }
-        if let Some(gt) = &scene.run.ground_truth {
-            lines.push(("ground_truth", gt, palette::GROUND_TRUTH));
-        }
-        log_trajectory_lines(rec, &lines)?;
-        log_robot(rec, &r.trajectory)?;
-
-        // Sightings at their time, placed with the localised pose: fused green, gated out red, tags
-        // the survey does not hold grey.
-        for (k, s) in scene.sightings.iter().enumerate() {
-            let Some(pose) = pose_at(&r.trajectory, s.t_s) else {
-                continue;
-            };
-            let p = pose.transform_point(nalgebra::Point2::new(
-                s.position_in_robot_m[0],
-                s.position_in_robot_m[1],
-            ));
-            let (what, color) = if r.accepted.contains(&k) {
-                ("fused", palette::FUSED)
-            } else if r.rejected.contains(&k) {
-                ("gated out", palette::GATED_OUT)
-            } else {
-                ("not surveyed", palette::NOT_SURVEYED)
-            };
-            rec.set_duration_secs("time", s.t_s);
-            rec.log(
-                "world/sightings",
-                &rerun::Points3D::new([[p.x as f32, p.y as f32, s.position_in_robot_m[2] as f32]])
-                    .with_labels([format!("tag {} {what}", s.id)])
-                    .with_colors([color])
-                    .with_radii([0.025f32]),
-            )?;
-        }
-
-        // The ranges matched with a surveyed wall, from the sensor along the beam axis, in batches
-        // of a second: fused cyan, gated out red.
-        let layout = &scene.run.meta.robot.sonar;
-        let mut batch: (Vec<[[f32; 3]; 2]>, Vec<rerun::Color>) = (Vec::new(), Vec::new());
-        let (mut batch_t, mut last_t) = (f64::NEG_INFINITY, 0.0);
-        let flush = |batch: &mut (Vec<[[f32; 3]; 2]>, Vec<rerun::Color>), t: f64| {
-            if batch.0.is_empty() {
-                return Ok::<(), VizError>(());
-            }
-            rec.set_duration_secs("time", t);
-            rec.log(
-                "world/sonar/ranges",
-                &rerun::LineStrips3D::new(std::mem::take(&mut batch.0))
-                    .with_colors(std::mem::take(&mut batch.1)),
-            )?;
-            Ok(())
-        };
-        for &(i, fused) in &r.range_outcomes {
-            let Some(reading) = scene.run.sonar.get(i) else {
-                continue;
-            };
-            let (Some(range), Some(sensor), Some(pose)) = (
-                reading.range_m,
-                layout.sensors.get(reading.sensor),
-                pose_at(&r.trajectory, reading.t_s),
-            ) else {
-                continue;
-            };
-            if reading.t_s >= batch_t + 1.0 {
-                flush(&mut batch, last_t)?;
-                batch_t = reading.t_s;
-            }
-            last_t = reading.t_s;
-            let o = pose.compose(&sensor.robot_from_sensor());
-            let end = [o.x + range * o.theta.cos(), o.y + range * o.theta.sin()];
-            batch.0.push([
-                [o.x as f32, o.y as f32, 0.3],
-                [end[0] as f32, end[1] as f32, 0.3],
-            ]);
-            batch.1.push(if fused {
-                palette::RANGE_FUSED
-            } else {
-                palette::GATED_OUT
-            });
-        }
-        flush(&mut batch, last_t)?;
-
-        // Error against the truth (when known), the filter's sigma and the distance since the last
-        // sighting.
-        let truth = scene.run.ground_truth.as_deref();
-        let mut next = f64::NEG_INFINITY;
-        for (i, p) in r.trajectory.iter().enumerate() {
-            if p.t_s < next {
-                continue;
-            }
-            next = p.t_s + POSE_SAMPLE_S;
-            rec.set_duration_secs("time", p.t_s);
-            rec.log("metrics/sigma_m", &rerun::Scalars::single(r.sigma_m[i]))?;
-            rec.log(
-                "metrics/since_sighting_m",
-                &rerun::Scalars::single(r.since_sighting_m[i]),
-            )?;
-            let Some(gt) = truth.and_then(|t| pose_at(t, p.t_s)) else {
-                continue;
-            };
-            rec.log(
-                "metrics/position_error_m/localized",
-                &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
-            )?;
-            let tracked = scene.calibrated_odometry.unwrap_or(&scene.run.odometry);
-            if let Some(o) = pose_at(tracked, p.t_s) {
-                rec.log(
-                    "metrics/position_error_m/odometry",
-                    &rerun::Scalars::single((o.x - gt.x).hypot(o.y - gt.y)),
-                )?;
-            }
-        }
+        log_trajectories(rec, scene)?;
+        log_sightings(rec, scene)?;
+        log_ranges(rec, scene)?;
+        log_errors(rec, scene)?;
         rec.reset_time();
-
-        let mut md = String::from("# stereotag localize\n\n| metric | value |\n|---|---|\n");
-        for (k, v) in scene.metrics {
-            md.push_str(&format!("| {k} | {v:.4} |\n"));
-        }
-        md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
-        for b in scene.growth {
-            md.push_str(&format!(
-                "| {:.1} | {:.1} | {} | {:.3} | {} |\n",
-                b.from_m,
-                b.to_m,
-                b.samples,
-                b.mean_sigma_m,
-                b.rms_error_m.map_or("-".into(), |e| format!("{e:.3}"))
-            ));
-        }
-        rec.log_static("report", &rerun::TextDocument::from_markdown(md))?;
-        Ok(())
+        log_report(rec, scene)
     }
+}
+
+/// The odometry (and its calibrated version), the localised trajectory, the truth and the robot.
+fn log_trajectories(
+    rec: &rerun::RecordingStream,
+    scene: &LocalizeScene<'_>,
+) -> Result<(), VizError> {
+    let r = scene.result;
+    let mut lines: Vec<(&str, &[StampedPose], rerun::Color)> = vec![
+        ("odometry", &scene.run.odometry, palette::ODOMETRY),
+        ("localized", &r.trajectory, palette::OFFLINE),
+    ];
+    if let Some(calibrated) = scene.calibrated_odometry {
+        lines.push(("odometry_calibrated", calibrated, palette::ONLINE));
+    }
+    if let Some(gt) = &scene.run.ground_truth {
+        lines.push(("ground_truth", gt, palette::GROUND_TRUTH));
+    }
+    log_trajectory_lines(rec, &lines)?;
+    log_robot(rec, &r.trajectory)
+}
+
+/// Sightings at their time, placed with the localised pose: fused green, gated out red, tags the
+/// survey does not hold grey.
+fn log_sightings(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let r = scene.result;
+    for (k, s) in scene.sightings.iter().enumerate() {
+        let Some(pose) = pose_at(&r.trajectory, s.t_s) else {
+            continue;
+        };
+        let p = pose.transform_point(nalgebra::Point2::new(
+            s.position_in_robot_m[0],
+            s.position_in_robot_m[1],
+        ));
+        let (what, color) = if r.accepted.contains(&k) {
+            ("fused", palette::FUSED)
+        } else if r.rejected.contains(&k) {
+            ("gated out", palette::GATED_OUT)
+        } else {
+            ("not surveyed", palette::NOT_SURVEYED)
+        };
+        rec.set_duration_secs("time", s.t_s);
+        rec.log(
+            "world/sightings",
+            &rerun::Points3D::new([[p.x as f32, p.y as f32, s.position_in_robot_m[2] as f32]])
+                .with_labels([format!("tag {} {what}", s.id)])
+                .with_colors([color])
+                .with_radii([0.025f32]),
+        )?;
+    }
+    Ok(())
+}
+
+/// The ranges matched with a surveyed wall, from the sensor along the beam axis: fused cyan,
+/// gated out red.
+fn log_ranges(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let r = scene.result;
+    let layout = &scene.run.meta.robot.sonar;
+    let mut batches = StripBatches::new(rec, "world/sonar/ranges");
+    for &(i, fused) in &r.range_outcomes {
+        let Some(reading) = scene.run.sonar.get(i) else {
+            continue;
+        };
+        let (Some(range), Some(sensor), Some(pose)) = (
+            reading.range_m,
+            layout.sensors.get(reading.sensor),
+            pose_at(&r.trajectory, reading.t_s),
+        ) else {
+            continue;
+        };
+        let o = pose.compose(&sensor.robot_from_sensor());
+        let end = [o.x + range * o.theta.cos(), o.y + range * o.theta.sin()];
+        let color = if fused {
+            palette::RANGE_FUSED
+        } else {
+            palette::GATED_OUT
+        };
+        let line = vec![
+            [o.x as f32, o.y as f32, SONAR_Z_M],
+            [end[0] as f32, end[1] as f32, SONAR_Z_M],
+        ];
+        batches.push(reading.t_s, line, color)?;
+    }
+    batches.flush()
+}
+
+/// The error against the truth (when known), the filter's sigma and the distance since the last
+/// sighting, over time.
+fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let r = scene.result;
+    let truth = scene.run.ground_truth.as_deref();
+    let tracked = scene.calibrated_odometry.unwrap_or(&scene.run.odometry);
+    let mut next = f64::NEG_INFINITY;
+    for (i, p) in r.trajectory.iter().enumerate() {
+        if p.t_s < next {
+            continue;
+        }
+        next = p.t_s + POSE_SAMPLE_S;
+        rec.set_duration_secs("time", p.t_s);
+        rec.log("metrics/sigma_m", &rerun::Scalars::single(r.sigma_m[i]))?;
+        rec.log(
+            "metrics/since_sighting_m",
+            &rerun::Scalars::single(r.since_sighting_m[i]),
+        )?;
+        let Some(gt) = truth.and_then(|t| pose_at(t, p.t_s)) else {
+            continue;
+        };
+        rec.log(
+            "metrics/position_error_m/localized",
+            &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
+        )?;
+        if let Some(o) = pose_at(tracked, p.t_s) {
+            rec.log(
+                "metrics/position_error_m/odometry",
+                &rerun::Scalars::single((o.x - gt.x).hypot(o.y - gt.y)),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// The figures and the error's growth with the distance since a sighting.
+fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let mut md = metrics_markdown("stereotag localize", scene.metrics);
+    md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
+    for b in scene.growth {
+        md.push_str(&format!(
+            "| {:.1} | {:.1} | {} | {:.3} | {} |\n",
+            b.from_m,
+            b.to_m,
+            b.samples,
+            b.mean_sigma_m,
+            b.rms_error_m.map_or("-".into(), |e| format!("{e:.3}"))
+        ));
+    }
+    rec.log_static("report", &rerun::TextDocument::from_markdown(md))?;
+    Ok(())
 }

@@ -4,9 +4,10 @@
 use super::draw::*;
 use super::palette;
 use super::{Recorder, SurveyScene, VizError, GRID_SNAPSHOT_S, POSE_SAMPLE_S};
-use crate::fusion::TagSighting;
-use crate::geometry::{pose_at, StampedPose};
+use crate::fusion::{Survey, TagSighting};
+use crate::geometry::{pose_at, Pose2, StampedPose};
 use crate::sonar::grid::{CountingGrid, OccupancyGrid};
+use crate::sonar::hough::{Accumulator, Feature};
 use nalgebra::Matrix3;
 use rerun::blueprint as bp;
 use std::collections::BTreeMap;
@@ -149,17 +150,19 @@ fn log_sonar_and_grid(
     scene: &SurveyScene<'_>,
 ) -> Result<(), VizError> {
     let s = scene.survey;
-    let layout = &scene.run.meta.robot.sonar;
-    let readings = scene.run.placed_readings(&s.online.trajectory);
-    let Ok(mut grid) = CountingGrid::new(
-        scene.mapping.grid.clone(),
-        layout.cone_rad,
-        layout.max_range_m,
-    ) else {
-        return Ok(());
-    };
-    // Hough accumulator and features: the final ones, static.
-    let acc = &s.raw.accumulator;
+    log_hough(rec, &s.raw.accumulator)?;
+    for (name, features) in [
+        ("raw", &s.raw.features_offline),
+        ("corrected", &s.corrected.features_offline),
+    ] {
+        log_features(rec, name, features)?;
+    }
+    log_corrected_map(rec, s)?;
+    log_growing_grid(rec, scene)
+}
+
+/// The final Hough accumulator as an image, votes on a log scale.
+fn log_hough(rec: &rerun::RecordingStream, acc: &Accumulator) -> Result<(), VizError> {
     let max = acc.votes.iter().copied().max().unwrap_or(1).max(1) as f64;
     let pixels: Vec<u8> = acc
         .votes
@@ -170,39 +173,38 @@ fn log_sonar_and_grid(
         "map/hough",
         &rerun::Image::from_l8(pixels, [acc.n_phi as u32, acc.n_rho as u32]),
     )?;
-    for (name, features) in [
-        ("raw", &s.raw.features_offline),
-        ("corrected", &s.corrected.features_offline),
-    ] {
-        let colors: Vec<rerun::Color> = features.iter().map(|f| feature_color(f.kind)).collect();
-        let labels: Vec<String> = features
-            .iter()
-            .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes))
-            .collect();
-        rec.log_static(
-            format!("world/features_{name}"),
-            &rerun::Points3D::new(features.iter().map(|f| [f.x_m as f32, f.y_m as f32, 0.0]))
-                .with_colors(colors)
-                .with_labels(labels)
-                .with_show_labels(false)
-                .with_radii([0.05f32]),
-        )?;
-    }
-    // The 2D maps: the online grid as it grows with the online trajectory, and the corrected grid
-    // with its features and the offline trajectory.
-    for (name, map, trajectory, color) in [
-        (
-            "online",
-            &s.corrected.counting,
-            &s.online.trajectory,
-            palette::ONLINE,
-        ),
-        (
-            "corrected",
-            &s.corrected.counting,
-            &s.offline.trajectory,
-            palette::OFFLINE,
-        ),
+    Ok(())
+}
+
+/// The Hough corners and edges in the 3D scene, coloured by kind.
+fn log_features(
+    rec: &rerun::RecordingStream,
+    name: &str,
+    features: &[Feature],
+) -> Result<(), VizError> {
+    let colors: Vec<rerun::Color> = features.iter().map(|f| feature_color(f.kind)).collect();
+    let labels: Vec<String> = features
+        .iter()
+        .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes))
+        .collect();
+    rec.log_static(
+        format!("world/features_{name}"),
+        &rerun::Points3D::new(features.iter().map(|f| [f.x_m as f32, f.y_m as f32, 0.0]))
+            .with_colors(colors)
+            .with_labels(labels)
+            .with_show_labels(false)
+            .with_radii([0.05f32]),
+    )?;
+    Ok(())
+}
+
+/// The 2D maps: the online and offline trajectories over the corrected grid, with its features
+/// and walls.
+fn log_corrected_map(rec: &rerun::RecordingStream, s: &Survey) -> Result<(), VizError> {
+    let map = &s.corrected.counting;
+    for (name, trajectory, color) in [
+        ("online", &s.online.trajectory, palette::ONLINE),
+        ("corrected", &s.offline.trajectory, palette::OFFLINE),
     ] {
         let traj: Vec<[f32; 2]> = trajectory
             .iter()
@@ -216,75 +218,69 @@ fn log_sonar_and_grid(
     let features = &s.corrected.features_offline;
     rec.log_static(
         "map/corrected/features",
-        &rerun::Points2D::new(
-            features
-                .iter()
-                .map(|f| map_pixel(&s.corrected.counting, f.x_m, f.y_m)),
-        )
-        .with_colors(
-            features
-                .iter()
-                .map(|f| feature_color(f.kind))
-                .collect::<Vec<_>>(),
-        )
-        .with_radii([1.0f32]),
+        &rerun::Points2D::new(features.iter().map(|f| map_pixel(map, f.x_m, f.y_m)))
+            .with_colors(
+                features
+                    .iter()
+                    .map(|f| feature_color(f.kind))
+                    .collect::<Vec<_>>(),
+            )
+            .with_radii([1.0f32]),
     )?;
-    rec.log_static("map/corrected/grid", &map_image(&s.corrected.counting))?;
-    log_surveyed_walls(rec, &s.corrected.walls, Some(&s.corrected.counting))?;
+    rec.log_static("map/corrected/grid", &map_image(map))?;
+    log_surveyed_walls(rec, &s.corrected.walls, Some(map))
+}
 
-    // The online grid (readings placed with the online poses) as it grows, and the sonar cones.
-    let half = 0.5 * layout.cone_rad;
-    let mut next_snapshot = f64::NEG_INFINITY;
-    let mut batch: Vec<Vec<[f32; 3]>> = Vec::new();
-    let mut batch_t = f64::NEG_INFINITY;
-    let flush = |batch: &mut Vec<Vec<[f32; 3]>>, t: f64| -> Result<(), VizError> {
-        if batch.is_empty() {
-            return Ok(());
-        }
-        rec.set_duration_secs("time", t);
-        rec.log(
-            "world/sonar/beams",
-            &rerun::LineStrips3D::new(std::mem::take(batch)).with_colors([palette::SONAR_BEAM]),
-        )?;
+/// The online grid (readings placed with the online poses) as it grows, with the sonar cones.
+fn log_growing_grid(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
+    let layout = &scene.run.meta.robot.sonar;
+    let readings = scene.run.placed_readings(&scene.survey.online.trajectory);
+    let Ok(mut grid) = CountingGrid::new(
+        scene.mapping.grid.clone(),
+        layout.cone_rad,
+        layout.max_range_m,
+    ) else {
+        return Ok(());
+    };
+    let log_grid = |grid: &CountingGrid, t_s: f64| -> Result<(), VizError> {
+        let map = grid.map();
+        rec.set_duration_secs("time", t_s);
+        rec.log("world/grid", &grid_map(&map))?;
+        rec.log("map/online/grid", &map_image(&map))?;
         Ok(())
     };
+    let mut beams = StripBatches::new(rec, "world/sonar/beams");
+    let mut next_snapshot = f64::NEG_INFINITY;
     for r in &readings {
         grid.insert(r);
         if let Some(range) = r.range_m {
-            let o = r.world_from_sensor;
-            let mut cone = vec![[o.x as f32, o.y as f32, 0.3]];
-            for k in 0..=6 {
-                let a = o.theta - half + layout.cone_rad * k as f64 / 6.0;
-                cone.push([
-                    (o.x + range * a.cos()) as f32,
-                    (o.y + range * a.sin()) as f32,
-                    0.3,
-                ]);
-            }
-            cone.push([o.x as f32, o.y as f32, 0.3]);
-            batch.push(cone);
-        }
-        if r.t_s >= batch_t + 1.0 {
-            flush(&mut batch, r.t_s)?;
-            batch_t = r.t_s;
+            let cone = cone_outline(&r.world_from_sensor, range, layout.cone_rad);
+            beams.push(r.t_s, cone, palette::SONAR_BEAM)?;
         }
         if r.t_s >= next_snapshot {
             next_snapshot = r.t_s + GRID_SNAPSHOT_S;
-            let map = grid.map();
-            rec.set_duration_secs("time", r.t_s);
-            rec.log("world/grid", &grid_map(&map))?;
-            rec.log("map/online/grid", &map_image(&map))?;
+            log_grid(&grid, r.t_s)?;
         }
     }
+    beams.flush()?;
     if let Some(last) = readings.last() {
-        flush(&mut batch, last.t_s)?;
-        let map = grid.map();
-        rec.set_duration_secs("time", last.t_s);
-        rec.log("world/grid", &grid_map(&map))?;
-        rec.log("map/online/grid", &map_image(&map))?;
+        log_grid(&grid, last.t_s)?;
     }
     rec.reset_time();
     Ok(())
+}
+
+/// A sonar cone drawn as a fan: from the sensor out to the range along seven rays and back.
+fn cone_outline(o: &Pose2, range: f64, cone_rad: f64) -> Vec<[f32; 3]> {
+    const RAYS: usize = 7;
+    let at = |x: f64, y: f64| [x as f32, y as f32, SONAR_Z_M];
+    let mut cone = vec![at(o.x, o.y)];
+    for k in 0..RAYS {
+        let a = o.theta - 0.5 * cone_rad + cone_rad * k as f64 / (RAYS - 1) as f64;
+        cone.push(at(o.x + range * a.cos(), o.y + range * a.sin()));
+    }
+    cone.push(at(o.x, o.y));
+    cone
 }
 
 fn log_cameras(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
@@ -456,10 +452,7 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
 }
 
 fn log_report(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
-    let mut md = String::from("# stereotag survey\n\n| metric | value |\n|---|---|\n");
-    for (k, v) in scene.metrics {
-        md.push_str(&format!("| {k} | {v:.4} |\n"));
-    }
+    let mut md = metrics_markdown("stereotag survey", scene.metrics);
     md.push_str("\n## Landmarks\n\n| tag | x m | y m | z m | sightings | corner |\n|---|---|---|---|---|---|\n");
     for l in &scene.survey.landmarks {
         md.push_str(&format!(

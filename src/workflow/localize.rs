@@ -5,12 +5,17 @@
 use super::sightings::{detect_run, DetectOptions, RunSightings};
 use super::survey::load_run_rig;
 use super::{load_run, load_world_of_run, Error, Result};
+use crate::dataset::RunDataset;
 use crate::fusion::{self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, SonarInput};
+use crate::geometry::StampedPose;
 use crate::io::{self, OutputDir};
 use crate::metrics::{error_growth, localization_metrics, GrowthBin, LocalizationCounts};
 use crate::progress::Progress;
 use crate::sonar::walls::WallSegment;
+use crate::visual::tags::TagFamily;
 use crate::viz::{LocalizeScene, Recorder, Recording, RecordingRequest};
+use std::borrow::Cow;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// What to localise against what.
@@ -86,15 +91,39 @@ fn filter_config(config: FuseConfig, calibration: Option<&OdometryCalibration>) 
     }
 }
 
-/// Localises a run against a survey and writes `localization.csv`, `report.json` and the
-/// recording into a new directory.
-pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Result<LocalizeOutput> {
-    let file = io::load_landmarks(&request.survey.join("landmarks.json"))?;
-    let calibration = file.odometry_calibration.filter(|_| !request.raw_odometry);
-    let landmarks: Vec<_> = file.landmarks.into_iter().map(|r| r.landmark).collect();
-    let walls = surveyed_walls(request.survey, request.no_walls)?;
-    let run = load_run(request.run_dir)?;
-    let odometry: std::borrow::Cow<'_, [_]> = match &calibration {
+/// What a survey gives a localisation.
+struct Surveyed {
+    landmarks: Vec<Landmark>,
+    walls: Vec<WallSegment>,
+    /// The odometry's errors the survey found, unless told to track with the raw odometry.
+    calibration: Option<OdometryCalibration>,
+}
+
+impl Surveyed {
+    fn load(request: &LocalizeRequest<'_>) -> Result<Self> {
+        let file = io::load_landmarks(&request.survey.join("landmarks.json"))?;
+        Ok(Self {
+            calibration: file.odometry_calibration.filter(|_| !request.raw_odometry),
+            landmarks: file.landmarks.into_iter().map(|r| r.landmark).collect(),
+            walls: surveyed_walls(request.survey, request.no_walls)?,
+        })
+    }
+
+    /// The tag families the survey holds, each once.
+    fn families(&self) -> Vec<TagFamily> {
+        let mut families: Vec<_> = self.landmarks.iter().map(|l| l.family).collect();
+        families.sort();
+        families.dedup();
+        families
+    }
+}
+
+/// The run's odometry, corrected with the survey's calibration when there is one.
+fn corrected_odometry<'r>(
+    run: &'r RunDataset,
+    calibration: Option<&OdometryCalibration>,
+) -> Cow<'r, [StampedPose]> {
+    match calibration {
         Some(c) => {
             tracing::info!(
                 "odometry corrected with the survey's calibration: turns {:+.2}%, drift {:+.4} rad/m, distances {:+.2}%",
@@ -105,8 +134,17 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             c.apply(&run.odometry).into()
         }
         None => run.odometry.as_slice().into(),
-    };
-    let config = filter_config(io::load_fuse_config(request.config)?, calibration.as_ref());
+    }
+}
+
+/// Localises a run against a survey and writes `localization.csv`, `report.json` and the
+/// recording into a new directory.
+pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Result<LocalizeOutput> {
+    let surveyed = Surveyed::load(request)?;
+    let run = load_run(request.run_dir)?;
+    let calibration = surveyed.calibration.as_ref();
+    let odometry = corrected_odometry(&run, calibration);
+    let config = filter_config(io::load_fuse_config(request.config)?, calibration);
     let world = load_world_of_run(request.world, request.run_dir, &run)?;
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
@@ -114,12 +152,9 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         Recording::Localization,
         &dir.path("localize.rrd"),
     )?;
-    let mut families: Vec<_> = landmarks.iter().map(|l| l.family).collect();
-    families.sort();
-    families.dedup();
     let options = DetectOptions {
         families: if request.detect.families.is_empty() {
-            families
+            surveyed.families()
         } else {
             request.detect.families.clone()
         },
@@ -136,12 +171,11 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             world.as_ref(),
             progress,
         )?,
-        None => RunSightings {
-            sightings: Vec::new(),
-            visual: Vec::new(),
-            images: Vec::new(),
-        },
+        None => RunSightings::default(),
     };
+    let Surveyed {
+        landmarks, walls, ..
+    } = surveyed;
     let sonar = SonarInput {
         readings: &run.sonar,
         layout: &run.meta.robot.sonar,
@@ -152,39 +186,31 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         sightings: &seen.sightings,
         visual: &seen.visual,
     };
-    let result = fusion::localize(
-        &obs,
-        &landmarks,
-        (!walls.is_empty()).then_some(sonar),
-        &config,
-    );
+    let sonar = (!walls.is_empty()).then_some(sonar);
+    let result = fusion::localize(&obs, &landmarks, sonar, &config);
     let truth = run.ground_truth.as_deref();
     let growth = error_growth(&result, truth);
     io::save_localization_csv(&dir.path("localization.csv"), &run.odometry, &result, truth)?;
-    let metrics = localization_metrics(
-        &result,
-        &run.odometry,
-        &odometry,
-        calibration.is_some(),
-        truth,
-        LocalizationCounts {
-            walls: walls.len(),
-            visual_turns: seen.visual.len(),
-        },
-    );
+    let counts = LocalizationCounts {
+        walls: walls.len(),
+        visual_turns: seen.visual.len(),
+    };
+    let calibrated = calibration.is_some();
+    let metrics =
+        localization_metrics(&result, &run.odometry, &odometry, calibrated, truth, counts);
     io::save_json(
         &dir.path("report.json"),
         &serde_json::json!({ "metrics": metrics, "error_growth": growth }),
     )?;
     if let Some(rec) = recorder {
-        let numbers: std::collections::BTreeMap<String, f64> = metrics
+        let numbers: BTreeMap<String, f64> = metrics
             .iter()
             .filter_map(|(k, v)| Some((k.clone(), v.as_f64()?)))
             .collect();
         let scene = LocalizeScene {
             run: &run,
             world: world.as_ref(),
-            calibrated_odometry: calibration.is_some().then_some(&*odometry),
+            calibrated_odometry: calibrated.then_some(&*odometry),
             landmarks: &landmarks,
             walls: &walls,
             sightings: &seen.sightings,

@@ -76,7 +76,8 @@ pub enum KeptPair {
     Jpeg(Vec<u8>, Vec<u8>),
 }
 
-/// What the pairs of a run gave.
+/// What the pairs of a run gave (nothing for a run without cameras).
+#[derive(Default)]
 pub struct RunSightings {
     /// Every tag sighting, in the order of the pairs.
     pub sightings: Vec<TagSighting>,

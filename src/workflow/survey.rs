@@ -221,11 +221,7 @@ fn detect_and_map(
     let (seen, (raw, seconds)) = rayon::join(
         || match rig {
             Some(rig) => detect_run(options, run_dir, run, rig, inputs.world.as_ref(), progress),
-            None => Ok(RunSightings {
-                sightings: Vec::new(),
-                visual: Vec::new(),
-                images: Vec::new(),
-            }),
+            None => Ok(RunSightings::default()),
         },
         || {
             let t = std::time::Instant::now();
