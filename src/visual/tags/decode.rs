@@ -114,7 +114,13 @@ pub(super) fn decode_quad(
         if family.reversed_border != quad.reversed_border {
             continue;
         }
-        let Some((id, hamming, rotation, margin)) = decode(im, family, &h, sharpening) else {
+        let Some(Code {
+            id,
+            hamming,
+            rotation,
+            margin,
+        }) = decode(im, family, &h, sharpening)
+        else {
             continue;
         };
         let theta = rotation as f64 * std::f64::consts::FRAC_PI_2;
@@ -144,14 +150,54 @@ pub(super) fn decode_quad(
     out
 }
 
-/// Reads the code inside the quad (`quad_decode`): (id, bits corrected, rotation, margin).
+/// A code read inside a quad.
+pub(super) struct Code {
+    /// The tag's id in its family.
+    pub(super) id: u32,
+    /// Bits corrected.
+    pub(super) hamming: u32,
+    /// Quarter turns from the quad's corner order to the tag's.
+    pub(super) rotation: u32,
+    /// The smaller of the mean white and mean black distances from the threshold.
+    pub(super) margin: f64,
+}
+
+/// Reads the code inside the quad (`quad_decode`): the border's gray models, each bit's value
+/// against their mean, sharpened, read as a code and looked up in every rotation.
 pub(super) fn decode(
     im: &GrayImage,
     family: &Family,
     h: &Homography,
     sharpening: f64,
-) -> Option<(u32, u32, u32, f64)> {
+) -> Option<Code> {
+    let (white, black) = border_models(im, family, h)?;
+    let mut values = bit_values(im, family, h, &white, &black);
+    sharpen(&mut values, family.total_width, sharpening);
+    let (mut rcode, margin) = read_bits(&values, family)?;
+    let codes = &family.code_data;
+    for rotation in 0..4 {
+        if let Some(e) = family.quick_decode.decode(rcode as usize, codes) {
+            return Some(Code {
+                id: e.id as u32,
+                hamming: e.hamming as u32,
+                rotation,
+                margin,
+            });
+        }
+        rcode = rotate90(rcode, family.nbits);
+    }
+    None
+}
+
+/// The white and black gray models fitted along the border's inside and outside; none when the
+/// border's polarity is not the family's.
+fn border_models(
+    im: &GrayImage,
+    family: &Family,
+    h: &Homography,
+) -> Option<(GrayModel, GrayModel)> {
     let wb = family.width_at_border as f64;
+    // (x0, y0, dx, dy, white): the four sides, just outside and just inside the border.
     let patterns: [(f64, f64, f64, f64, bool); 8] = [
         (-0.5, 0.5, 0.0, 1.0, true),
         (0.5, 0.5, 0.0, 1.0, false),
@@ -194,10 +240,26 @@ pub(super) fn decode(
     if (white.at(0.0, 0.0) - black.at(0.0, 0.0) < 0.0) != family.reversed_border {
         return None;
     }
+    Some((white, black))
+}
+
+/// The index of bit cell (`bx`, `by`) in the tag's `total_width` squared cells.
+fn cell(family: &Family, bx: i8, by: i8) -> usize {
+    let tw = family.total_width as i64;
+    let min_coord = (family.width_at_border as i64 - tw) / 2;
+    ((by as i64 - min_coord) * tw + bx as i64 - min_coord) as usize
+}
+
+/// Each bit's gray value less the threshold the models give at its place, on the tag's cells.
+fn bit_values(
+    im: &GrayImage,
+    family: &Family,
+    h: &Homography,
+    white: &GrayModel,
+    black: &GrayModel,
+) -> Vec<f64> {
+    let wb = family.width_at_border as f64;
     let tw = family.total_width;
-    let min_coord = (family.width_at_border as i64 - tw as i64) / 2;
-    let cell =
-        |bx: i8, by: i8| ((by as i64 - min_coord) * tw as i64 + bx as i64 - min_coord) as usize;
     let mut values = vec![0.0f64; tw * tw];
     for i in 0..family.nbits {
         let (bx, by) = (family.bit_x[i], family.bit_y[i]);
@@ -208,35 +270,44 @@ pub(super) fn decode(
             continue;
         };
         let thresh = (black.at(tagx, tagy) + white.at(tagx, tagy)) / 2.0;
-        values[cell(bx, by)] = v - thresh;
+        values[cell(family, bx, by)] = v - thresh;
     }
-    // Sharpen with a Laplacian.
+    values
+}
+
+/// Sharpens the `tw` x `tw` cell values with a Laplacian, `sharpening` of it added.
+fn sharpen(values: &mut [f64], tw: usize, sharpening: f64) {
     let mut sharpened = vec![0.0f64; tw * tw];
     let kernel = [0.0, -1.0, 0.0, -1.0, 4.0, -1.0, 0.0, -1.0, 0.0];
-    for y in 0..tw as i64 {
-        for x in 0..tw as i64 {
+    let tw = tw as i64;
+    for y in 0..tw {
+        for x in 0..tw {
             let mut acc = 0.0;
             for i in 0..3i64 {
                 for j in 0..3i64 {
                     let (yy, xx) = (y + i - 1, x + j - 1);
-                    if yy < 0 || yy >= tw as i64 || xx < 0 || xx >= tw as i64 {
+                    if yy < 0 || yy >= tw || xx < 0 || xx >= tw {
                         continue;
                     }
-                    acc += values[(yy * tw as i64 + xx) as usize] * kernel[(i * 3 + j) as usize];
+                    acc += values[(yy * tw + xx) as usize] * kernel[(i * 3 + j) as usize];
                 }
             }
-            sharpened[(y * tw as i64 + x) as usize] = acc;
+            sharpened[(y * tw + x) as usize] = acc;
         }
     }
     for (v, s) in values.iter_mut().zip(&sharpened) {
         *v += sharpening * s;
     }
+}
+
+/// The bits as a code (first bit highest) and the margin; none when the margin is negative.
+fn read_bits(values: &[f64], family: &Family) -> Option<(u64, f64)> {
     let (mut black_score, mut white_score) = (0.0f32, 0.0f32);
     let (mut black_count, mut white_count) = (1.0f32, 1.0f32);
     let mut rcode = 0u64;
     for i in 0..family.nbits {
         rcode <<= 1;
-        let v = values[cell(family.bit_x[i], family.bit_y[i])];
+        let v = values[cell(family, family.bit_x[i], family.bit_y[i])];
         if v > 0.0 {
             white_score += v as f32;
             white_count += 1.0;
@@ -247,17 +318,12 @@ pub(super) fn decode(
         }
     }
     let margin = (white_score / white_count).min(black_score / black_count) as f64;
+    // Not `margin >= 0.0`: a NaN margin goes on to the look-up, as in the C library.
     if margin < 0.0 {
-        return None;
+        None
+    } else {
+        Some((rcode, margin))
     }
-    let codes = &family.code_data;
-    for rotation in 0..4 {
-        if let Some(e) = family.quick_decode.decode(rcode as usize, codes) {
-            return Some((e.id as u32, e.hamming as u32, rotation, margin));
-        }
-        rcode = rotate90(rcode, family.nbits);
-    }
-    None
 }
 
 /// Keeps one of any two detections of the same tag whose quads overlap: fewer bits corrected,
