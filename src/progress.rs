@@ -1,5 +1,6 @@
-//! Progress of long work and the time its stages take, reported to whoever runs it: the command line draws bars from it, a
-//! program embedding the library may show it or ignore it ([`Silent`]).
+//! Progress of long work and the time its stages take, reported to whoever runs it: the command
+//! line draws bars from it, a program embedding the library may show it or ignore it
+//! ([`Silent`]).
 //!
 //! A workflow announces each stage with [`Progress::start`] (its name and number of steps),
 //! reports steps as they are done (from worker threads too, hence `Sync`) and closes the stage

@@ -82,7 +82,7 @@ pub struct FuseConfig {
     /// sighting, position sigma 0.6 m, then 2 m and 19 degrees off).
     pub sonar_max_range_sigma_m: f64,
     /// Hold the survey's trajectory after its last sighting to the walls mapped before it
-    /// ([`hold_tail_to_walls`]; ours: on).
+    /// ([`super::localize::hold_tail_to_walls`]; ours: on).
     pub hold_tail_to_walls: bool,
     /// Fuse the turns the cameras measure between frames ([`crate::visual::vo`]) with the odometry,
     /// online and offline (ours: on; they are used when the run's pictures give them).
@@ -161,7 +161,7 @@ impl FuseConfig {
         Ok(())
     }
 
-    /// The settings for odometry already corrected with a survey's [`OdometryCalibration`]: the
+    /// The settings for odometry already corrected with a survey's [`super::OdometryCalibration`]: the
     /// turn noise is then what the calibration leaves
     /// (`calibrated_heading_sigma_per_sqrt_rad`), not the wheel-base error it removed.
     pub fn for_calibrated_odometry(&self) -> Self {

@@ -80,6 +80,24 @@ impl SonarMap {
 
 /// Builds the grids, features and walls of a run's sonar with the readings placed along
 /// `trajectory` (odometry, ground truth or a corrected estimate).
+///
+/// The sonar half alone, on two minutes of a simulated office:
+///
+/// ```
+/// use stereotag::sim::{simulate, SimConfig};
+/// use stereotag::sonar::map::{map_trajectory, MappingConfig};
+///
+/// let path = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/office/world.yaml");
+/// let office = stereotag::io::load_world(std::path::Path::new(path))?;
+/// let mut config: SimConfig = office.simulation.clone();
+/// config.exploration.duration_s = 120.0;
+/// let run = simulate(&office.world, &config, |_| {}).expect("a valid world").run;
+/// let map = map_trajectory(&run.sonar_log(), &run.odometry, &MappingConfig::default())
+///     .expect("valid grid settings");
+/// println!("{} corners and edges, {} walls", map.features_offline.len(), map.walls.len());
+/// assert!(!map.features_offline.is_empty());
+/// # Ok::<(), stereotag::io::IoError>(())
+/// ```
 pub fn map_trajectory(
     sonar: &SonarLog<'_>,
     trajectory: &[StampedPose],

@@ -92,6 +92,34 @@ pub struct CalibrationViews {
 /// Calibrates a rig and writes `camchain.yaml`, `opencv_stereo.yaml`, `left.yaml`,
 /// `right.yaml`, `report.json`, `rectified.png` (when asked) and the recording into a new
 /// directory. Progress: one step per image pair.
+///
+/// ```no_run
+/// use std::path::Path;
+/// use stereotag::camera::LensModel;
+/// use stereotag::progress::Silent;
+/// use stereotag::viz::RecordingRequest;
+/// use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
+///
+/// let out = calibrate(
+///     &CalibrateRequest {
+///         target: Path::new("calibration/targets/checkerboard_9x6.yaml"),
+///         input: CalibrationInput::Images {
+///             left: "images/*_left.jpg",
+///             right: "images/*_right.jpg",
+///         },
+///         resolution: None,
+///         model: LensModel::Radtan,
+///         fix_intrinsics: None,
+///         out: Path::new("calib/my-rig"),
+///         force: false,
+///         rectify_pair: None,
+///         recording: RecordingRequest::none(),
+///     },
+///     &Silent,
+/// )?;
+/// println!("baseline {:.4} m", out.calibration.rig.baseline_m());
+/// # Ok::<(), stereotag::workflow::Error>(())
+/// ```
 pub fn calibrate(
     request: &CalibrateRequest<'_>,
     progress: &dyn Progress,

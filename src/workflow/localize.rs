@@ -139,6 +139,34 @@ fn corrected_odometry<'r>(
 
 /// Localises a run against a survey and writes `localization.csv`, `report.json` and the
 /// recording into a new directory.
+///
+/// ```no_run
+/// use std::path::Path;
+/// use stereotag::progress::Silent;
+/// use stereotag::visual::tags::Backend;
+/// use stereotag::viz::RecordingRequest;
+/// use stereotag::workflow::localize::{localize, LocalizeRequest};
+/// use stereotag::workflow::sightings::DetectOptions;
+///
+/// let out = localize(
+///     &LocalizeRequest {
+///         survey: Path::new("surveys/office"),
+///         run_dir: Path::new("runs/office-tuesday"),
+///         out: Path::new("localized/office-tuesday"),
+///         world: None,
+///         config: None,
+///         detect: DetectOptions::survey(Backend::ApriltagC),
+///         raw_odometry: false,
+///         no_walls: false,
+///         force: false,
+///         recording: RecordingRequest::none(),
+///     },
+///     &Silent,
+/// )?;
+/// let last = out.result.trajectory.last().unwrap();
+/// println!("ended at {:?}", last.pose);
+/// # Ok::<(), stereotag::workflow::Error>(())
+/// ```
 pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Result<LocalizeOutput> {
     let surveyed = Surveyed::load(request)?;
     let run = load_run(request.run_dir)?;

@@ -38,6 +38,23 @@ pub struct MapOutput {
 
 /// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
 /// `corners.csv`, `corners_online.csv`, `walls.csv` and `report.json` into a new directory.
+///
+/// ```no_run
+/// use std::path::Path;
+/// use stereotag::dataset::PoseSource;
+/// use stereotag::workflow::map::{map, MapRequest};
+///
+/// let out = map(&MapRequest {
+///     run_dir: Path::new("runs/office"),
+///     out: Path::new("maps/office"),
+///     poses: PoseSource::Odometry,
+///     world: None,
+///     config: None,
+///     force: false,
+/// })?;
+/// println!("{} corners", out.map.features_offline.len());
+/// # Ok::<(), stereotag::workflow::Error>(())
+/// ```
 pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     let run = load_run(request.run_dir)?;
     let config = match request.config {

@@ -154,6 +154,24 @@ type PerPair = (Vec<TagSighting>, Option<KeptPair>, Option<VisualTurn>);
 /// Detects and triangulates the tags of every stereo pair of `run` (read from `run_dir`), and
 /// measures the turns between its pictures when asked, in parallel; `world` gives the tag sizes
 /// and families when known. Progress: one step per pair.
+///
+/// ```no_run
+/// use std::path::Path;
+/// use stereotag::progress::Silent;
+/// use stereotag::visual::tags::Backend;
+/// use stereotag::workflow::sightings::{detect_run, DetectOptions};
+/// use stereotag::workflow::{load_run, survey::load_run_rig};
+///
+/// let dir = Path::new("runs/office");
+/// let run = load_run(dir)?;
+/// let rig = load_run_rig(dir, &run)?.expect("the run has stereo pairs");
+/// let options = DetectOptions::survey(Backend::ApriltagC);
+/// let seen = detect_run(&options, dir, &run, &rig, None, &Silent)?;
+/// for s in &seen.sightings {
+///     println!("{:.1} s: tag {} at {:?} m from the robot", s.t_s, s.id, s.position_in_robot_m);
+/// }
+/// # Ok::<(), stereotag::workflow::Error>(())
+/// ```
 pub fn detect_run(
     options: &DetectOptions,
     run_dir: &Path,

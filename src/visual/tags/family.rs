@@ -20,7 +20,7 @@ pub enum TagFamily {
     #[serde(rename = "tagStandard41h12")]
     TagStandard41h12,
     /// Kalibr's AprilGrid tags: tag36h11's codes with a 2-bit black border, found by the
-    /// AprilGrid detector ([`AprilGridDetector`]) alone.
+    /// AprilGrid detector ([`super::AprilGridDetector`]) alone.
     #[serde(rename = "aprilgrid36h11")]
     Aprilgrid36h11,
 }

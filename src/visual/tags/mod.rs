@@ -154,6 +154,27 @@ pub enum Backend {
 
 impl Backend {
     /// A detector of this backend with `config`, or the error naming the setting it refuses.
+    ///
+    /// ```
+    /// use stereotag::visual::tags::{Backend, DetectorConfig, TagFamily};
+    ///
+    /// // Tag 7 of tag36h11, 20 pixels a cell, on a white page.
+    /// let tag = TagFamily::Tag36h11.code_image(7).unwrap();
+    /// let (n, cell, margin) = (tag.total_cells as i64, 20, 40);
+    /// let side = (n * cell + 2 * margin) as u32;
+    /// let image = image::GrayImage::from_fn(side, side, |x, y| {
+    ///     let (x, y) = (x as i64 - margin, y as i64 - margin);
+    ///     let inside = (0..n * cell).contains(&x) && (0..n * cell).contains(&y);
+    ///     let white = !inside || tag.white[((y / cell) * n + x / cell) as usize];
+    ///     image::Luma([if white { 255 } else { 0 }])
+    /// });
+    /// let mut detector = Backend::ApriltagC.detector(DetectorConfig::default())?;
+    /// let found = detector.detect(&image)?;
+    /// assert_eq!(found.len(), 1);
+    /// assert_eq!((found[0].family, found[0].id), (TagFamily::Tag36h11, 7));
+    /// println!("centre {:?} px, corners {:?}", found[0].centre_px, found[0].corners_px);
+    /// # Ok::<(), stereotag::visual::tags::TagError>(())
+    /// ```
     pub fn detector(self, config: DetectorConfig) -> Result<Box<dyn TagDetector + Send>, TagError> {
         Ok(match self {
             Backend::Kornia => Box::new(KorniaDetector::new(config)?),

@@ -314,7 +314,7 @@ pub struct VoImage {
 impl VoImage {
     /// From an 8-bit grey image. Only the quarter resolution gets integral images: the searches
     /// there cover many positions (a whole epipolar line, the tracking radius); the few at half
-    /// and full resolution sum the columns of their own patches ([`Level::box_sums_row`]).
+    /// and full resolution sum the columns of their own patches (`Level::box_sums_row`).
     pub fn new(gray: &image::GrayImage) -> Self {
         let full = binomial5_gray(gray);
         let half = full.halved();
