@@ -1,7 +1,6 @@
 use super::survey::Backend;
-use super::UsageError;
 use std::path::PathBuf;
-use stereotag::visual::tags::{DetectorConfig, TagFamily};
+use stereotag::visual::tags::DetectorConfig;
 use stereotag::workflow::detect::{detect, DetectOutput, DetectRequest};
 
 /// Arguments of `stereotag detect`.
@@ -46,17 +45,7 @@ pub struct Detect {
 
 impl Detect {
     pub fn run(&self) -> anyhow::Result<()> {
-        let families = self
-            .family
-            .iter()
-            .map(|f| {
-                TagFamily::from_name(f).ok_or_else(|| {
-                    UsageError(format!(
-                        "--family {f}: expected tag36h11, tag25h9, tag16h5 or tagStandard41h12"
-                    ))
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let families = super::families(&self.family)?;
         super::check_decimate(self.decimate)?;
         let output = detect(&DetectRequest {
             images: &self.images,

@@ -15,6 +15,7 @@ mod survey;
 
 use clap::{CommandFactory, Parser, Subcommand};
 use std::path::PathBuf;
+use stereotag::visual::tags::TagFamily;
 
 /// Map a home with sonar and keep the robot's pose honest with stereo AprilTag landmarks.
 #[derive(Debug, Parser)]
@@ -270,4 +271,18 @@ pub(crate) fn check_decimate(decimate: f32) -> Result<(), UsageError> {
             "--decimate {decimate}: must be at least 1"
         )))
     }
+}
+
+/// The families named by `--family` flags.
+pub(crate) fn families(names: &[String]) -> Result<Vec<TagFamily>, UsageError> {
+    names
+        .iter()
+        .map(|f| {
+            TagFamily::from_name(f).ok_or_else(|| {
+                UsageError(format!(
+                    "--family {f}: expected tag36h11, tag25h9, tag16h5 or tagStandard41h12"
+                ))
+            })
+        })
+        .collect()
 }

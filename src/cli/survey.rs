@@ -2,7 +2,6 @@ use super::{Bars, UsageError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use stereotag::fusion::Survey;
-use stereotag::visual::tags::TagFamily;
 use stereotag::workflow::sightings::{survey_decimate, DetectOptions, SURVEY_MIN_CONTRAST};
 use stereotag::workflow::survey::{survey, SurveyRequest};
 use stereotag::world::World;
@@ -88,17 +87,7 @@ impl DetectArgs {
     /// The detector options these flags give (the survey's defaults where none is given).
     pub(crate) fn options(&self) -> Result<DetectOptions, UsageError> {
         let backend = self.backend.into();
-        let families = self
-            .family
-            .iter()
-            .map(|f| {
-                TagFamily::from_name(f).ok_or_else(|| {
-                    UsageError(format!(
-                        "family {f}: expected tag36h11, tag25h9, tag16h5 or tagStandard41h12"
-                    ))
-                })
-            })
-            .collect::<Result<_, _>>()?;
+        let families = super::families(&self.family)?;
         Ok(DetectOptions {
             families,
             decimate: self.decimate.unwrap_or(survey_decimate(backend)),

@@ -8,6 +8,25 @@ use crate::geometry::{wrap_angle, Pose2, StampedPose};
 use crate::visual::tags::TagId;
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector2, Vector3};
 
+/// The Jacobians of `pose ∘ (dx, dy, dθ)` with respect to the pose and to the step, for a pose
+/// at heading `theta`.
+fn compose_jacobians(theta: f64, dx: f64, dy: f64) -> (Matrix3<f64>, Matrix3<f64>) {
+    let (s, c) = theta.sin_cos();
+    #[rustfmt::skip]
+    let wrt_pose = Matrix3::new(
+        1.0, 0.0, -s * dx - c * dy,
+        0.0, 1.0, c * dx - s * dy,
+        0.0, 0.0, 1.0,
+    );
+    #[rustfmt::skip]
+    let wrt_step = Matrix3::new(
+        c, -s, 0.0,
+        s, c, 0.0,
+        0.0, 0.0, 1.0,
+    );
+    (wrt_pose, wrt_step)
+}
+
 /// The EKF state: pose first, then three numbers per landmark.
 pub(crate) struct Ekf {
     pub(crate) x: DVector<f64>,
@@ -82,19 +101,7 @@ impl Ekf {
     }
 
     pub(crate) fn predict(&mut self, delta: &Pose2, q: &Matrix3<f64>) {
-        let (s, c) = self.x[2].sin_cos();
-        let f = Matrix3::new(
-            1.0,
-            0.0,
-            -s * delta.x - c * delta.y,
-            0.0,
-            1.0,
-            c * delta.x - s * delta.y,
-            0.0,
-            0.0,
-            1.0,
-        );
-        let g = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let (f, g) = compose_jacobians(self.x[2], delta.x, delta.y);
         let moved = self.pose().compose(delta);
         self.x[0] = moved.x;
         self.x[1] = moved.y;
@@ -267,18 +274,7 @@ impl Ekf {
             self.x[1] + s * z.x + c * z.y,
             wrap_angle(self.x[2] + z.z),
         );
-        let gp = Matrix3::new(
-            1.0,
-            0.0,
-            -s * z.x - c * z.y,
-            0.0,
-            1.0,
-            c * z.x - s * z.y,
-            0.0,
-            0.0,
-            1.0,
-        );
-        let gz = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let (gp, gz) = compose_jacobians(self.x[2], z.x, z.y);
         let n = self.x.len();
         let mut x = DVector::zeros(n + 3);
         x.rows_mut(0, n).copy_from(&self.x);

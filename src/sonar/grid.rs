@@ -275,13 +275,74 @@ pub trait OccupancyGrid {
     }
 }
 
-/// The paper's simple counting grid.
+/// What both grids share: their settings and cells, and the sonar cone they update.
 #[derive(Debug, Clone)]
-pub struct CountingGrid {
+struct ConeCells {
     config: GridConfig,
     geometry: GridGeometry,
     half_cone_rad: f64,
     max_range_m: f64,
+}
+
+impl ConeCells {
+    fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
+        config.validate()?;
+        Ok(Self {
+            geometry: GridGeometry::from_config(&config),
+            config,
+            half_cone_rad: 0.5 * cone_rad,
+            max_range_m,
+        })
+    }
+
+    fn cells(&self) -> usize {
+        self.geometry.width * self.geometry.height
+    }
+
+    /// How far the reading reaches and whether it ends in an echo: a range within the sensor's
+    /// reach, or (when no echo counts as free) its whole reach without one.
+    fn extent(&self, r: &PlacedReading) -> Option<(f64, bool)> {
+        match r.range_m {
+            Some(range) if range.is_finite() && range >= 0.0 && range <= self.max_range_m => {
+                Some((range, true))
+            }
+            Some(_) | None if self.config.no_echo_is_free => Some((self.max_range_m, false)),
+            _ => None,
+        }
+    }
+
+    /// Visits the cells the reading's cone says something about, with what it says.
+    fn visit(
+        &self,
+        reading: &PlacedReading,
+        range: f64,
+        hit: bool,
+        visit: impl FnMut(usize, CellEvidence),
+    ) {
+        self.geometry
+            .for_each_cone_cell(reading, self.half_cone_rad, range, hit, visit);
+    }
+
+    /// The map of these cells with each cell's occupancy (`None`: too little evidence).
+    fn map(&self, occupancy: Vec<Option<f64>>) -> OccupancyMap {
+        OccupancyMap {
+            geometry: self.geometry.clone(),
+            occupancy,
+            occupied_threshold: self.config.occupied_threshold,
+            free_threshold: self.config.free_threshold,
+        }
+    }
+
+    /// Whether `n` observations of a cell are enough to say something about it.
+    fn enough(&self, n: u32) -> bool {
+        n >= self.config.min_evidence.max(1)
+    }
+}
+
+/// The paper's simple counting grid.
+#[derive(Debug, Clone)]
+pub struct CountingGrid {
+    cells: ConeCells,
     hits: Vec<u32>,
     misses: Vec<u32>,
 }
@@ -289,14 +350,10 @@ pub struct CountingGrid {
 impl CountingGrid {
     /// An empty grid for sensors with the given beam width and maximum range.
     pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
-        config.validate()?;
-        let geometry = GridGeometry::from_config(&config);
-        let n = geometry.width * geometry.height;
+        let cells = ConeCells::new(config, cone_rad, max_range_m)?;
+        let n = cells.cells();
         Ok(Self {
-            config,
-            geometry,
-            half_cone_rad: 0.5 * cone_rad,
-            max_range_m,
+            cells,
             hits: vec![0; n],
             misses: vec![0; n],
         })
@@ -311,44 +368,23 @@ impl CountingGrid {
     }
 }
 
-fn reading_extent(
-    r: &PlacedReading,
-    max_range_m: f64,
-    no_echo_is_free: bool,
-) -> Option<(f64, bool)> {
-    match r.range_m {
-        Some(range) if range.is_finite() && range >= 0.0 && range <= max_range_m => {
-            Some((range, true))
-        }
-        Some(_) | None if no_echo_is_free => Some((max_range_m, false)),
-        _ => None,
-    }
-}
-
 impl OccupancyGrid for CountingGrid {
     fn insert(&mut self, reading: &PlacedReading) {
-        let Some((range, hit)) =
-            reading_extent(reading, self.max_range_m, self.config.no_echo_is_free)
-        else {
+        let Some((range, hit)) = self.cells.extent(reading) else {
             return;
         };
-        let near = hit && range < self.config.near_range_m;
+        let config = &self.cells.config;
+        let near = hit && range < config.near_range_m;
         let (wh, wm) = if near {
-            (self.config.near_hit, self.config.near_miss)
+            (config.near_hit, config.near_miss)
         } else {
-            (self.config.far_hit, self.config.far_miss)
+            (config.far_hit, config.far_miss)
         };
         let (hits, misses) = (&mut self.hits, &mut self.misses);
-        self.geometry.for_each_cone_cell(
-            reading,
-            self.half_cone_rad,
-            range,
-            hit,
-            |idx, e| match e {
-                CellEvidence::Hit => hits[idx] += wh,
-                CellEvidence::Miss => misses[idx] += wm,
-            },
-        );
+        self.cells.visit(reading, range, hit, |idx, e| match e {
+            CellEvidence::Hit => hits[idx] += wh,
+            CellEvidence::Miss => misses[idx] += wm,
+        });
     }
 
     fn map(&self) -> OccupancyMap {
@@ -356,20 +392,9 @@ impl OccupancyGrid for CountingGrid {
             .hits
             .iter()
             .zip(&self.misses)
-            .map(|(&h, &m)| {
-                if h + m < self.config.min_evidence.max(1) {
-                    None
-                } else {
-                    Some(h as f64 / (h + m) as f64)
-                }
-            })
+            .map(|(&h, &m)| self.cells.enough(h + m).then(|| h as f64 / (h + m) as f64))
             .collect();
-        OccupancyMap {
-            geometry: self.geometry.clone(),
-            occupancy,
-            occupied_threshold: self.config.occupied_threshold,
-            free_threshold: self.config.free_threshold,
-        }
+        self.cells.map(occupancy)
     }
 }
 
@@ -383,10 +408,7 @@ pub const LOG_ODDS_CLAMP: f32 = 8.0;
 /// A Bayesian log-odds grid over the same cone cells.
 #[derive(Debug, Clone)]
 pub struct LogOddsGrid {
-    config: GridConfig,
-    geometry: GridGeometry,
-    half_cone_rad: f64,
-    max_range_m: f64,
+    cells: ConeCells,
     log_odds: Vec<f32>,
     seen: Vec<u32>,
 }
@@ -394,14 +416,10 @@ pub struct LogOddsGrid {
 impl LogOddsGrid {
     /// An empty grid.
     pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
-        config.validate()?;
-        let geometry = GridGeometry::from_config(&config);
-        let n = geometry.width * geometry.height;
+        let cells = ConeCells::new(config, cone_rad, max_range_m)?;
+        let n = cells.cells();
         Ok(Self {
-            config,
-            geometry,
-            half_cone_rad: 0.5 * cone_rad,
-            max_range_m,
+            cells,
             log_odds: vec![0.0; n],
             seen: vec![0; n],
         })
@@ -410,24 +428,18 @@ impl LogOddsGrid {
 
 impl OccupancyGrid for LogOddsGrid {
     fn insert(&mut self, reading: &PlacedReading) {
-        let Some((range, hit)) =
-            reading_extent(reading, self.max_range_m, self.config.no_echo_is_free)
-        else {
+        let Some((range, hit)) = self.cells.extent(reading) else {
             return;
         };
         let (lo, seen) = (&mut self.log_odds, &mut self.seen);
-        self.geometry
-            .for_each_cone_cell(reading, self.half_cone_rad, range, hit, |idx, e| {
-                let l = &mut lo[idx];
-                *l = (*l
-                    + if e == CellEvidence::Hit {
-                        LOG_ODDS_HIT
-                    } else {
-                        LOG_ODDS_MISS
-                    })
-                .clamp(-LOG_ODDS_CLAMP, LOG_ODDS_CLAMP);
-                seen[idx] += 1;
-            });
+        self.cells.visit(reading, range, hit, |idx, e| {
+            let step = match e {
+                CellEvidence::Hit => LOG_ODDS_HIT,
+                CellEvidence::Miss => LOG_ODDS_MISS,
+            };
+            lo[idx] = (lo[idx] + step).clamp(-LOG_ODDS_CLAMP, LOG_ODDS_CLAMP);
+            seen[idx] += 1;
+        });
     }
 
     fn map(&self) -> OccupancyMap {
@@ -436,15 +448,12 @@ impl OccupancyGrid for LogOddsGrid {
             .iter()
             .zip(&self.seen)
             .map(|(&l, &s)| {
-                (s >= self.config.min_evidence.max(1)).then(|| 1.0 - 1.0 / (1.0 + (l as f64).exp()))
+                self.cells
+                    .enough(s)
+                    .then(|| 1.0 - 1.0 / (1.0 + (l as f64).exp()))
             })
             .collect();
-        OccupancyMap {
-            geometry: self.geometry.clone(),
-            occupancy,
-            occupied_threshold: self.config.occupied_threshold,
-            free_threshold: self.config.free_threshold,
-        }
+        self.cells.map(occupancy)
     }
 }
 
