@@ -206,7 +206,7 @@ fn wall_held(
     let g = &map.geometry;
     let mut held = vec![false; g.width * g.height];
     for &i in free {
-        let (x, y) = g.centre(i % g.width, i / g.width);
+        let [x, y] = g.centre(i % g.width, i / g.width);
         // The range a sonar facing the wall head-on would measure from here (a hair of cone:
         // the beam's angle to the normal rounds to about 1e-16 rad).
         held[i] = walls.iter().any(|w| {
@@ -274,7 +274,7 @@ fn covered(map: &OccupancyMap, at: (f64, f64), free: &[usize], config: &PlanConf
     free.iter()
         .copied()
         .filter(|&i| {
-            let (x, y) = g.centre(i % g.width, i / g.width);
+            let [x, y] = g.centre(i % g.width, i / g.width);
             let d = (x - at.0).hypot(y - at.1);
             d <= config.capture_range_m && line_of_sight(map, (x, y), at, config)
         })

@@ -47,5 +47,5 @@ pub use localize::{
 };
 pub use observations::Observations;
 pub use offline::{run_offline, OdometryCalibration, OfflineResult};
-pub use online::{run_online, OnlineResolve, OnlineResult};
+pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use survey::{survey, Survey, SurveySettings};

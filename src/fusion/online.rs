@@ -29,7 +29,7 @@ pub struct OnlineResult {
     /// Filtered pose at each sighting (same order as the input), used to start the offline pass.
     pub pose_at_sighting: Vec<Pose2>,
     /// Normalised innovation squared of each accepted update (for consistency plots).
-    pub nis: Vec<(f64, f64)>,
+    pub nis: Vec<Nis>,
     /// Position sigma of the pose (√ of the largest eigenvalue) at each odometry time, metres.
     pub sigma_m: Vec<f64>,
     /// Each re-solve of the graph of the run so far ([`FuseConfig::online_resolve`]).
@@ -38,6 +38,16 @@ pub struct OnlineResult {
     pub visual_fused: usize,
     /// Visual turns gated out.
     pub visual_rejected: usize,
+}
+
+/// The normalised innovation squared of one accepted sighting: about 3 on average (its degrees
+/// of freedom) when the filter's covariance is honest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Nis {
+    /// When, seconds.
+    pub t_s: f64,
+    /// The NIS.
+    pub value: f64,
 }
 
 /// One re-solve of the online graph: what the filter took from it.
@@ -307,7 +317,10 @@ fn fuse_sighting(
                 return false;
             }
             ekf.update(&y, &s, &jac, &r);
-            result.nis.push((sighting.t_s, d2));
+            result.nis.push(Nis {
+                t_s: sighting.t_s,
+                value: d2,
+            });
             slot
         }
         None => {

@@ -454,7 +454,7 @@ fn choose_target(
             dist[j] = dist[i] + 1;
             if map.occupancy[j].is_none() {
                 // A frontier cell: score by unknown cells around, minus travel.
-                let (x, y) = g.centre(cc as usize, rr as usize);
+                let [x, y] = g.centre(cc as usize, rr as usize);
                 if failed.iter().any(|f| (f.x - x).hypot(f.y - y) < 1.0) {
                     continue;
                 }
@@ -482,7 +482,7 @@ fn choose_target(
         }
     }
     best.map(|(_, j)| {
-        let (x, y) = g.centre(j % g.width, j / g.width);
+        let [x, y] = g.centre(j % g.width, j / g.width);
         Point2::new(x, y)
     })
 }

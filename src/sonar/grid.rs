@@ -163,11 +163,11 @@ impl GridGeometry {
     }
 
     /// Centre of a cell in the world, metres.
-    pub fn centre(&self, col: usize, row: usize) -> (f64, f64) {
-        (
+    pub fn centre(&self, col: usize, row: usize) -> [f64; 2] {
+        [
             self.origin_m[0] + (col as f64 + 0.5) * self.resolution_m,
             self.origin_m[1] + (row as f64 + 0.5) * self.resolution_m,
-        )
+        ]
     }
 
     /// Calls `visit(index, evidence)` for each cell the reading says something about.

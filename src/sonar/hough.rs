@@ -450,7 +450,7 @@ pub fn is_mid_wall(f: &Feature, map: &OccupancyMap) -> bool {
             if !map.is_occupied(idx) {
                 continue;
             }
-            let (x, y) = g.centre(c as usize, r as usize);
+            let [x, y] = g.centre(c as usize, r as usize);
             let d = (x - f.x_m).hypot(y - f.y_m);
             if !(WALL_RING_M.0..=WALL_RING_M.1).contains(&d) {
                 continue;
@@ -489,7 +489,7 @@ pub fn classify_features(features: &mut [Feature], map: &OccupancyMap) {
                 if c < 0 || r < 0 || c >= g.width as i64 || r >= g.height as i64 {
                     continue;
                 }
-                let (x, y) = g.centre(c as usize, r as usize);
+                let [x, y] = g.centre(c as usize, r as usize);
                 let d = (x - f.x_m).hypot(y - f.y_m);
                 if !(RING_M.0..=RING_M.1).contains(&d) {
                     continue;

@@ -4,7 +4,7 @@
 use super::draw::*;
 use super::palette;
 use super::{Recorder, SurveyScene, VizError, GRID_SNAPSHOT_S, POSE_SAMPLE_S};
-use crate::fusion::{Survey, TagSighting};
+use crate::fusion::{Nis, Survey, TagSighting};
 use crate::geometry::{pose_at, Pose2, StampedPose};
 use crate::sonar::grid::{CountingGrid, OccupancyGrid};
 use crate::sonar::hough::{Accumulator, Feature};
@@ -396,9 +396,9 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
             }
         }
     }
-    for (t, nis) in &s.online.nis {
-        rec.set_duration_secs("time", *t);
-        rec.log("metrics/tag_nis", &rerun::Scalars::single(*nis))?;
+    for &Nis { t_s: t, value: nis } in &s.online.nis {
+        rec.set_duration_secs("time", t);
+        rec.log("metrics/tag_nis", &rerun::Scalars::single(nis))?;
     }
     // Each turn the cameras measured, at the picture it ends: its error against the truth beside
     // the wheels' over the same stretch, and its sigma.

@@ -135,7 +135,7 @@ fn save_predicted_error(
     let mut csv = String::from("x_m,y_m,error_m\n");
     for (i, e) in cell_errors_m.iter().enumerate() {
         if let Some(e) = e {
-            let (x, y) = g.centre(i % g.width, i / g.width);
+            let [x, y] = g.centre(i % g.width, i / g.width);
             let _ = writeln!(csv, "{x:.3},{y:.3},{e:.4}");
         }
     }

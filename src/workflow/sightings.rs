@@ -148,8 +148,23 @@ struct Shared<'a> {
     compress_now: bool,
 }
 
-/// What one pair gave: its sightings, its images for the recording, the turn it starts.
-type PerPair = (Vec<TagSighting>, Option<KeptPair>, Option<VisualTurn>);
+/// What one pair gave.
+struct PerPair {
+    sightings: Vec<TagSighting>,
+    /// Its images, when the recording keeps them.
+    kept: Option<KeptPair>,
+    /// The turn from this picture to the next one the visual odometry measures from it.
+    turn: Option<VisualTurn>,
+}
+
+/// A picture a visual-odometry turn starts from: its index, its images prepared, and the picture
+/// the turn ends at.
+struct TurnStart {
+    frame: usize,
+    left: VoImage,
+    right: VoImage,
+    to: usize,
+}
 
 /// Detects and triangulates the tags of every stereo pair of `run` (read from `run_dir`), and
 /// measures the turns between its pictures when asked, in parallel; `world` gives the tag sizes
@@ -239,16 +254,12 @@ pub fn detect_run(
         )
         .collect();
     progress.finish();
-    let mut out = RunSightings {
-        sightings: Vec::new(),
-        visual: Vec::new(),
-        images: Vec::new(),
-    };
+    let mut out = RunSightings::default();
     for r in per_run {
-        for (s, e, v) in r? {
-            out.sightings.extend(s);
-            out.images.push(e);
-            out.visual.extend(v);
+        for pair in r? {
+            out.sightings.extend(pair.sightings);
+            out.images.push(pair.kept);
+            out.visual.extend(pair.turn);
         }
     }
     tracing::info!(
@@ -295,16 +306,10 @@ impl Shared<'_> {
         let (run, rig) = (self.run, self.rig);
         let last = (first + RUN_OF_PAIRS).min(run.stereo.len());
         let mut out: Vec<PerPair> = Vec::with_capacity(last - first);
-        // The picture a turn starts from (its index and prepared images), and where to.
-        let mut from: Option<(usize, VoImage, VoImage, usize)> = None;
+        let mut from: Option<TurnStart> = None;
         for (frame, entry) in run.stereo.iter().enumerate().take(last).skip(first) {
-            let (left_path, right_path) = (
-                self.run_dir.join(&entry.left),
-                self.run_dir.join(&entry.right),
-            );
-            let (left, right) = (io::load_gray(&left_path)?, io::load_gray(&right_path)?);
-            io::check_image_size(&left, &rig.left, &left_path, "the rig")?;
-            io::check_image_size(&right, &rig.right, &right_path, "the rig")?;
+            let left = load_checked(&self.run_dir.join(&entry.left), &rig.left)?;
+            let right = load_checked(&self.run_dir.join(&entry.right), &rig.right)?;
             let (sightings, rejected) = sightings_from_pair(
                 detector,
                 rig,
@@ -324,25 +329,34 @@ impl Shared<'_> {
                     r.reason
                 );
             }
-            let ends = from.as_ref().is_some_and(|f| f.3 == frame);
+            let ends = from.as_ref().is_some_and(|f| f.to == frame);
             let starts = self.next[frame].is_some();
             if ends || starts {
                 let here = VoImage::new(&left);
-                if let Some((a, a_left, a_right, _)) = from.take().filter(|_| ends) {
-                    out[a - first].2 = self.visual_turn((a, &a_left, &a_right), (frame, &here));
+                if let Some(start) = from.take().filter(|_| ends) {
+                    out[start.frame - first].turn = self.visual_turn(&start, &here);
                 }
                 if let Some(to) = self.next[frame] {
-                    from = Some((frame, here, VoImage::new(&right), to));
+                    from = Some(TurnStart {
+                        frame,
+                        left: here,
+                        right: VoImage::new(&right),
+                        to,
+                    });
                 }
             }
-            out.push((sightings, self.kept(frame, tag_found, left, right), None));
+            out.push(PerPair {
+                sightings,
+                kept: self.kept(frame, tag_found, left, right),
+                turn: None,
+            });
             progress.advance(1);
         }
         // A turn into the next run of pairs: its last picture decoded here as well.
-        if let Some((a, a_left, a_right, to)) = from {
-            let image = load_checked(&self.run_dir.join(&run.stereo[to].left), &rig.left)?;
+        if let Some(start) = from {
+            let image = load_checked(&self.run_dir.join(&run.stereo[start.to].left), &rig.left)?;
             let here = VoImage::new(&image);
-            out[a - first].2 = self.visual_turn((a, &a_left, &a_right), (to, &here));
+            out[start.frame - first].turn = self.visual_turn(&start, &here);
         }
         Ok(out)
     }
@@ -365,18 +379,20 @@ impl Shared<'_> {
         }
     }
 
-    /// The turn from picture `from` to picture `to` of the run (their images prepared), measured
-    /// by the visual odometry from the odometry's; `None` when the pictures do not show it (too
-    /// little texture in common).
-    fn visual_turn(
-        &self,
-        (from, left, right): (usize, &VoImage, &VoImage),
-        (to, next): (usize, &VoImage),
-    ) -> Option<VisualTurn> {
+    /// The turn from picture `start` to the left image `next` of the picture it ends at,
+    /// measured by the visual odometry from the odometry's; `None` when the pictures do not show
+    /// it (too little texture in common).
+    fn visual_turn(&self, start: &TurnStart, next: &VoImage) -> Option<VisualTurn> {
         let run = self.run;
-        let (a, b) = (&run.stereo[from], &run.stereo[to]);
+        let (a, b) = (&run.stereo[start.frame], &run.stereo[start.to]);
         let prior = pose_at(&run.odometry, a.t_s)?.between(&pose_at(&run.odometry, b.t_s)?);
-        match relative_motion(self.rig, (left, right), next, &prior, &self.vo) {
+        match relative_motion(
+            self.rig,
+            (&start.left, &start.right),
+            next,
+            &prior,
+            &self.vo,
+        ) {
             Ok(m) => Some(m.turn(a.t_s, b.t_s)),
             Err(e) => {
                 tracing::debug!(
