@@ -90,6 +90,7 @@ pub mod geometry;
 pub mod imgproc;
 pub mod io;
 pub mod metrics;
+pub mod picture;
 pub mod plan;
 pub mod progress;
 pub mod render;

@@ -31,8 +31,9 @@ pub struct Calibrate {
     /// Keep this rig file's intrinsics and distortion; solve right_from_left only.
     #[arg(long, value_name = "RIG")]
     fix_intrinsics: Option<PathBuf>,
-    /// Output directory: camchain.yaml, opencv_stereo.yaml, left.yaml, right.yaml, report.json,
-    /// calibration.rrd.
+    /// Output directory: camchain.yaml (Kalibr), opencv_stereo.yaml (OpenCV), left.yaml and
+    /// right.yaml (ROS camera_info), report.json, calibration.rrd, and rectified.png with
+    /// --rectify-pair.
     #[arg(long)]
     out: PathBuf,
     /// Replace the output directory if it exists.

@@ -17,7 +17,6 @@ impl Config {
                 self.kind
             ))
         })?;
-        print!("{}", settings.default_yaml());
-        Ok(())
+        super::print_out(&settings.default_yaml())
     }
 }

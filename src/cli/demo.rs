@@ -7,7 +7,7 @@ use stereotag::workflow::sightings::DetectOptions;
 /// Arguments of `stereotag demo`.
 #[derive(Debug, clap::Args)]
 pub struct Demo {
-    /// Output directory.
+    /// Output directory: the run in run/, the survey's files (`survey --help`) and survey.rrd.
     #[arg(long, default_value = "out")]
     out: PathBuf,
     /// World to run (default: the bundled office).
@@ -51,22 +51,32 @@ impl Demo {
             },
             &Bars::new(quiet),
         )?;
+        if quiet {
+            return Ok(());
+        }
         let survey = &output.survey;
         super::survey::print_summary(&survey.survey, &survey.metrics, survey.world.as_ref());
         let get = |k: &str| survey.metrics.get(k).copied().unwrap_or(f64::NAN);
-        println!(
-            "stereotag demo: {} -> {}",
+        let mut see = format!("{}/landmarks.json, map_corrected.png", self.out.display());
+        let default_rrd = self.out.join("survey.rrd");
+        match self.rerun.written_file(&default_rrd) {
+            Some(rrd) if rrd == default_rrd => see += ", survey.rrd",
+            Some(rrd) => see += &format!(", {}", rrd.display()),
+            None => {}
+        }
+        let mut text = format!(
+            "stereotag demo: {} -> {}\n",
             self.world.display(),
             self.out.display()
         );
-        println!(
-            "  trajectory error (ATE): odometry {:.3} m -> online {:.3} m -> offline {:.3} m",
+        text += &format!(
+            "  trajectory error (ATE): odometry {:.3} m -> online {:.3} m -> offline {:.3} m\n",
             get("ate_m.odometry"),
             get("ate_m.online"),
             get("ate_m.offline")
         );
-        println!(
-            "  map occupied precision/recall: raw {:.3}/{:.3} -> corrected {:.3}/{:.3} (ground-truth poses {:.3}/{:.3})",
+        text += &format!(
+            "  map occupied precision/recall: raw {:.3}/{:.3} -> corrected {:.3}/{:.3} (ground-truth poses {:.3}/{:.3})\n",
             get("map.occupied_precision"),
             get("map.occupied_recall"),
             get("map_corrected.occupied_precision"),
@@ -74,20 +84,18 @@ impl Demo {
             get("map_ground_truth.occupied_precision"),
             get("map_ground_truth.occupied_recall"),
         );
-        if survey.survey.landmarks.is_empty() {
-            println!(
-                "  no landmarks: the robot saw no tag ({} sightings); see {}/map_corrected.png, survey.rrd",
+        text += &if survey.survey.landmarks.is_empty() {
+            format!(
+                "  no landmarks: the robot saw no tag ({} sightings); see {see}\n",
                 get("sightings.total"),
-                self.out.display()
-            );
+            )
         } else {
-            println!(
-                "  {} landmarks, median position error {:.1} mm; see {}/landmarks.json, map_corrected.png, survey.rrd",
+            format!(
+                "  {} landmarks, median position error {:.1} mm; see {see}\n",
                 survey.survey.landmarks.len(),
                 get("landmarks.median_error_m") * 1e3,
-                self.out.display()
-            );
-        }
-        Ok(())
+            )
+        };
+        super::print_out(&text)
     }
 }

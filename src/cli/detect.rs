@@ -82,7 +82,7 @@ impl Detect {
                 serde_json::json!({ "detections": all })
             }
         };
-        println!("{}", serde_json::to_string_pretty(&json)?);
+        super::print_out(&(serde_json::to_string_pretty(&json)? + "\n"))?;
         Ok(())
     }
 }

@@ -11,7 +11,7 @@ pub struct Localize {
     /// The new run to track.
     #[arg(long)]
     run: PathBuf,
-    /// Output directory.
+    /// Output directory: localization.csv, report.json and localize.rrd.
     #[arg(long)]
     out: PathBuf,
     /// World file for the tag sizes (default: the one run.yaml names, if it exists).

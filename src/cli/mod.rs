@@ -10,6 +10,7 @@ mod map;
 mod plan;
 mod render;
 mod rig;
+mod samples;
 mod simulate;
 mod survey;
 
@@ -24,11 +25,19 @@ use stereotag::visual::tags::TagFamily;
     after_help = "Example:\n  stereotag demo\n  stereotag simulate --world samples/office/world.yaml --out runs/office\n  stereotag map --run runs/office --out maps/office"
 )]
 pub struct Cli {
-    /// Only print errors.
-    #[arg(short, long, global = true)]
+    /// Print errors only: no progress bars, warnings or summaries (data asked for on standard
+    /// output, such as `detect`'s JSON, is still printed).
+    #[arg(
+        short,
+        long,
+        global = true,
+        display_order = 1000,
+        conflicts_with = "verbose"
+    )]
     quiet: bool,
-    /// Print more (repeat for debug output).
-    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    /// Print more: -v adds each stage's details (tags rejected and why, failed visual turns,
+    /// solver steps); -vv adds every picture's detections. RUST_LOG overrides both.
+    #[arg(short, long, global = true, display_order = 1001, action = clap::ArgAction::Count)]
     verbose: u8,
     #[command(subcommand)]
     command: Command,
@@ -36,10 +45,18 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Simulate the office sample and map it: writes out/run and out/map.
+    /// Simulate a robot exploring the office sample with its stereo camera, then survey the run:
+    /// writes the run to out/run and the survey (landmarks, maps, trajectories, report,
+    /// survey.rrd) to out.
     ///
     /// Example: stereotag demo --out out
     Demo(demo::Demo),
+    /// Write the samples, calibration targets and rigs built into stereotag to a directory, to
+    /// edit them (commands read the built-in copies of `samples/...` and `calibration/...` when
+    /// the files are not there).
+    ///
+    /// Example: stereotag samples --out .
+    Samples(samples::Samples),
     /// Simulate a robot exploring a world; writes a run dataset.
     ///
     /// Example: stereotag simulate --world samples/office/world.yaml --out runs/office
@@ -99,6 +116,36 @@ enum Command {
     },
 }
 
+/// Whether log lines may be coloured: standard error is a terminal and `NO_COLOR` is not set
+/// (<https://no-color.org>).
+fn colour_on_stderr() -> bool {
+    use std::io::IsTerminal;
+    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+}
+
+/// Ctrl-C or SIGTERM: removes the outputs under construction and exits with 130, as a shell
+/// does for a command stopped by SIGINT.
+fn interrupted() {
+    let removed = stereotag::io::remove_partial_outputs();
+    if removed > 0 {
+        eprintln!("interrupted: the unfinished output was removed");
+    } else {
+        eprintln!("interrupted");
+    }
+    std::process::exit(130);
+}
+
+/// Prints `text` to standard output. A reader that went away (`stereotag detect .. | head`) is
+/// not an error: the rest is not wanted.
+pub(crate) fn print_out(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
 /// Errors caused by the user's input: exit status 2.
 fn is_input_error(err: &anyhow::Error) -> bool {
     err.chain().any(|e| {
@@ -129,10 +176,15 @@ pub fn main() -> i32 {
         .with_env_filter(filter)
         .with_target(false)
         .without_time()
+        .with_ansi(colour_on_stderr())
         .with_writer(std::io::stderr)
         .init();
+    if let Err(e) = ctrlc::set_handler(interrupted) {
+        tracing::debug!("no Ctrl-C handler: {e}");
+    }
     let result = match &cli.command {
         Command::Demo(c) => c.run(cli.quiet),
+        Command::Samples(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
         Command::Map(c) => c.run(),
         Command::Survey(c) => c.run(cli.quiet),
@@ -144,13 +196,9 @@ pub fn main() -> i32 {
         Command::Render(c) => c.run(cli.quiet),
         Command::Config(c) => c.run(),
         Command::Completions { shell } => {
-            clap_complete::generate(
-                *shell,
-                &mut Cli::command(),
-                "stereotag",
-                &mut std::io::stdout(),
-            );
-            Ok(())
+            let mut script = Vec::new();
+            clap_complete::generate(*shell, &mut Cli::command(), "stereotag", &mut script);
+            print_out(&String::from_utf8_lossy(&script))
         }
     };
     match result {
@@ -229,8 +277,8 @@ impl stereotag::progress::Progress for Bars {
 /// Where a command's Rerun recording goes.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct RerunArgs {
-    /// Write the recording to this .rrd file (default: the output directory's survey.rrd, or
-    /// localize.rrd for `localize`).
+    /// Write the recording to this .rrd file instead of the output directory's (named in
+    /// --out's help).
     #[arg(long, value_name = "FILE.rrd")]
     save: Option<PathBuf>,
     /// Stream the recording to a new Rerun viewer (the `rerun` executable on PATH).
@@ -253,12 +301,33 @@ impl RerunArgs {
                 p.display()
             )));
         }
+        if self.spawn && !stereotag::viz::viewer_on_path() {
+            return Err(UsageError(format!(
+                "--spawn: no Rerun viewer (`rerun`) on PATH; install it with `pip install rerun-sdk=={}`, or write the recording with --save FILE.rrd and open it later",
+                stereotag::viz::VIEWER_VERSION
+            )));
+        }
         Ok(stereotag::viz::RecordingRequest {
             off: self.no_rerun,
             save: self.save.clone(),
             spawn: self.spawn,
             connect: self.connect.clone(),
         })
+    }
+}
+
+impl RerunArgs {
+    /// The `.rrd` file these flags write: `--save`'s, else `default` unless the recording only
+    /// streams to a viewer or is off.
+    pub(crate) fn written_file(&self, default: &std::path::Path) -> Option<PathBuf> {
+        match (
+            &self.save,
+            self.no_rerun || self.spawn || self.connect.is_some(),
+        ) {
+            (Some(p), _) => Some(p.clone()),
+            (None, false) => Some(default.to_path_buf()),
+            (None, true) => None,
+        }
     }
 }
 

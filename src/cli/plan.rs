@@ -8,15 +8,16 @@ pub struct PlanArgs {
     /// A map directory from `stereotag map` or `survey` (map.yaml + map.pgm and corners.csv).
     #[arg(long)]
     map: PathBuf,
-    /// Write plan.json here (default: print it).
+    /// Output directory: plan.json, predicted_error.csv and plan.png, a picture of the map with
+    /// the tags (default: print plan.json).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Largest useful distance to a tag, metres.
-    #[arg(long)]
-    range_m: Option<f64>,
+    #[arg(long, default_value_t = PlanConfig::default().capture_range_m)]
+    range_m: f64,
     /// Tags at most.
-    #[arg(long)]
-    max_tags: Option<usize>,
+    #[arg(long, default_value_t = PlanConfig::default().max_tags)]
+    max_tags: usize,
     /// Predict the error with these tags instead of proposing some: a survey's landmarks.json
     /// (the tags already up).
     #[arg(long, value_name = "LANDMARKS_JSON")]
@@ -41,12 +42,8 @@ impl PlanArgs {
         } else {
             PlanConfig::default()
         };
-        if let Some(r) = self.range_m {
-            config.capture_range_m = r;
-        }
-        if let Some(n) = self.max_tags {
-            config.max_tags = n;
-        }
+        config.capture_range_m = self.range_m;
+        config.max_tags = self.max_tags;
         let output = plan(&PlanRequest {
             map: &self.map,
             out: self.out.as_deref(),
@@ -106,7 +103,7 @@ impl PlanArgs {
             }
         };
         if self.out.is_none() {
-            println!("{}", serde_json::to_string_pretty(json)?);
+            super::print_out(&(serde_json::to_string_pretty(json)? + "\n"))?;
         }
         Ok(())
     }

@@ -12,7 +12,9 @@ pub struct SurveyArgs {
     /// Run dataset directory.
     #[arg(long)]
     run: PathBuf,
-    /// Output directory.
+    /// Output directory: landmarks.json, layout.json (WPILib), map*.yaml/pgm/png (raw, online
+    /// and corrected), corners*.csv, walls_corrected.csv, hough*.png, trajectory.csv,
+    /// visual_turns.csv, report.json and survey.rrd.
     #[arg(long)]
     out: PathBuf,
     /// World file to score against and to give planned tag positions (default: the one run.yaml

@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 /// Settings of the fusion stage. Defaults say where they come from.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct FuseConfig {
     /// Translation noise of odometry, m per √m travelled (ours: 1 cm/√m, five times the simulated

@@ -87,7 +87,11 @@ fn read_ros_map(yaml_path: &Path) -> Result<(RosMapYaml, image::GrayImage), IoEr
         .parent()
         .unwrap_or(Path::new("."))
         .join(&meta.image);
-    let img = image::open(&image_path)
+    let bytes = super::bundled::read(&image_path)?;
+    let img = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| IoError::file(&image_path, e))?
+        .decode()
         .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
         .to_luma8();
     Ok((meta, img))
@@ -119,17 +123,6 @@ pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
     })
 }
 
-fn save_gray_pixels(
-    path: &Path,
-    width: usize,
-    height: usize,
-    pixels: Vec<u8>,
-) -> Result<(), IoError> {
-    let img = image::GrayImage::from_raw(width as u32, height as u32, pixels)
-        .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))?;
-    save_gray_png(path, &img)
-}
-
 /// Writes a grey image as PNG (the image crate's default compression).
 pub fn save_gray_png(path: &Path, image: &image::GrayImage) -> Result<(), IoError> {
     image
@@ -137,37 +130,32 @@ pub fn save_gray_png(path: &Path, image: &image::GrayImage) -> Result<(), IoErro
         .map_err(|e| IoError::content(path, format!("cannot write PNG: {e}")))
 }
 
-/// The paper's display: occupancy normalised to [0, 1] over the map, drawn inverse grey (black =
-/// most occupied, white = free or unseen), north up.
-pub fn save_map_png(path: &Path, map: &OccupancyMap) -> Result<(), IoError> {
-    let g = &map.geometry;
-    let max = map
-        .occupancy
-        .iter()
-        .flatten()
-        .fold(0.0f64, |a, &b| a.max(b))
-        .max(1e-9);
-    let mut pixels = vec![255u8; g.width * g.height];
-    for row in 0..g.height {
-        for col in 0..g.width {
-            if let Some(c) = map.occupancy[row * g.width + col] {
-                pixels[(g.height - 1 - row) * g.width + col] =
-                    (255.0 * (1.0 - c / max)).round() as u8;
-            }
-        }
-    }
-    save_gray_pixels(path, g.width, g.height, pixels)
+/// Writes a picture of `map` (the picture module's [`map_picture`](crate::picture::map_picture):
+/// a fixed scale, axes in metres, unknown distinct from free) with `overlay` drawn on it.
+pub fn save_map_png(
+    path: &Path,
+    map: &OccupancyMap,
+    title: &str,
+    overlay: &crate::picture::Overlay<'_>,
+) -> Result<(), IoError> {
+    save_rgb_png(path, &crate::picture::map_picture(map, title, overlay))
 }
 
-/// The accumulator as an image: radius down the rows, angle across, log-scaled votes.
-pub fn save_accumulator_png(path: &Path, acc: &Accumulator) -> Result<(), IoError> {
-    let max = acc.votes.iter().copied().max().unwrap_or(0).max(1) as f64;
-    let pixels = acc
-        .votes
-        .iter()
-        .map(|&v| (255.0 * (1.0 + v as f64).ln() / (1.0 + max).ln()).round() as u8)
-        .collect();
-    save_gray_pixels(path, acc.n_phi, acc.n_rho, pixels)
+/// Writes a picture of the Hough accumulator, with its axes.
+pub fn save_accumulator_png(path: &Path, acc: &Accumulator, title: &str) -> Result<(), IoError> {
+    save_rgb_png(path, &crate::picture::accumulator_picture(acc, title))
+}
+
+/// Writes an RGB image as PNG.
+pub fn save_rgb_png(path: &Path, image: &image::RgbImage) -> Result<(), IoError> {
+    let mut bytes = Vec::new();
+    image
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| IoError::content(path, format!("cannot encode PNG: {e}")))?;
+    write_file(path, &bytes)
 }
 
 /// Writes `corners.csv`: `x_m,y_m,votes,kind`.

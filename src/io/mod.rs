@@ -4,6 +4,7 @@
 //! the file and line of the first problem. Writers go through [`OutputDir`], which builds the
 //! output under a temporary name and renames it into place, so a failure leaves nothing half-written.
 
+mod bundled;
 mod calib;
 mod maps;
 mod output;
@@ -12,15 +13,17 @@ mod run;
 mod survey;
 mod world;
 
+pub use bundled::{bundled, extract as extract_bundled, FILES as BUNDLED_FILES};
 pub use calib::{load_corner_csvs, load_target};
 pub use maps::{
     load_features_csv, load_ros_map, load_ros_occupancy, load_walls_csv, save_accumulator_png,
-    save_features_csv, save_gray_png, save_map_png, save_ros_map, save_walls_csv, RosMapYaml,
+    save_features_csv, save_gray_png, save_map_png, save_rgb_png, save_ros_map, save_walls_csv,
+    RosMapYaml,
 };
-pub use output::OutputDir;
+pub use output::{remove_partial_outputs, OutputDir};
 pub use rig::{
-    load_rig, load_rig_or_builtin, parse_rig, robot_from_forward_camera, save_camera_info,
-    save_opencv_stereo, save_rig, save_rig_exports, Camchain, KalibrCamera, DEFAULT_RIG,
+    load_rig, parse_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig,
+    save_rig_exports, Camchain, KalibrCamera, DEFAULT_RIG,
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
 pub use survey::{
@@ -244,9 +247,10 @@ pub fn create_dir(path: &Path) -> Result<(), IoError> {
     std::fs::create_dir_all(path).map_err(|e| IoError::file(path, e))
 }
 
-/// Reads a whole text file.
+/// Reads a whole text file (or the built-in copy of a sample, target or rig: [`bundled`]).
 pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
-    std::fs::read_to_string(path).map_err(|e| IoError::file(path, e))
+    String::from_utf8(bundled::read(path)?)
+        .map_err(|_| IoError::content(path, "not a UTF-8 text file"))
 }
 
 /// Parses YAML into `T`, with the file, line and column of the first error.
@@ -309,17 +313,115 @@ impl Settings {
         }
     }
 
-    /// The defaults as YAML, ready to edit.
+    /// The defaults as YAML, ready to edit, each setting under a comment saying what it is
+    /// (its documentation).
     pub fn default_yaml(self) -> String {
-        let yaml = match self {
-            Self::Mapping => serde_yaml_ng::to_string(&crate::sonar::map::MappingConfig::default()),
-            Self::Simulation => serde_yaml_ng::to_string(&crate::sim::SimConfig::default()),
-            Self::Fuse => serde_yaml_ng::to_string(&crate::fusion::FuseConfig::default()),
-            Self::Plan => serde_yaml_ng::to_string(&crate::plan::PlanConfig::default()),
-        };
-        // Plain structs of numbers and flags always serialise.
-        yaml.unwrap_or_default()
+        fn commented<T: serde::Serialize + schemars::JsonSchema + Default>() -> String {
+            // Plain structs of numbers and flags always serialise.
+            let yaml = serde_yaml_ng::to_string(&T::default()).unwrap_or_default();
+            with_comments(&yaml, schemars::schema_for!(T).as_value())
+        }
+        match self {
+            Self::Mapping => commented::<crate::sonar::map::MappingConfig>(),
+            Self::Simulation => commented::<crate::sim::SimConfig>(),
+            Self::Fuse => commented::<crate::fusion::FuseConfig>(),
+            Self::Plan => commented::<crate::plan::PlanConfig>(),
+        }
     }
+}
+
+/// `yaml` (block style, as serde_yaml writes a struct) with the description that `schema` gives
+/// each key written as `# ...` lines above it.
+fn with_comments(yaml: &str, schema: &serde_json::Value) -> String {
+    // The schema of each open mapping, innermost last, with its keys' indentation.
+    let mut open: Vec<(usize, &serde_json::Value)> = Vec::new();
+    let mut out = String::new();
+    for line in yaml.lines() {
+        let indent = line.len() - line.trim_start().len();
+        let key = line
+            .trim_start()
+            .split_once(':')
+            .map(|(k, _)| k)
+            .filter(|k| !k.is_empty() && !k.starts_with('-') && !k.contains(' '));
+        if let Some(key) = key {
+            while open.last().is_some_and(|(i, _)| *i > indent) {
+                open.pop();
+            }
+            let parent = match open.last() {
+                Some((i, s)) if *i == indent => Some(*s),
+                None if indent == 0 => Some(schema),
+                _ => None,
+            };
+            let field = parent.and_then(|p| property(schema, p, key));
+            if let Some(text) = field
+                .and_then(|f| f.get("description"))
+                .and_then(|d| d.as_str())
+            {
+                for comment in wrap(text, 98usize.saturating_sub(indent)) {
+                    out += &format!("{:indent$}# {comment}\n", "");
+                }
+            }
+            if line.trim_end().ends_with(':') {
+                if let Some(f) = field {
+                    // A nested mapping: its keys come on the next lines, indented.
+                    open.push((indent + 2, f));
+                }
+            }
+        }
+        out += line;
+        out.push('\n');
+    }
+    out
+}
+
+/// The schema of property `key` of object schema `of`, references into `root` followed.
+fn property<'a>(
+    root: &'a serde_json::Value,
+    of: &'a serde_json::Value,
+    key: &str,
+) -> Option<&'a serde_json::Value> {
+    let of = resolve(root, of);
+    let field = of.get("properties")?.get(key)?;
+    // A field documented in place of its type keeps the description; its properties come from
+    // the referenced definition.
+    Some(field)
+}
+
+/// `schema` with a `$ref` (or a nullable `anyOf` around one) replaced by its definition.
+fn resolve<'a>(
+    root: &'a serde_json::Value,
+    schema: &'a serde_json::Value,
+) -> &'a serde_json::Value {
+    let target = schema.get("$ref").or_else(|| {
+        schema
+            .get("anyOf")
+            .and_then(|a| a.as_array())
+            .and_then(|a| a.iter().find_map(|s| s.get("$ref")))
+    });
+    target
+        .and_then(|r| r.as_str())
+        .and_then(|r| r.strip_prefix("#/"))
+        .and_then(|r| r.split('/').try_fold(root, |node, part| node.get(part)))
+        .unwrap_or(schema)
+}
+
+/// `text` (a doc comment: paragraphs of lines) as lines of at most `width` characters.
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        if !line.is_empty() && line.len() + 1 + word.len() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line += word;
+    }
+    if !line.is_empty() {
+        lines.push(line);
+    }
+    lines
 }
 
 /// Writes a value as pretty JSON.

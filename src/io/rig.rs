@@ -179,18 +179,8 @@ pub fn robot_from_forward_camera(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64>
 /// The stereo rig `simulate`, `render` and `demo` use unless told otherwise (repository-relative).
 pub const DEFAULT_RIG: &str = "calibration/rigs/default.yaml";
 
-/// Loads a rig file; the default one ([`DEFAULT_RIG`]), when it is not there (stereotag run
-/// outside its repository, or installed), from the copy built into the library, and says so.
-pub fn load_rig_or_builtin(path: &Path) -> Result<StereoRig, IoError> {
-    if path == Path::new(DEFAULT_RIG) && !path.exists() {
-        tracing::info!("{DEFAULT_RIG} is not here: using the copy built into stereotag");
-        let text = include_str!("../../calibration/rigs/default.yaml");
-        return parse_rig(path, text);
-    }
-    load_rig(path)
-}
-
-/// Reads a Kalibr camchain YAML file as a stereo rig. Without `stereotag.robot_from_left` the
+/// Reads a Kalibr camchain YAML file as a stereo rig (the bundled rigs, such as [`DEFAULT_RIG`],
+/// from their built-in copies when they are not on disk). Without `stereotag.robot_from_left` the
 /// left camera is taken to look straight ahead from the robot centre, 0.3 m up.
 pub fn load_rig(path: &Path) -> Result<StereoRig, IoError> {
     parse_rig(path, &read_text(path)?)

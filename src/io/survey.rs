@@ -91,13 +91,16 @@ pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
 }
 
 /// Writes a WPILib AprilTag field layout: each tag's pose with x out of the tag face, and the
-/// field size as the extent of the landmarks plus a margin.
+/// field's length (x) and width (y), metres: the home's extent from the survey's origin, as
+/// `home` gives it (the corrected map's observed cells), and at least the landmarks' extent.
+/// WPILib puts the field's corner at the origin: a home reaching below x = 0 or y = 0 (the robot
+/// started inside it) is cut there in WPILib's tools, which the log says.
 pub fn save_wpilib_layout(
     path: &Path,
     landmarks: &[Landmark],
-    margin_m: f64,
+    home: Option<([f64; 2], [f64; 2])>,
 ) -> Result<(), IoError> {
-    let (mut max_x, mut max_y) = (0.0f64, 0.0f64);
+    let (mut max_x, mut max_y) = home.map_or((0.0f64, 0.0f64), |(_, hi)| (hi[0], hi[1]));
     let tags: Vec<_> = landmarks
         .iter()
         .map(|l| {
@@ -113,11 +116,88 @@ pub fn save_wpilib_layout(
             })
         })
         .collect();
+    if let Some((lo, _)) = home.filter(|(lo, _)| lo[0] < -0.5 || lo[1] < -0.5) {
+        tracing::info!(
+            "{}: the home reaches ({:.1}, {:.1}) m, below the field's corner at the survey's origin; WPILib tools show only x, y >= 0",
+            path.display(),
+            lo[0],
+            lo[1]
+        );
+    }
     let layout = serde_json::json!({
         "tags": tags,
-        "field": {"length": max_x + margin_m, "width": max_y + margin_m}
+        "field": {"length": max_x, "width": max_y}
     });
     super::save_json(path, &layout)
+}
+
+/// The survey's pictures: the raw map with the odometry and its Hough corners, the online map
+/// with the online filter's trajectory, the corrected map with the offline trajectory (the
+/// ground truth beside it when known) and the landmarks, and both Hough accumulators.
+fn save_survey_pictures(dir: &Path, run: &RunDataset, s: &Survey) -> Result<(), IoError> {
+    use crate::picture::{colours, Mark, Overlay, Path as Line};
+    let truth = || {
+        run.ground_truth
+            .as_deref()
+            .map(|t| Line::trajectory("ground truth", colours::GROUND_TRUTH, t))
+    };
+    let raw = Overlay {
+        paths: vec![Line::trajectory(
+            "odometry",
+            colours::ODOMETRY,
+            &run.odometry,
+        )],
+        marks: Mark::corners(&s.raw.features_offline),
+        mark_legend: vec![("Hough corner", colours::CORNER)],
+    };
+    super::save_map_png(
+        &dir.join("map.png"),
+        &s.raw.counting,
+        "map.png: sonar map on the odometry's poses",
+        &raw,
+    )?;
+    let online = Overlay {
+        paths: vec![Line::trajectory(
+            "online",
+            colours::ONLINE,
+            &s.online.trajectory,
+        )],
+        ..Overlay::default()
+    };
+    super::save_map_png(
+        &dir.join("map_online.png"),
+        &s.online_map,
+        "map_online.png: sonar map on the online filter's poses",
+        &online,
+    )?;
+    let corrected = Overlay {
+        paths: truth()
+            .into_iter()
+            .chain([Line::trajectory(
+                "offline",
+                colours::OFFLINE,
+                &s.offline.trajectory,
+            )])
+            .collect(),
+        marks: Mark::landmarks(&s.landmarks),
+        mark_legend: vec![("landmark", colours::LANDMARK)],
+    };
+    super::save_map_png(
+        &dir.join("map_corrected.png"),
+        &s.corrected.counting,
+        "map_corrected.png: sonar map on the offline poses, with the landmarks",
+        &corrected,
+    )?;
+    super::save_accumulator_png(
+        &dir.join("hough.png"),
+        &s.raw.accumulator,
+        "hough.png: Hough accumulator of the odometry's map",
+    )?;
+    super::save_accumulator_png(
+        &dir.join("hough_corrected.png"),
+        &s.corrected.accumulator,
+        "hough_corrected.png: Hough accumulator of the corrected map",
+    )
 }
 
 /// The trajectories of a survey, all at the odometry times.
@@ -204,15 +284,11 @@ pub fn save_survey(
     metrics: &BTreeMap<String, f64>,
     timings: &BTreeMap<String, f64>,
 ) -> Result<(), IoError> {
+    save_survey_pictures(dir, run, s)?;
     super::save_ros_map(dir, "map", &s.raw.counting)?;
-    super::save_map_png(&dir.join("map.png"), &s.raw.counting)?;
-    super::save_accumulator_png(&dir.join("hough.png"), &s.raw.accumulator)?;
     super::save_features_csv(&dir.join("corners.csv"), &s.raw.features_offline)?;
     super::save_ros_map(dir, "map_online", &s.online_map)?;
-    super::save_map_png(&dir.join("map_online.png"), &s.online_map)?;
     super::save_ros_map(dir, "map_corrected", &s.corrected.counting)?;
-    super::save_map_png(&dir.join("map_corrected.png"), &s.corrected.counting)?;
-    super::save_accumulator_png(&dir.join("hough_corrected.png"), &s.corrected.accumulator)?;
     super::save_features_csv(
         &dir.join("corners_corrected.csv"),
         &s.corrected.features_offline,
@@ -245,7 +321,11 @@ pub fn save_survey(
             odometry_calibration: s.offline.odometry_calibration,
         },
     )?;
-    super::save_wpilib_layout(&dir.join("layout.json"), &landmarks, 0.5)?;
+    super::save_wpilib_layout(
+        &dir.join("layout.json"),
+        &landmarks,
+        s.corrected.counting.known_extent(),
+    )?;
     super::save_trajectory_csv(
         &dir.join("trajectory.csv"),
         &Trajectories {

@@ -12,7 +12,7 @@ use crate::sonar::PlacedReading;
 use serde::{Deserialize, Serialize};
 
 /// Settings of a grid. Defaults are the paper's office experiment.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct GridConfig {
     /// Cells along x: 80 in the paper's office (120 in the museum).
@@ -258,6 +258,25 @@ impl OccupancyMap {
     /// Number of cells that have been observed.
     pub fn known_cells(&self) -> usize {
         self.occupancy.iter().filter(|c| c.is_some()).count()
+    }
+
+    /// The rectangle the observed cells cover, `(lower-left, upper-right)` corners in metres;
+    /// `None` when nothing was observed.
+    pub fn known_extent(&self) -> Option<([f64; 2], [f64; 2])> {
+        let g = &self.geometry;
+        let half = 0.5 * g.resolution_m;
+        let mut known = self
+            .occupancy
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.is_some());
+        let first = known.next()?.0;
+        let start = g.centre(first % g.width, first / g.width);
+        let (lo, hi) = known.fold((start, start), |(lo, hi), (i, _)| {
+            let [x, y] = g.centre(i % g.width, i / g.width);
+            ([lo[0].min(x), lo[1].min(y)], [hi[0].max(x), hi[1].max(y)])
+        });
+        Some(([lo[0] - half, lo[1] - half], [hi[0] + half, hi[1] + half]))
     }
 }
 

@@ -35,7 +35,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Settings of the Hough transform. Defaults are the paper's office experiment.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct HoughConfig {
     /// Radial cell size: 100 mm in the paper.
@@ -157,6 +157,16 @@ impl Accumulator {
             rho_step: config.rho_step_m,
             phi_step: config.phi_step_deg.to_radians(),
         }
+    }
+
+    /// Width of a radial bin, metres.
+    pub fn rho_step_m(&self) -> f64 {
+        self.rho_step
+    }
+
+    /// Width of an angular bin, degrees.
+    pub fn phi_step_deg(&self) -> f64 {
+        self.phi_step.to_degrees()
     }
 
     fn cell(&self, x: f64, y: f64) -> Option<usize> {

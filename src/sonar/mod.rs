@@ -20,7 +20,7 @@ pub const PAPER_CONE_RAD: f64 = 30.0 * std::f64::consts::PI / 180.0;
 pub const PAPER_MAX_RANGE_M: f64 = 2.1;
 
 /// One transducer, in the robot frame (x forward, y left).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SonarSensor {
     /// Position forward of the robot centre, metres.
@@ -39,7 +39,7 @@ impl SonarSensor {
 }
 
 /// A robot's sonar ring.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SonarLayout {
     /// A name for the layout.

@@ -57,8 +57,8 @@ pub enum VizError {
     Rerun(#[from] rerun::RecordingStreamError),
     /// The viewer could not be started.
     #[cfg(feature = "rerun")]
-    #[error("starting the rerun viewer: {0}")]
-    Spawn(#[from] rerun::SpawnError),
+    #[error("--spawn: {0}")]
+    Spawn(String),
     /// A bad `--connect` URL, or a file that cannot be written.
     #[error("--connect {url}: {message}")]
     Url {
@@ -172,6 +172,17 @@ impl RecordingRequest {
     pub fn names_a_sink(&self) -> bool {
         !self.off && (self.save.is_some() || self.spawn || self.connect.is_some())
     }
+}
+
+/// The Rerun viewer version the recordings are written for (the `rerun` executable that
+/// `--spawn` starts must match it).
+pub const VIEWER_VERSION: &str = "0.36.3";
+
+/// Whether a `rerun` executable is on `PATH` (what `--spawn` starts).
+pub fn viewer_on_path() -> bool {
+    let exe = if cfg!(windows) { "rerun.exe" } else { "rerun" };
+    std::env::var_os("PATH")
+        .is_some_and(|paths| std::env::split_paths(&paths).any(|dir| dir.join(exe).is_file()))
 }
 
 /// Whether `path` looks like an `.rrd` file name.

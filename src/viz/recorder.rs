@@ -28,6 +28,15 @@ impl Recorder {
             Recording::Calibration => calibration::blueprint(),
             Recording::Localization => localize::blueprint(),
         };
+        // The blueprint and selection panels collapsed: the views get the whole width (the
+        // viewer's own buttons open them again).
+        let blueprint = blueprint
+            .with_blueprint_panel(bp::BlueprintPanel::from_state(
+                bp::components::PanelState::Collapsed,
+            ))
+            .with_selection_panel(bp::SelectionPanel::from_state(
+                bp::components::PanelState::Collapsed,
+            ));
         Self::new(kind.application(), &sinks, blueprint).map(Some)
     }
 
@@ -49,7 +58,8 @@ impl Recorder {
                     })?))
                 }
                 Sink::Spawn => {
-                    rerun::spawn(&rerun::SpawnOptions::default())?;
+                    rerun::spawn(&rerun::SpawnOptions::default())
+                        .map_err(|e| VizError::Spawn(e.to_string()))?;
                     boxed.push(Box::new(rerun::sink::GrpcSink::new(
                         rerun::DEFAULT_CONNECT_URL.parse().map_err(
                             |e: rerun::external::re_uri::Error| VizError::Url {

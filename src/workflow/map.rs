@@ -108,9 +108,23 @@ pub fn map_and_score(
 fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
     let map = &output.map;
     io::save_ros_map(dir, "map", &map.counting)?;
-    io::save_map_png(&dir.join("map.png"), &map.counting)?;
+    let corners = crate::picture::Overlay {
+        marks: crate::picture::Mark::corners(&map.features_offline),
+        mark_legend: vec![("Hough corner", crate::picture::colours::CORNER)],
+        ..Default::default()
+    };
+    io::save_map_png(
+        &dir.join("map.png"),
+        &map.counting,
+        "map.png: sonar map (simple counting) with its Hough corners",
+        &corners,
+    )?;
     io::save_ros_map(dir, "map_log_odds", &map.log_odds)?;
-    io::save_accumulator_png(&dir.join("hough.png"), &map.accumulator)?;
+    io::save_accumulator_png(
+        &dir.join("hough.png"),
+        &map.accumulator,
+        "hough.png: Hough accumulator",
+    )?;
     io::save_features_csv(&dir.join("corners.csv"), &map.features_offline)?;
     io::save_features_csv(&dir.join("corners_online.csv"), &map.features_online)?;
     io::save_walls_csv(&dir.join("walls.csv"), &map.walls)?;

@@ -14,7 +14,7 @@ use std::path::Path;
 pub struct PlanRequest<'a> {
     /// A map directory from `map` or `survey` (map.yaml + map.pgm, corners.csv, walls.csv).
     pub map: &'a Path,
-    /// Write plan.json and predicted_error.csv here (default: nothing written).
+    /// Write plan.json, predicted_error.csv and plan.png here (default: nothing written).
     pub out: Option<&'a Path>,
     /// The settings.
     pub config: PlanConfig,
@@ -120,9 +120,53 @@ pub fn plan(request: &PlanRequest<'_>) -> Result<PlanOutput> {
         let dir = OutputDir::create(out, request.force)?;
         io::save_json(&dir.path("plan.json"), json)?;
         save_predicted_error(&dir.path("predicted_error.csv"), &map, errors)?;
+        save_plan_picture(&dir.path("plan.png"), &map, &corners, &output)?;
         dir.commit()?;
     }
     Ok(output)
+}
+
+/// `plan.png`: the map with its Hough corners and the tags (proposed or given), numbered, and
+/// the predicted error in the title.
+fn save_plan_picture(
+    path: &Path,
+    map: &OccupancyMap,
+    corners: &[crate::sonar::hough::Feature],
+    output: &PlanOutput,
+) -> Result<()> {
+    use crate::picture::{colours, Mark, Overlay};
+    let (tags_m, prediction, what): (Vec<[f64; 2]>, &Prediction, &str) = match output {
+        PlanOutput::Proposed { plan, .. } => (
+            plan.tags.iter().map(|t| [t.x_m, t.y_m]).collect(),
+            &plan.prediction,
+            "proposed",
+        ),
+        PlanOutput::Predicted {
+            prediction, tags_m, ..
+        } => (tags_m.clone(), prediction, "given"),
+    };
+    let mut marks = Mark::corners(corners);
+    marks.extend(tags_m.iter().enumerate().map(|(i, &at_m)| Mark {
+        at_m,
+        colour: colours::LANDMARK,
+        label: format!("tag {}", i + 1),
+    }));
+    let overlay = Overlay {
+        paths: Vec::new(),
+        marks,
+        mark_legend: vec![
+            ("Hough corner", colours::CORNER),
+            ("tag", colours::LANDMARK),
+        ],
+    };
+    let title = format!(
+        "plan.png: {} tags {what}; {:.0}% of free cells see one; predicted error mean {:.3} m, worst {:.3} m",
+        tags_m.len(),
+        100.0 * prediction.coverage,
+        prediction.predicted_error_mean_m,
+        prediction.predicted_error_max_m
+    );
+    Ok(io::save_map_png(path, map, &title, &overlay)?)
 }
 
 /// `predicted_error.csv`: the predicted error at each free cell's centre.

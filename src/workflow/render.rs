@@ -71,7 +71,7 @@ pub struct PairRendered {
 /// (every tag in view, corners in both images and in the world).
 pub fn render_pose(request: &RenderRequest<'_>, world: &Path, pose: Pose2) -> Result<PairRendered> {
     let loaded = io::load_world(world)?;
-    let rig = io::load_rig_or_builtin(request.rig)?;
+    let rig = io::load_rig(request.rig)?;
     let config = request.config(request.seed);
     let start = std::time::Instant::now();
     let pair = request
@@ -103,7 +103,7 @@ pub fn render_sequence(
 ) -> Result<usize> {
     let poses = io::read_poses(poses)?;
     let loaded = io::load_world(world)?;
-    let rig = io::load_rig_or_builtin(request.rig)?;
+    let rig = io::load_rig(request.rig)?;
     let renderer = request.renderer(&rig, SCENE_SAMPLES);
     let dir = sequence_dir(request)?;
     progress.start("render", poses.len() as u64);
@@ -141,7 +141,7 @@ pub fn render_calibration_sequence(
     progress: &dyn Progress,
 ) -> Result<usize> {
     let target = io::load_target(target_path)?;
-    let rig = io::load_rig_or_builtin(request.rig)?;
+    let rig = io::load_rig(request.rig)?;
     let board = match &target {
         Target::Aprilgrid(g) => {
             Board::aprilgrid(g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing)?

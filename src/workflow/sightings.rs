@@ -106,7 +106,7 @@ const RUN_OF_PAIRS: usize = 16;
 /// half of the office demo's). Compressing the pairs is most of what a recording costs; between
 /// two recorded pairs the viewer shows the earlier one.
 fn recorded(frame: usize, tag_found: bool) -> bool {
-    tag_found || frame % RECORD_EVERY == 0
+    tag_found || frame.is_multiple_of(RECORD_EVERY)
 }
 
 /// Whether a run's pairs, `pairs` of `pixels` each image, are too many to keep decoded.
@@ -321,6 +321,16 @@ impl Shared<'_> {
                 &self.stereo,
             )?;
             let tag_found = !sightings.is_empty() || !rejected.is_empty();
+            for s in &sightings {
+                let [x, y, z] = s.position_in_robot_m;
+                tracing::trace!(
+                    "pair {frame} (t = {:.2} s): {} {} at ({x:.3}, {y:.3}, {z:.3}) m from the robot, edge {:.3} m",
+                    entry.t_s,
+                    s.family,
+                    s.id,
+                    s.size_m
+                );
+            }
             for r in rejected {
                 tracing::debug!(
                     "pair {frame} (t = {:.1} s): tag {} rejected: {}",

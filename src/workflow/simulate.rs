@@ -156,7 +156,7 @@ fn take_pictures(
     seed: u64,
     progress: &dyn Progress,
 ) -> Result<()> {
-    let rig = io::load_rig_or_builtin(pictures.rig)?;
+    let rig = io::load_rig(pictures.rig)?;
     let truth = output.run.ground_truth.clone().unwrap_or_default();
     let config = RenderConfig::default();
     let plan = plan_captures(world, &rig, &truth, &pictures.policy, &config)?;
