@@ -45,8 +45,8 @@ pub fn bundled(path: &Path) -> Option<&'static [u8]> {
         .map(|(_, content)| *content)
 }
 
-/// The content of `path`: the file if it exists, else its built-in copy if it has one (logged
-/// once per run), else the error of reading the missing file.
+/// The content of `path`: the file if it exists, else its built-in copy if it has one (each
+/// such read is logged), else the error of reading the missing file.
 pub(crate) fn read(path: &Path) -> Result<Vec<u8>, IoError> {
     match std::fs::read(path) {
         Ok(bytes) => Ok(bytes),
