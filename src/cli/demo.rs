@@ -59,7 +59,7 @@ impl Demo {
         let get = |k: &str| survey.metrics.get(k).copied().unwrap_or(f64::NAN);
         let mut see = format!("{}/landmarks.json, map_corrected.png", self.out.display());
         let default_rrd = self.out.join("survey.rrd");
-        match self.rerun.written_file(&default_rrd) {
+        match self.rerun.request()?.file(&default_rrd) {
             Some(rrd) if rrd == default_rrd => see += ", survey.rrd",
             Some(rrd) => see += &format!(", {}", rrd.display()),
             None => {}

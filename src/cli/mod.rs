@@ -316,21 +316,6 @@ impl RerunArgs {
     }
 }
 
-impl RerunArgs {
-    /// The `.rrd` file these flags write: `--save`'s, else `default` unless the recording only
-    /// streams to a viewer or is off.
-    pub(crate) fn written_file(&self, default: &std::path::Path) -> Option<PathBuf> {
-        match (
-            &self.save,
-            self.no_rerun || self.spawn || self.connect.is_some(),
-        ) {
-            (Some(p), _) => Some(p.clone()),
-            (None, false) => Some(default.to_path_buf()),
-            (None, true) => None,
-        }
-    }
-}
-
 /// A `--decimate` the detectors take (finite, at least 1), or the usage error naming it.
 pub(crate) fn check_decimate(decimate: f32) -> Result<(), UsageError> {
     if stereotag::visual::tags::valid_decimation(decimate) {

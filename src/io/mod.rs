@@ -374,17 +374,14 @@ fn with_comments(yaml: &str, schema: &serde_json::Value) -> String {
     out
 }
 
-/// The schema of property `key` of object schema `of`, references into `root` followed.
+/// The schema of property `key` of object schema `of`, references into `root` followed. It keeps
+/// the field's own description; a nested struct's properties are found through [`resolve`].
 fn property<'a>(
     root: &'a serde_json::Value,
     of: &'a serde_json::Value,
     key: &str,
 ) -> Option<&'a serde_json::Value> {
-    let of = resolve(root, of);
-    let field = of.get("properties")?.get(key)?;
-    // A field documented in place of its type keeps the description; its properties come from
-    // the referenced definition.
-    Some(field)
+    resolve(root, of).get("properties")?.get(key)
 }
 
 /// `schema` with a `$ref` (or a nullable `anyOf` around one) replaced by its definition.

@@ -23,7 +23,9 @@ pub fn remove_partial_outputs() -> usize {
     let dirs = std::mem::take(&mut *partial());
     for dir in &dirs {
         // Renamed away first, so that a thread still writing cannot refill it while it goes.
-        let doomed = dir.with_extension("removing");
+        let mut doomed = dir.clone().into_os_string();
+        doomed.push(".removing");
+        let doomed = PathBuf::from(doomed);
         let gone = if std::fs::rename(dir, &doomed).is_ok() {
             &doomed
         } else {

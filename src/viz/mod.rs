@@ -168,6 +168,14 @@ impl RecordingRequest {
         sinks
     }
 
+    /// The `.rrd` file the recording is written to, if any (`default_file` when no sink is named).
+    pub fn file(&self, default_file: &Path) -> Option<PathBuf> {
+        self.sinks(default_file).into_iter().find_map(|s| match s {
+            Sink::Save(path) => Some(path),
+            _ => None,
+        })
+    }
+
     /// Whether a sink is named explicitly (not only the default file).
     pub fn names_a_sink(&self) -> bool {
         !self.off && (self.save.is_some() || self.spawn || self.connect.is_some())
