@@ -41,7 +41,7 @@ pub mod colours {
     /// Landmarks (surveyed tags).
     pub const LANDMARK: [u8; 3] = [148, 103, 189];
     /// Hough corners.
-    pub const CORNER: [u8; 3] = [227, 119, 194];
+    pub const CORNER: [u8; 3] = [23, 190, 207];
 }
 
 /// A line drawn on a map: a trajectory.

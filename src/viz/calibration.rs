@@ -42,7 +42,11 @@ pub(super) fn blueprint() -> bp::Blueprint {
         ])
         .into(),
     ]))
-    .with_time_panel(bp::TimePanel::new().with_timeline("view"))
+    .with_time_panel(
+        bp::TimePanel::new()
+            .with_timeline("view")
+            .with_state(bp::components::PanelState::Collapsed),
+    )
 }
 
 impl Recorder {

@@ -17,6 +17,7 @@ pub(super) fn following_time_panel() -> bp::TimePanel {
     bp::TimePanel::new()
         .with_timeline("time")
         .with_play_state(bp::components::PlayState::Following)
+        .with_state(bp::components::PanelState::Collapsed)
 }
 
 pub(super) fn f32s<const N: usize>(v: [f64; N]) -> [f32; N] {
@@ -347,9 +348,10 @@ pub(super) fn metrics_markdown<'m>(
     title: &str,
     metrics: impl IntoIterator<Item = (&'m String, &'m f64)>,
 ) -> String {
-    let mut md = format!("# {title}\n\n| metric | value |\n|---|---|\n");
+    // The value first: a narrow panel clips the last column, and the names are long.
+    let mut md = format!("# {title}\n\n| value | metric |\n|---:|---|\n");
     for (k, v) in metrics {
-        md.push_str(&format!("| {k} | {v:.4} |\n"));
+        md.push_str(&format!("| {v:.4} | {k} |\n"));
     }
     md
 }
