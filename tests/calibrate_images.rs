@@ -15,7 +15,9 @@ use stereotag::camera::Camera;
 use stereotag::camera::LensModel;
 use stereotag::progress::Silent;
 use stereotag::viz::RecordingRequest;
-use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
+use stereotag::workflow::calibrate::{
+    calibrate, report_markdown, CalibrateRequest, CalibrationInput,
+};
 use stereotag::workflow::render::{render_calibration_sequence, RenderRequest};
 
 fn stereotag(args: &[&str]) -> std::process::Output {
@@ -338,4 +340,87 @@ fn too_few_boards_is_an_input_error_naming_the_images() {
     assert!(err.contains("too few views"), "{err}");
     assert!(err.contains("no usable board in"), "{err}");
     assert!(!dir.path().join("cal").exists(), "no output left behind");
+}
+
+/// The calibration's recording on the MRPT photos holds what its layout shows: every residual
+/// with rings at round pixel values, the coverage with each cell's count, every board's outline,
+/// and a report with the warnings and the intrinsics with their sigmas.
+#[test]
+fn mrpt_calibration_recording_shows_residuals_coverage_and_sigmas() {
+    let data = "../shared/data/mrpt_stereo_calib";
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cal");
+    let run = stereotag(&[
+        "calibrate",
+        "-q",
+        "--target",
+        "calibration/targets/checkerboard_9x6.yaml",
+        "--left",
+        &format!("{data}/*_left.jpg"),
+        "--right",
+        &format!("{data}/*_right.jpg"),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let print = Command::new(std::env::var("RERUN").unwrap_or_else(|_| "rerun".into()))
+        .args(["rrd", "print", "-vvv"])
+        .arg(out.join("calibration.rrd"))
+        .output()
+        .expect("the `rerun` CLI (pip install rerun-sdk==0.36.3) must be on PATH");
+    assert!(print.status.success());
+    let text = String::from_utf8_lossy(&print.stdout);
+    for entity in [
+        "/residuals/left",
+        "/residuals/right",
+        "/residuals/rings",
+        "/residuals/values",
+        "/coverage/left/counts",
+        "/rig/boards",
+        "/views/left/residuals",
+        "/report",
+        "/viewport",
+    ] {
+        assert!(
+            text.contains(&format!("- {entity} - ")),
+            "the recording has no {entity}"
+        );
+    }
+    // The report (the print cuts long text, so from the library).
+    let calibrated = calibrate(
+        &CalibrateRequest {
+            target: Path::new("calibration/targets/checkerboard_9x6.yaml"),
+            input: CalibrationInput::Images {
+                left: &format!("{data}/*_left.jpg"),
+                right: &format!("{data}/*_right.jpg"),
+            },
+            resolution: None,
+            model: LensModel::Radtan,
+            fix_intrinsics: None,
+            out: &dir.path().join("again"),
+            force: false,
+            rectify_pair: None,
+            recording: RecordingRequest::none(),
+        },
+        &Silent,
+    )
+    .unwrap();
+    let md = report_markdown(&calibrated.calibration, false);
+    for words in [
+        "## Warnings",
+        "only 4 views",
+        "| fx | ",
+        " ± ",
+        "baseline",
+        "| tx | ",
+    ] {
+        assert!(
+            md.contains(words),
+            "the report does not say {words:?}:\n{md}"
+        );
+    }
 }

@@ -246,12 +246,26 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         "/metrics/turn_deg/wheels_error",
         "/events/online_resolve",
         "/report",
+        // The top-down map with every trajectory and the landmarks, and the picture with a tag.
+        "/map/corrected/trajectories/odometry",
+        "/map/corrected/trajectories/offline",
+        "/map/corrected/landmarks",
+        "/map/corrected/legend",
+        "/tag_frame/left/image",
+        "/tag_frame/left/image/tags",
+        // The layout the viewer opens it with: its own views' settings too.
+        "/viewport",
+        "/time_panel",
     ] {
         assert!(
             text.contains(&format!("- {entity} - ")),
             "the recording has no {entity}"
         );
     }
+    assert!(
+        text.contains("/VisibleTimeRanges - ") && text.contains("/EyeControls3D - "),
+        "the layout sets no plot range or 3D eye"
+    );
     for l in list {
         let id = l["id"].as_u64().unwrap();
         let recorded = recorded_position(&text, &format!("/landmarks/tag_{id}"))

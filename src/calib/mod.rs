@@ -184,6 +184,14 @@ pub(crate) struct View<'a> {
     pub(crate) right: Vec<Corner>,
 }
 
+/// A camera's eight calibrated intrinsics by name (`fx`, `fy`, `cx`, `cy` and four distortion
+/// terms), named as [`Calibration::sigmas`] names them (after `left.` or `right.`).
+pub fn named_intrinsics(c: &Camera) -> [(&'static str, f64); 8] {
+    let names = bundle::intrinsics_names(c);
+    let values = bundle::intrinsics_vec(c);
+    std::array::from_fn(|i| (names[i], values[i]))
+}
+
 /// Calibrates a stereo rig from corners of the same views in both cameras: the cameras and
 /// board poses initialised, adjusted, the outliers dropped and listed, adjusted again; with the
 /// residuals, coverage, sigmas and warnings.

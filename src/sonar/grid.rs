@@ -260,6 +260,38 @@ impl OccupancyMap {
         self.occupancy.iter().filter(|c| c.is_some()).count()
     }
 
+    /// The part of the map whose cells meet the rectangle from `lo` to `hi` (metres), on the same
+    /// cells; the whole map when the rectangle covers it, an empty one when it misses it.
+    pub fn cropped(&self, lo: [f64; 2], hi: [f64; 2]) -> OccupancyMap {
+        let g = &self.geometry;
+        let cells =
+            |v: f64, origin: f64, n: usize| ((v - origin) / g.resolution_m).clamp(0.0, n as f64);
+        let c0 = cells(lo[0], g.origin_m[0], g.width).floor() as usize;
+        let c1 = cells(hi[0], g.origin_m[0], g.width).ceil() as usize;
+        let r0 = cells(lo[1], g.origin_m[1], g.height).floor() as usize;
+        let r1 = cells(hi[1], g.origin_m[1], g.height).ceil() as usize;
+        let (width, height) = (c1.saturating_sub(c0), r1.saturating_sub(r0));
+        let mut occupancy = Vec::with_capacity(width * height);
+        for row in r0..r0 + height {
+            occupancy
+                .extend_from_slice(&self.occupancy[row * g.width + c0..row * g.width + c0 + width]);
+        }
+        OccupancyMap {
+            geometry: GridGeometry {
+                width,
+                height,
+                resolution_m: g.resolution_m,
+                origin_m: [
+                    g.origin_m[0] + c0 as f64 * g.resolution_m,
+                    g.origin_m[1] + r0 as f64 * g.resolution_m,
+                ],
+            },
+            occupancy,
+            occupied_threshold: self.occupied_threshold,
+            free_threshold: self.free_threshold,
+        }
+    }
+
     /// The rectangle the observed cells cover, `(lower-left, upper-right)` corners in metres;
     /// `None` when nothing was observed.
     pub fn known_extent(&self) -> Option<([f64; 2], [f64; 2])> {
@@ -480,6 +512,32 @@ impl OccupancyGrid for LogOddsGrid {
 mod tests {
     use super::*;
     use crate::geometry::Pose2;
+
+    #[test]
+    fn cropping_keeps_the_cells_and_their_place() {
+        let geometry = GridGeometry {
+            width: 10,
+            height: 8,
+            resolution_m: 0.5,
+            origin_m: [-1.0, 2.0],
+        };
+        let occupancy = (0..80).map(|i| Some(i as f64 / 80.0)).collect();
+        let map = OccupancyMap {
+            geometry,
+            occupancy,
+            occupied_threshold: 0.65,
+            free_threshold: 0.35,
+        };
+        // Cells 2..5 across (x from 0.0 to 1.5 m) and 1..3 up (y from 2.5 to 3.5 m).
+        let crop = map.cropped([0.1, 2.6], [1.4, 3.4]);
+        assert_eq!((crop.geometry.width, crop.geometry.height), (3, 2));
+        assert_eq!(crop.geometry.origin_m, [0.0, 2.5]);
+        assert_eq!(crop.occupancy[0], map.occupancy[10 + 2]);
+        assert_eq!(crop.occupancy[5], map.occupancy[20 + 4]);
+        // A rectangle past the map keeps the whole map; one beside it, nothing.
+        assert_eq!(map.cropped([-9.0, -9.0], [9.0, 9.0]), map);
+        assert!(map.cropped([20.0, 20.0], [30.0, 30.0]).occupancy.is_empty());
+    }
 
     #[test]
     fn a_near_reading_marks_arc_occupied_and_cone_free() {

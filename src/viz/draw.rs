@@ -9,17 +9,9 @@ use crate::sonar::grid::OccupancyMap;
 use crate::sonar::walls::WallSegment;
 use crate::world::World;
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
-use rerun::blueprint as bp;
 
 /// The time panel on the `time` timeline, following the end of the run (the finished map and
 /// trajectories); scrub back to replay it.
-pub(super) fn following_time_panel() -> bp::TimePanel {
-    bp::TimePanel::new()
-        .with_timeline("time")
-        .with_play_state(bp::components::PlayState::Following)
-        .with_state(bp::components::PanelState::Collapsed)
-}
-
 pub(super) fn f32s<const N: usize>(v: [f64; N]) -> [f32; N] {
     v.map(|x| x as f32)
 }
@@ -115,6 +107,37 @@ pub(super) fn ellipsoid(cov: &[[f64; 3]; 3]) -> ([f32; 3], rerun::Quaternion) {
     (f32s([radii[0], radii[1], radii[2]]), quaternion(&r))
 }
 
+/// The smallest rectangle holding the points, `(lower-left, upper-right)`; `None` for none.
+pub(super) fn bounding_box(
+    points: impl IntoIterator<Item = [f64; 2]>,
+) -> Option<([f64; 2], [f64; 2])> {
+    points.into_iter().fold(None, |acc, p| {
+        let (lo, hi) = acc.unwrap_or((p, p));
+        Some((
+            [lo[0].min(p[0]), lo[1].min(p[1])],
+            [hi[0].max(p[0]), hi[1].max(p[1])],
+        ))
+    })
+}
+
+/// The outline (32 points, closed) of the [`ELLIPSOID_SIGMAS`] ellipse of a 2x2 covariance, as
+/// offsets from its centre.
+pub(super) fn ellipse_2d(cov: [[f64; 2]; 2]) -> Vec<[f64; 2]> {
+    let m = nalgebra::Matrix2::new(cov[0][0], cov[0][1], cov[1][0], cov[1][1]);
+    let eig = ((m + m.transpose()) * 0.5).symmetric_eigen();
+    let axes = eig.eigenvectors;
+    let r = eig
+        .eigenvalues
+        .map(|v| ELLIPSOID_SIGMAS * v.max(0.0).sqrt());
+    (0..=32)
+        .map(|k| {
+            let a = k as f64 / 32.0 * std::f64::consts::TAU;
+            let p = axes * nalgebra::Vector2::new(r[0] * a.cos(), r[1] * a.sin());
+            [p.x, p.y]
+        })
+        .collect()
+}
+
 pub(super) fn log_world(
     rec: &rerun::RecordingStream,
     world: Option<&World>,
@@ -148,6 +171,7 @@ pub(super) fn log_world(
         "world/tags_planned",
         &rerun::Points3D::new(planned)
             .with_labels(world.tags.iter().map(|t| format!("planned {}", t.id)))
+            .with_show_labels(false)
             .with_colors([palette::PLANNED_TAG])
             .with_radii([0.03f32]),
     )?;
@@ -176,7 +200,8 @@ pub(super) fn log_trajectory_lines(
             &rerun::LineStrips3D::new([strip(t, 0.02)])
                 .with_colors([*c])
                 .with_radii([rerun::Radius::new_ui_points(1.5)])
-                .with_labels([*name]),
+                .with_labels([*name])
+                .with_show_labels(false),
         )?;
     }
     Ok(())
@@ -219,7 +244,7 @@ pub(super) fn log_landmark(rec: &rerun::RecordingStream, l: &Landmark) -> Result
     rec.log_static(
         path.as_str(),
         &rerun::Points3D::new([f32s(l.position_m)])
-            .with_labels([format!("tag {} ({} sightings)", l.id, l.observations)])
+            .with_labels([format!("tag {}", l.id)])
             .with_colors([palette::FUSED])
             .with_radii([0.04f32]),
     )?;
@@ -351,7 +376,12 @@ pub(super) fn metrics_markdown<'m>(
     // The value first: a narrow panel clips the last column, and the names are long.
     let mut md = format!("# {title}\n\n| value | metric |\n|---:|---|\n");
     for (k, v) in metrics {
-        md.push_str(&format!("| {v:.4} | {k} |\n"));
+        // Counts as counts; figures to four places.
+        if v.fract() == 0.0 && v.abs() < 1e9 {
+            md.push_str(&format!("| {v:.0} | {k} |\n"));
+        } else {
+            md.push_str(&format!("| {v:.4} | {k} |\n"));
+        }
     }
     md
 }

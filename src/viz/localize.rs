@@ -2,42 +2,66 @@
 //! fused, the error and sigma over time.
 
 use super::draw::*;
+use super::layout::{column, row, tabs, Layout, View};
 use super::palette;
 use super::{LocalizeScene, Recorder, VizError, POSE_SAMPLE_S};
 use crate::geometry::{pose_at, StampedPose};
-use rerun::blueprint as bp;
+use rerun::blueprint::components::PlayState;
 
 /// The default layout of a localisation: the 3D scene (surveyed tags and walls, the trajectories,
-/// the robot with the sightings and the sonar ranges it fused), the error and sigma over time and
-/// the report.
-pub(super) fn blueprint() -> bp::Blueprint {
-    let scene = bp::Spatial3DView::new("Scene")
-        .with_origin("/world")
-        .with_contents(["+ /world/**", "+ /landmarks/**"]);
-    let errors = bp::Tabs::new([
-        bp::TimeSeriesView::new("Position error and sigma")
-            .with_origin("/metrics")
+/// the robot with the sightings and the sonar ranges it fused) seen from above the home, the error
+/// and sigma over the whole run and the report.
+fn layout(scene: &LocalizeScene<'_>) -> Layout {
+    let points = scene
+        .result
+        .trajectory
+        .iter()
+        .map(|p| [p.pose.x, p.pose.y])
+        .chain(
+            scene
+                .landmarks
+                .iter()
+                .map(|l| [l.position_m[0], l.position_m[1]]),
+        );
+    let view =
+        View::spatial_3d("Scene", "/world").with_contents(["+ /world/**", "+ /landmarks/**"]);
+    let view = match bounding_box(points) {
+        Some((lo, hi)) => {
+            let centre = [
+                0.5 * (lo[0] + hi[0]) as f32,
+                0.5 * (lo[1] + hi[1]) as f32,
+                0.0,
+            ];
+            let size = ((hi[0] - lo[0]).max(hi[1] - lo[1]) as f32).max(2.0);
+            view.eye([centre[0], centre[1] - 0.9 * size, 1.1 * size], centre)
+        }
+        None => view,
+    };
+    let errors = tabs([
+        View::time_series("Position error and sigma", "/metrics")
             .with_contents(["+ /metrics/position_error_m/**", "+ /metrics/sigma_m"])
+            .whole_run("time")
             .into(),
-        bp::TimeSeriesView::new("Distance since a sighting")
-            .with_origin("/metrics/since_sighting_m")
+        View::time_series("Distance since a sighting", "/metrics/since_sighting_m")
+            .whole_run("time")
             .into(),
     ]);
-    let report = bp::TextDocumentView::new("Report").with_origin("/report");
-    bp::Blueprint::new(
-        bp::Horizontal::new([
-            scene.into(),
-            bp::Vertical::new([errors.into(), report.into()]).into(),
-        ])
-        .with_column_shares([0.65, 0.35]),
-    )
-    .with_time_panel(following_time_panel())
+    let report = View::text_document("Report", "/report");
+    Layout {
+        root: row(
+            [view.into(), column([errors, report.into()], &[0.5, 0.5])],
+            &[0.62, 0.38],
+        ),
+        timeline: "time",
+        play: PlayState::Following,
+    }
 }
 
 impl Recorder {
     /// Logs a localisation of a later run against a survey.
     pub fn log_localization(&self, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
         let rec = self.stream();
+        layout(scene).send(rec)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         log_world(rec, scene.world)?;
         log_surveyed_walls(rec, scene.walls, None)?;
@@ -97,6 +121,7 @@ fn log_sightings(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Res
             "world/sightings",
             &rerun::Points3D::new([[p.x as f32, p.y as f32, s.position_in_robot_m[2] as f32]])
                 .with_labels([format!("tag {} {what}", s.id)])
+                .with_show_labels(false)
                 .with_colors([color])
                 .with_radii([0.025f32]),
         )?;
@@ -140,6 +165,37 @@ fn log_ranges(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
 /// The error against the truth (when known), the filter's sigma and the distance since the last
 /// sighting, over time.
 fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let odometry = if scene.calibrated_odometry.is_some() {
+        "odometry (calibrated)"
+    } else {
+        "odometry"
+    };
+    for (path, name, color) in [
+        (
+            "metrics/position_error_m/localized",
+            "localized",
+            palette::OFFLINE,
+        ),
+        (
+            "metrics/position_error_m/odometry",
+            odometry,
+            palette::ODOMETRY,
+        ),
+        ("metrics/sigma_m", "σ (filter's own)", palette::SIGMA),
+        (
+            "metrics/since_sighting_m",
+            "distance since a sighting, m",
+            palette::FUSED,
+        ),
+    ] {
+        rec.log_static(
+            path,
+            &rerun::SeriesLines::new()
+                .with_names([name])
+                .with_colors([color])
+                .with_widths([2.0f32]),
+        )?;
+    }
     let r = scene.result;
     let truth = scene.run.ground_truth.as_deref();
     let tracked = scene.calibrated_odometry.unwrap_or(&scene.run.odometry);
@@ -175,6 +231,21 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
 /// The figures and the error's growth with the distance since a sighting.
 fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
     let mut md = metrics_markdown("stereotag localize", scene.metrics);
+    let colours = format!(
+        "In the scene: odometry red{}, localized green{}; surveyed tags green dots, surveyed \
+         walls orange, the sonar ranges fused cyan (gated out red).\n\n",
+        if scene.calibrated_odometry.is_some() {
+            ", calibrated with the survey yellow"
+        } else {
+            ""
+        },
+        if scene.run.ground_truth.is_some() {
+            ", ground truth grey"
+        } else {
+            ""
+        }
+    );
+    md.insert_str(md.find("| value").unwrap_or(0), &colours);
     md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
     for b in scene.growth {
         md.push_str(&format!(

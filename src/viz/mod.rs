@@ -16,6 +16,8 @@ mod calibration;
 #[cfg(feature = "rerun")]
 mod draw;
 #[cfg(feature = "rerun")]
+mod layout;
+#[cfg(feature = "rerun")]
 mod localize;
 #[cfg(feature = "rerun")]
 mod palette;
@@ -45,8 +47,6 @@ pub const GRID_SNAPSHOT_S: f64 = 5.0;
 pub const POSE_SAMPLE_S: f64 = 0.5;
 /// Ellipsoids are drawn at this many sigmas.
 pub const ELLIPSOID_SIGMAS: f64 = 3.0;
-/// Residuals magnified this many times in the calibration recording's arrows.
-pub const RESIDUAL_ARROW_SCALE: f32 = 20.0;
 
 /// Errors of the recording.
 #[derive(Debug, thiserror::Error)]

@@ -19,6 +19,8 @@ pub const ODOMETRY: Color = rgb(230, 80, 60);
 pub const ONLINE: Color = rgb(240, 180, 40);
 /// The offline (corrected) trajectory, and a localised one.
 pub const OFFLINE: Color = rgb(60, 200, 90);
+/// A filter's own uncertainty in the plots.
+pub const SIGMA: Color = rgb(140, 120, 255);
 /// The true trajectory.
 pub const GROUND_TRUTH: Color = rgb(200, 200, 200);
 
@@ -61,3 +63,13 @@ pub const DETECTION: Color = rgb(40, 255, 120);
 pub const TRIANGULATED: Color = rgb(255, 200, 0);
 /// Calibration residuals.
 pub const RESIDUAL: Color = rgb(255, 80, 80);
+/// The left camera's points where both cameras' are drawn together.
+pub const LEFT: Color = rgb(80, 180, 255);
+/// The right camera's.
+pub const RIGHT: Color = rgb(255, 170, 60);
+/// Rings of round values on a plot.
+pub const RING: Color = rgba(200, 200, 200, 160);
+/// A calibration board's outline.
+pub const BOARD_OUTLINE: Color = rgba(120, 200, 255, 140);
+/// A calibration board's corners.
+pub const BOARD_CORNER: Color = rgb(255, 200, 60);

@@ -1,9 +1,7 @@
 //! The open recording: its sinks (a file, a spawned viewer, a running viewer), its default
 //! layout, and the JPEG compression of the camera images it holds.
 
-use super::{calibration, localize, survey};
 use super::{Recording, RecordingRequest, Sink, VizError, IMAGE_JPEG_QUALITY};
-use rerun::blueprint as bp;
 use std::path::Path;
 
 /// An open recording.
@@ -23,29 +21,11 @@ impl Recorder {
         if sinks.is_empty() {
             return Ok(None);
         }
-        let blueprint = match kind {
-            Recording::Survey => survey::blueprint(),
-            Recording::Calibration => calibration::blueprint(),
-            Recording::Localization => localize::blueprint(),
-        };
-        // The blueprint and selection panels collapsed: the views get the whole width (the
-        // viewer's own buttons open them again).
-        let blueprint = blueprint
-            .with_blueprint_panel(bp::BlueprintPanel::from_state(
-                bp::components::PanelState::Collapsed,
-            ))
-            .with_selection_panel(bp::SelectionPanel::from_state(
-                bp::components::PanelState::Collapsed,
-            ));
-        Self::new(kind.application(), &sinks, blueprint).map(Some)
+        Self::new(kind.application(), &sinks).map(Some)
     }
 
-    /// Opens a recording to the sinks, with the layout `blueprint` sent first.
-    fn new(
-        application: &'static str,
-        sinks: &[Sink],
-        blueprint: bp::Blueprint,
-    ) -> Result<Self, VizError> {
+    /// Opens a recording to the sinks; its layout is sent with what it logs.
+    fn new(application: &'static str, sinks: &[Sink]) -> Result<Self, VizError> {
         let mut boxed: Vec<Box<dyn rerun::sink::LogSink>> = Vec::new();
         for sink in sinks {
             match sink {
@@ -78,9 +58,7 @@ impl Recorder {
                 ))),
             }
         }
-        let rec = rerun::RecordingStreamBuilder::new(application)
-            .with_blueprint(blueprint)
-            .set_sinks(boxed)?;
+        let rec = rerun::RecordingStreamBuilder::new(application).set_sinks(boxed)?;
         Ok(Self { rec })
     }
 

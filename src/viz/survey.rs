@@ -2,76 +2,253 @@
 //! error plots and the report, with its default layout.
 
 use super::draw::*;
+use super::layout::{column, row, tabs, Layout, View};
 use super::palette;
 use super::{Recorder, SurveyScene, VizError, GRID_SNAPSHOT_S, POSE_SAMPLE_S};
-use crate::fusion::{Nis, Survey, TagSighting};
+use crate::fusion::{Nis, TagSighting};
 use crate::geometry::{pose_at, Pose2, StampedPose};
+use crate::sonar::grid::OccupancyMap;
 use crate::sonar::grid::{CountingGrid, OccupancyGrid};
 use crate::sonar::hough::{Accumulator, Feature};
 use nalgebra::Matrix3;
-use rerun::blueprint as bp;
+use rerun::blueprint::components::PlayState;
 use std::collections::BTreeMap;
 
-/// The default layout of a survey: the 3D scene and the map on top, the stereo pair and the time
-/// series below, the report beside.
-pub(super) fn blueprint() -> bp::Blueprint {
-    let scene = bp::Spatial3DView::new("Scene")
-        .with_origin("/world")
-        .with_contents(["+ /world/**", "+ /landmarks/**"]);
-    let maps = bp::Tabs::new([
-        bp::Spatial2DView::new("Online map")
-            .with_origin("/map/online")
-            .into(),
-        bp::Spatial2DView::new("Corrected map")
-            .with_origin("/map/corrected")
-            .into(),
-        bp::Spatial2DView::new("Hough accumulator")
-            .with_origin("/map/hough")
-            .into(),
+/// The default layout of a survey: the top-down map (with the 3D scene, the online map and the
+/// Hough accumulator in tabs), the error plots over the whole run and the report on top; the
+/// stereo pair below.
+fn layout(frame: &MapFrame, tag_frame: Option<&TagFrame>) -> Layout {
+    let [w, h] = [
+        frame.map.geometry.width as f32,
+        frame.map.geometry.height as f32,
+    ];
+    // The map and its legend, which sits beside it on the right; a margin for the labels.
+    let margin = 0.06 * w.max(h);
+    let map_view = |name: &str, origin: &str| {
+        View::spatial_2d(name, origin).framed(
+            [-margin, -margin],
+            [w + LEGEND_WIDTH_PX + margin, h + margin],
+        )
+    };
+    let (lo, hi) = frame.extent;
+    let centre = [
+        0.5 * (lo[0] + hi[0]) as f32,
+        0.5 * (lo[1] + hi[1]) as f32,
+        0.0,
+    ];
+    let size = (hi[0] - lo[0]).max(hi[1] - lo[1]) as f32;
+    let scene = View::spatial_3d("Scene (3D)", "/world")
+        .with_contents(["+ /world/**", "+ /landmarks/**"])
+        .eye([centre[0], centre[1] - 0.9 * size, 1.0 * size], centre);
+    let maps = tabs([
+        map_view("Map", "/map/corrected").into(),
+        scene.into(),
+        map_view("Online map", "/map/online").into(),
+        View::spatial_2d("Hough accumulator", "/map/hough").into(),
     ]);
-    let left = bp::Spatial2DView::new("Left camera").with_origin("/world/robot/left/image");
-    let right = bp::Spatial2DView::new("Right camera").with_origin("/world/robot/right/image");
-    let errors = bp::Tabs::new([
-        bp::TimeSeriesView::new("Position error")
-            .with_origin("/metrics")
+    let errors = tabs([
+        View::time_series("Position error", "/metrics")
             .with_contents([
-                "+ /metrics/position_error_m/**",
+                "+ /metrics/position_error_m/online",
+                "+ /metrics/position_error_m/offline",
                 "+ /metrics/online_sigma_m",
             ])
+            .whole_run("time")
             .into(),
-        bp::TimeSeriesView::new("Tag NIS")
-            .with_origin("/metrics/tag_nis")
+        View::time_series("Odometry error", "/metrics/position_error_m")
+            .whole_run("time")
             .into(),
-        bp::TimeSeriesView::new("Turn error (cameras vs wheels)")
-            .with_origin("/metrics/turn_deg")
+        View::time_series("Tag NIS", "/metrics/tag_nis")
+            .whole_run("time")
             .into(),
-        bp::TextLogView::new("Online re-solves")
-            .with_origin("/events")
+        View::time_series("Turn error (cameras vs wheels)", "/metrics/turn_deg")
+            .whole_run("time")
             .into(),
+        View::text_log("Online re-solves", "/events").into(),
     ]);
-    let report = bp::TextDocumentView::new("Report").with_origin("/report");
-    bp::Blueprint::new(
-        bp::Vertical::new([
-            bp::Horizontal::new([scene.into(), maps.into(), report.into()])
-                .with_column_shares([0.45, 0.35, 0.2])
+    let report = View::text_document("Report", "/report");
+    // Each camera opens on the picture with the most tags (a copy of it, whatever the time
+    // cursor), the picture at the time cursor in the next tab.
+    let camera = |side: &str| {
+        let origin = format!("/world/robot/{side}/image");
+        let live = View::spatial_2d(&format!("{side} camera at the cursor"), &origin);
+        match tag_frame {
+            Some(f) => tabs([
+                View::spatial_2d(
+                    &format!(
+                        "{side} camera, frame {} at {:.1} s (tags {})",
+                        f.frame, f.t_s, f.tags
+                    ),
+                    &format!("/tag_frame/{side}"),
+                )
                 .into(),
-            bp::Horizontal::new([left.into(), right.into(), errors.into()]).into(),
-        ])
-        .with_row_shares([0.6, 0.4]),
-    )
-    .with_time_panel(following_time_panel())
+                live.into(),
+            ]),
+            None => live.into(),
+        }
+    };
+    let cameras = row([camera("left"), camera("right")], &[]);
+    Layout {
+        root: column(
+            [
+                row([maps, errors, report.into()], &[0.46, 0.32, 0.22]),
+                cameras,
+            ],
+            &[0.6, 0.4],
+        ),
+        timeline: "time",
+        play: PlayState::Following,
+    }
+}
+
+/// The picture with the most tags in it, the largest in the picture among equals.
+struct TagFrame {
+    /// Its index in the run's stereo pairs.
+    frame: usize,
+    /// Its time, seconds.
+    t_s: f64,
+    /// The tags' ids, as a list.
+    tags: String,
+}
+
+impl TagFrame {
+    fn find(scene: &SurveyScene<'_>) -> Option<Self> {
+        // Per picture: its tags and their area in the left image, pixels².
+        let mut by_frame: BTreeMap<usize, (Vec<u32>, f64)> = BTreeMap::new();
+        for s in scene.sightings {
+            let entry = by_frame.entry(s.frame).or_default();
+            entry.0.push(s.id);
+            entry.1 += s.corners_px.map_or(0.0, |(left, _)| quad_area(&left));
+        }
+        let (&frame, (ids, _)) = by_frame.iter().max_by(|a, b| {
+            (a.1 .0.len(), a.1 .1)
+                .partial_cmp(&(b.1 .0.len(), b.1 .1))
+                .unwrap_or(std::cmp::Ordering::Equal)
+                // The first of equals.
+                .then(b.0.cmp(a.0))
+        })?;
+        let t_s = scene.run.stereo.get(frame)?.t_s;
+        let tags = ids
+            .iter()
+            .map(u32::to_string)
+            .collect::<Vec<_>>()
+            .join(", ");
+        Some(Self { frame, t_s, tags })
+    }
+}
+
+/// A stereo pair (JPEG bytes) under `{prefix}/left/image` and `{prefix}/right/image` with the
+/// tags' outlines and ids on each; `still`: static, else at the current time.
+fn log_picture(
+    rec: &rerun::RecordingStream,
+    prefix: &str,
+    pair: Option<&(Vec<u8>, Vec<u8>)>,
+    tags: &[&TagSighting],
+    still: bool,
+) -> Result<(), VizError> {
+    let log = |path: String, what: &dyn rerun::AsComponents| {
+        if still {
+            rec.log_static(path, what)
+        } else {
+            rec.log(path, what)
+        }
+    };
+    for (side, index) in [("left", 0usize), ("right", 1usize)] {
+        if let Some(pair) = pair {
+            let jpeg = if index == 0 { &pair.0 } else { &pair.1 };
+            log(
+                format!("{prefix}/{side}/image"),
+                &rerun::EncodedImage::from_file_contents(jpeg.clone()),
+            )?;
+        }
+        let outlines: Vec<Vec<[f32; 2]>> = tags
+            .iter()
+            .filter_map(|s| s.corners_px.as_ref())
+            .map(|c| {
+                let c = if index == 0 { &c.0 } else { &c.1 };
+                let mut v: Vec<[f32; 2]> = c.iter().map(|p| f32s(*p)).collect();
+                v.push(f32s(c[0]));
+                v
+            })
+            .collect();
+        log(
+            format!("{prefix}/{side}/image/tags"),
+            &rerun::LineStrips2D::new(outlines)
+                .with_labels(tags.iter().map(|s| format!("tag {}", s.id)))
+                .with_colors([palette::DETECTION])
+                .with_radii([rerun::Radius::new_ui_points(1.5)]),
+        )?;
+    }
+    Ok(())
+}
+
+/// The area of a quadrilateral (shoelace), pixels².
+fn quad_area(c: &[[f64; 2]; 4]) -> f64 {
+    let twice: f64 = (0..4)
+        .map(|i| {
+            let (a, b) = (c[i], c[(i + 1) % 4]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum();
+    0.5 * twice.abs()
+}
+
+/// Width kept right of the map for its legend, pixels of the map.
+const LEGEND_WIDTH_PX: f32 = 30.0;
+
+/// The part of the home the maps show: the corrected map's observed cells and a margin, on the
+/// grid's own cells (every map image of the recording is cropped to it).
+struct MapFrame {
+    /// The corrected map, cropped.
+    map: OccupancyMap,
+    /// The rectangle shown, metres.
+    extent: ([f64; 2], [f64; 2]),
+}
+
+impl MapFrame {
+    fn new(corrected: &OccupancyMap) -> Self {
+        const MARGIN_M: f64 = 0.6;
+        let g = &corrected.geometry;
+        let (lo, hi) = corrected.known_extent().unwrap_or((
+            g.origin_m,
+            [
+                g.origin_m[0] + g.width as f64 * g.resolution_m,
+                g.origin_m[1] + g.height as f64 * g.resolution_m,
+            ],
+        ));
+        let lo = [lo[0] - MARGIN_M, lo[1] - MARGIN_M];
+        let hi = [hi[0] + MARGIN_M, hi[1] + MARGIN_M];
+        let map = corrected.cropped(lo, hi);
+        let mg = &map.geometry;
+        let extent = (
+            mg.origin_m,
+            [
+                mg.origin_m[0] + mg.width as f64 * mg.resolution_m,
+                mg.origin_m[1] + mg.height as f64 * mg.resolution_m,
+            ],
+        );
+        Self { map, extent }
+    }
+
+    /// Another map of the same grid, cropped the same.
+    fn crop(&self, map: &OccupancyMap) -> OccupancyMap {
+        map.cropped(self.extent.0, self.extent.1)
+    }
 }
 
 impl Recorder {
     /// Logs a whole survey.
     pub fn log_survey(&self, scene: &SurveyScene<'_>) -> Result<(), VizError> {
         let rec = self.stream();
+        let frame = MapFrame::new(&scene.survey.corrected.counting);
+        let tag_frame = TagFrame::find(scene);
+        layout(&frame, tag_frame.as_ref()).send(rec)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         log_world(rec, scene.world)?;
         log_trajectories(rec, scene)?;
         log_landmarks(rec, scene)?;
-        log_sonar_and_grid(rec, scene)?;
-        log_cameras(rec, scene)?;
+        log_sonar_and_grid(rec, scene, &frame)?;
+        log_cameras(rec, scene, tag_frame.as_ref())?;
         log_errors(rec, scene)?;
         log_report(rec, scene)?;
         Ok(())
@@ -104,7 +281,8 @@ fn log_landmarks(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Resul
                     [c.x_m as f32, c.y_m as f32, 0.0],
                 ]])
                 .with_colors([palette::ASSOCIATION])
-                .with_labels([format!("corner {} votes", c.votes)]),
+                .with_labels([format!("corner {} votes", c.votes)])
+                .with_show_labels(false),
             )?;
         }
     }
@@ -148,6 +326,7 @@ fn log_landmarks(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Resul
 fn log_sonar_and_grid(
     rec: &rerun::RecordingStream,
     scene: &SurveyScene<'_>,
+    frame: &MapFrame,
 ) -> Result<(), VizError> {
     let s = scene.survey;
     log_hough(rec, &s.raw.accumulator)?;
@@ -157,8 +336,8 @@ fn log_sonar_and_grid(
     ] {
         log_features(rec, name, features)?;
     }
-    log_corrected_map(rec, s)?;
-    log_growing_grid(rec, scene)
+    log_corrected_map(rec, scene, frame)?;
+    log_growing_grid(rec, scene, frame)
 }
 
 /// The final Hough accumulator as an image, votes on a log scale.
@@ -198,23 +377,42 @@ fn log_features(
     Ok(())
 }
 
-/// The 2D maps: the online and offline trajectories over the corrected grid, with its features
-/// and walls.
-fn log_corrected_map(rec: &rerun::RecordingStream, s: &Survey) -> Result<(), VizError> {
-    let map = &s.corrected.counting;
-    for (name, trajectory, color) in [
+/// The top-down map: the corrected grid with every trajectory, the Hough features, the surveyed
+/// walls and the landmarks, and a legend beside it; the online trajectory on the online map.
+fn log_corrected_map(
+    rec: &rerun::RecordingStream,
+    scene: &SurveyScene<'_>,
+    frame: &MapFrame,
+) -> Result<(), VizError> {
+    let s = scene.survey;
+    let map = &frame.map;
+    let mut lines: Vec<(&str, &[StampedPose], rerun::Color)> = vec![
+        ("odometry", &scene.run.odometry, palette::ODOMETRY),
         ("online", &s.online.trajectory, palette::ONLINE),
-        ("corrected", &s.offline.trajectory, palette::OFFLINE),
-    ] {
-        let traj: Vec<[f32; 2]> = trajectory
+        ("offline", &s.offline.trajectory, palette::OFFLINE),
+    ];
+    if let Some(gt) = &scene.run.ground_truth {
+        lines.insert(0, ("ground truth", gt, palette::GROUND_TRUTH));
+    }
+    let pixels = |trajectory: &[StampedPose]| -> Vec<[f32; 2]> {
+        trajectory
             .iter()
             .map(|p| map_pixel(map, p.pose.x, p.pose.y))
-            .collect();
+            .collect()
+    };
+    for (name, trajectory, color) in &lines {
         rec.log_static(
-            format!("map/{name}/trajectory"),
-            &rerun::LineStrips2D::new([traj]).with_colors([color]),
+            format!("map/corrected/trajectories/{}", name.replace(' ', "_")),
+            &rerun::LineStrips2D::new([pixels(trajectory)])
+                .with_colors([*color])
+                .with_labels([*name])
+                .with_show_labels(false),
         )?;
     }
+    rec.log_static(
+        "map/online/trajectory",
+        &rerun::LineStrips2D::new([pixels(&s.online.trajectory)]).with_colors([palette::ONLINE]),
+    )?;
     let features = &s.corrected.features_offline;
     rec.log_static(
         "map/corrected/features",
@@ -225,14 +423,94 @@ fn log_corrected_map(rec: &rerun::RecordingStream, s: &Survey) -> Result<(), Viz
                     .map(|f| feature_color(f.kind))
                     .collect::<Vec<_>>(),
             )
-            .with_radii([1.0f32]),
+            .with_labels(
+                features
+                    .iter()
+                    .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes)),
+            )
+            .with_show_labels(false)
+            .with_radii([0.8f32]),
     )?;
+    log_map_landmarks(rec, scene, map)?;
+    let mut legend: Vec<(String, rerun::Color)> = lines
+        .iter()
+        .map(|(name, _, color)| (name.to_string(), *color))
+        .collect();
+    legend.extend([
+        ("tags".to_string(), palette::FUSED),
+        ("Hough corners".to_string(), palette::CORNER),
+        ("Hough edges".to_string(), palette::EDGE),
+        ("walls".to_string(), palette::SURVEYED_WALL),
+    ]);
+    log_legend(rec, "map/corrected/legend", map, &legend)?;
     rec.log_static("map/corrected/grid", &map_image(map))?;
     log_surveyed_walls(rec, &s.corrected.walls, Some(map))
 }
 
+/// The landmarks on the map: a dot, the 3-sigma ellipse of the position and the tag's number.
+fn log_map_landmarks(
+    rec: &rerun::RecordingStream,
+    scene: &SurveyScene<'_>,
+    map: &OccupancyMap,
+) -> Result<(), VizError> {
+    let landmarks = &scene.survey.landmarks;
+    let ellipses: Vec<Vec<[f32; 2]>> = landmarks
+        .iter()
+        .map(|l| {
+            let c = &l.covariance_m2;
+            ellipse_2d([[c[0][0], c[0][1]], [c[1][0], c[1][1]]])
+                .into_iter()
+                .map(|[dx, dy]| map_pixel(map, l.position_m[0] + dx, l.position_m[1] + dy))
+                .collect()
+        })
+        .collect();
+    rec.log_static(
+        "map/corrected/landmarks/covariance",
+        &rerun::LineStrips2D::new(ellipses).with_colors([palette::LANDMARK_COVARIANCE]),
+    )?;
+    rec.log_static(
+        "map/corrected/landmarks",
+        &rerun::Points2D::new(
+            landmarks
+                .iter()
+                .map(|l| map_pixel(map, l.position_m[0], l.position_m[1])),
+        )
+        .with_labels(landmarks.iter().map(|l| {
+            let c = &l.covariance_m2;
+            let sigma_mm = 1e3 * (c[0][0].max(c[1][1])).max(0.0).sqrt();
+            format!("tag {} ±{:.0} mm", l.id, 3.0 * sigma_mm)
+        }))
+        .with_colors([palette::FUSED])
+        .with_radii([1.0f32]),
+    )?;
+    Ok(())
+}
+
+/// A legend right of the map: each name in its colour, one row each.
+fn log_legend(
+    rec: &rerun::RecordingStream,
+    path: &str,
+    map: &OccupancyMap,
+    entries: &[(String, rerun::Color)],
+) -> Result<(), VizError> {
+    let x = map.geometry.width as f32 + 0.5 * LEGEND_WIDTH_PX;
+    let step = map.geometry.height as f32 / entries.len().max(8) as f32;
+    rec.log_static(
+        path,
+        &rerun::Points2D::new((0..entries.len()).map(|i| [x, step * (i as f32 + 0.5)]))
+            .with_colors(entries.iter().map(|(_, c)| *c).collect::<Vec<_>>())
+            .with_labels(entries.iter().map(|(n, _)| n.clone()))
+            .with_radii([rerun::Radius::new_ui_points(0.5)]),
+    )?;
+    Ok(())
+}
+
 /// The online grid (readings placed with the online poses) as it grows, with the sonar cones.
-fn log_growing_grid(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
+fn log_growing_grid(
+    rec: &rerun::RecordingStream,
+    scene: &SurveyScene<'_>,
+    frame: &MapFrame,
+) -> Result<(), VizError> {
     let layout = &scene.run.meta.robot.sonar;
     let readings = scene.run.placed_readings(&scene.survey.online.trajectory);
     let Ok(mut grid) = CountingGrid::new(
@@ -243,7 +521,7 @@ fn log_growing_grid(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Re
         return Ok(());
     };
     let log_grid = |grid: &CountingGrid, t_s: f64| -> Result<(), VizError> {
-        let map = grid.map();
+        let map = frame.crop(&grid.map());
         rec.set_duration_secs("time", t_s);
         rec.log("world/grid", &grid_map(&map))?;
         rec.log("map/online/grid", &map_image(&map))?;
@@ -283,7 +561,11 @@ fn cone_outline(o: &Pose2, range: f64, cone_rad: f64) -> Vec<[f32; 3]> {
     cone
 }
 
-fn log_cameras(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
+fn log_cameras(
+    rec: &rerun::RecordingStream,
+    scene: &SurveyScene<'_>,
+    tag_frame: Option<&TagFrame>,
+) -> Result<(), VizError> {
     let Some(rig) = scene.rig else {
         return Ok(());
     };
@@ -311,34 +593,10 @@ fn log_cameras(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<
         let pair = scene.images.get(k).cloned().flatten();
         rec.set_duration_secs("time", entry.t_s);
         rec.set_time_sequence("frame", k as i64);
-        if let Some((left, right)) = pair {
-            rec.log(
-                "world/robot/left/image",
-                &rerun::EncodedImage::from_file_contents(left),
-            )?;
-            rec.log(
-                "world/robot/right/image",
-                &rerun::EncodedImage::from_file_contents(right),
-            )?;
-        }
         let tags = by_frame.get(&k).map(Vec::as_slice).unwrap_or(&[]);
-        for (side, corners_of) in [("left", 0usize), ("right", 1usize)] {
-            let outlines: Vec<Vec<[f32; 2]>> = tags
-                .iter()
-                .filter_map(|s| s.corners_px.as_ref())
-                .map(|c| {
-                    let c = if corners_of == 0 { &c.0 } else { &c.1 };
-                    let mut v: Vec<[f32; 2]> = c.iter().map(|p| f32s(*p)).collect();
-                    v.push(f32s(c[0]));
-                    v
-                })
-                .collect();
-            rec.log(
-                format!("world/robot/{side}/image/tags"),
-                &rerun::LineStrips2D::new(outlines)
-                    .with_labels(tags.iter().map(|s| format!("{}", s.id)))
-                    .with_colors([palette::DETECTION]),
-            )?;
+        log_picture(rec, "world/robot", pair.as_ref(), tags, false)?;
+        if tag_frame.is_some_and(|f| f.frame == k) {
+            log_picture(rec, "tag_frame", pair.as_ref(), tags, true)?;
         }
         // Triangulated centres in the left camera frame, with their covariance.
         let left_from_robot = rig.robot_from_left.inverse();
@@ -366,7 +624,55 @@ fn log_cameras(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<
     Ok(())
 }
 
+/// Each plotted series' name and colour, the trajectories' colours as on the map.
+fn log_series_styles(rec: &rerun::RecordingStream) -> Result<(), VizError> {
+    for (path, name, color) in [
+        (
+            "metrics/position_error_m/odometry",
+            "odometry",
+            palette::ODOMETRY,
+        ),
+        ("metrics/position_error_m/online", "online", palette::ONLINE),
+        (
+            "metrics/position_error_m/offline",
+            "offline",
+            palette::OFFLINE,
+        ),
+        (
+            "metrics/online_sigma_m",
+            "online σ (filter's own)",
+            palette::SIGMA,
+        ),
+        ("metrics/tag_nis", "tag NIS", palette::FUSED),
+        (
+            "metrics/turn_deg/visual_error",
+            "cameras' turn error",
+            palette::OFFLINE,
+        ),
+        (
+            "metrics/turn_deg/wheels_error",
+            "wheels' turn error",
+            palette::ODOMETRY,
+        ),
+        (
+            "metrics/turn_deg/visual_sigma",
+            "cameras' turn σ",
+            palette::SIGMA,
+        ),
+    ] {
+        rec.log_static(
+            path,
+            &rerun::SeriesLines::new()
+                .with_names([name])
+                .with_colors([color])
+                .with_widths([2.0f32]),
+        )?;
+    }
+    Ok(())
+}
+
 fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
+    log_series_styles(rec)?;
     let s = scene.survey;
     let truth = scene.run.ground_truth.as_deref();
     let mut next = f64::NEG_INFINITY;
@@ -451,8 +757,68 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
     Ok(())
 }
 
+/// The online filter's position error over its own sigma, median over the run; `None` without
+/// the truth.
+fn error_over_sigma(scene: &SurveyScene<'_>) -> Option<f64> {
+    let truth = scene.run.ground_truth.as_deref()?;
+    let online = &scene.survey.online;
+    let mut ratios: Vec<f64> = online
+        .trajectory
+        .iter()
+        .zip(&online.sigma_m)
+        .filter(|(_, s)| **s > 0.0)
+        .filter_map(|(p, s)| {
+            let gt = pose_at(truth, p.t_s)?;
+            Some((p.pose.x - gt.x).hypot(p.pose.y - gt.y) / s)
+        })
+        .collect();
+    if ratios.is_empty() {
+        return None;
+    }
+    ratios.sort_by(f64::total_cmp);
+    Some(ratios[ratios.len() / 2])
+}
+
+/// The report's opening lines: the figures a reader looks for first, and how to read the plots.
+fn at_a_glance(scene: &SurveyScene<'_>) -> String {
+    let m = scene.metrics;
+    let get = |k: &str| m.get(k).copied();
+    let mut md = String::from("## At a glance\n\n");
+    if let (Some(o), Some(on), Some(off)) = (
+        get("ate_m.odometry"),
+        get("ate_m.online"),
+        get("ate_m.offline"),
+    ) {
+        md.push_str(&format!(
+            "Position error (ATE): odometry **{:.3} m**, online **{:.3} m**, offline **{:.3} m**.\n\n",
+            o, on, off
+        ));
+    }
+    md.push_str(&format!(
+        "{} landmarks surveyed.\n\n",
+        scene.survey.landmarks.len()
+    ));
+    if let Some(r) = error_over_sigma(scene) {
+        md.push_str(&format!(
+            "The plot's *online σ* is the filter's own 1-σ position uncertainty (its longest \
+             axis), not an error: on this run the online error is {:.2} σ at the median, so the \
+             filter is {} (its noise settings are in `stereotag config --default`).\n\n",
+            r,
+            if r < 0.5 {
+                "cautious: it believes itself less than it could"
+            } else if r > 2.0 {
+                "over-confident"
+            } else {
+                "consistent"
+            }
+        ));
+    }
+    md
+}
+
 fn log_report(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
     let mut md = metrics_markdown("stereotag survey", scene.metrics);
+    md.insert_str(md.find("| value").unwrap_or(0), &at_a_glance(scene));
     md.push_str("\n## Landmarks\n\n| tag | x m | y m | z m | sightings | corner |\n|---|---|---|---|---|---|\n");
     for l in &scene.survey.landmarks {
         md.push_str(&format!(

@@ -196,9 +196,7 @@ pub fn calibrate(
         &dir.path("calibration.rrd"),
     )?;
     if let Some(rec) = recorder {
-        let metrics = serde_json::to_string_pretty(&report["metrics"])
-            .map_err(|e| Error::Request(e.to_string()))?;
-        let md = format!("# stereotag calibration\n\n```json\n{metrics}\n```\n");
+        let md = report_markdown(&calib, request.fix_intrinsics.is_some());
         rec.log_calibration(&CalibrationScene {
             calibration: &calib,
             report_markdown: &md,
@@ -249,6 +247,83 @@ fn report(
         "coverage_counts": {"cols": 8, "rows": 6, "left": calib.coverage_counts.0, "right": calib.coverage_counts.1},
         "warnings": calib.warnings,
     }))
+}
+
+/// The report as the recording shows it (Markdown): the warnings first, the fit, then each
+/// camera's intrinsics and the rig's extrinsics with their sigmas.
+pub fn report_markdown(calib: &Calibration, intrinsics_fixed: bool) -> String {
+    let mut md = String::from("# stereotag calibration\n\n## Warnings\n\n");
+    if calib.warnings.is_empty() {
+        md.push_str("None.\n");
+    }
+    for w in &calib.warnings {
+        md.push_str(&format!("- **{w}**\n"));
+    }
+    let sigma = |key: &str| calib.sigmas.get(key).copied();
+    let pm = |v: f64, s: Option<f64>, digits: usize| match s {
+        Some(s) => format!("{v:.digits$} ± {s:.digits$}"),
+        None => format!("{v:.digits$}"),
+    };
+    let t = calib.rig.right_from_left.translation.vector;
+    md.push_str(&format!(
+        "\n## Fit\n\n| value | |\n|---:|---|\n\
+         | {:.3} px | RMS reprojection (left {:.3}, right {:.3}) |\n\
+         | {:.3} px | epipolar error |\n\
+         | {} mm | baseline (± 1σ) |\n\
+         | {} | views used |\n| {} | outliers left out |\n\
+         | {:.0}% / {:.0}% | image cells covered, left / right |\n",
+        calib.rms_px,
+        calib.rms_left_px,
+        calib.rms_right_px,
+        calib.epipolar_error_px,
+        pm(1e3 * t.norm(), sigma("baseline_m").map(|s| 1e3 * s), 2),
+        calib.views.len(),
+        calib.outliers.len(),
+        100.0 * calib.coverage.0,
+        100.0 * calib.coverage.1,
+    ));
+    md.push_str(&format!(
+        "\n## Intrinsics (± 1σ{})\n\n| | left | right |\n|---|---:|---:|\n",
+        if intrinsics_fixed {
+            "; fixed, as given"
+        } else {
+            ""
+        }
+    ));
+    let left = crate::calib::named_intrinsics(&calib.rig.left);
+    let right = crate::calib::named_intrinsics(&calib.rig.right);
+    for ((name, l), (_, r)) in left.iter().zip(&right) {
+        let digits = if name.starts_with('f') || name.starts_with('c') {
+            2
+        } else {
+            5
+        };
+        md.push_str(&format!(
+            "| {name} | {} | {} |\n",
+            pm(*l, sigma(&format!("left.{name}")), digits),
+            pm(*r, sigma(&format!("right.{name}")), digits)
+        ));
+    }
+    md.push_str("\n## Right camera from left (± 1σ)\n\n| | value |\n|---|---:|\n");
+    let r = calib.rig.right_from_left.rotation.scaled_axis();
+    for (name, v, scale, unit) in [
+        ("tx", t.x, 1e3, "mm"),
+        ("ty", t.y, 1e3, "mm"),
+        ("tz", t.z, 1e3, "mm"),
+        ("rx", r.x, 180.0 / std::f64::consts::PI, "deg"),
+        ("ry", r.y, 180.0 / std::f64::consts::PI, "deg"),
+        ("rz", r.z, 180.0 / std::f64::consts::PI, "deg"),
+    ] {
+        md.push_str(&format!(
+            "| {name} | {} {unit} |\n",
+            pm(
+                v * scale,
+                sigma(&format!("right_from_left.{name}")).map(|s| s * scale),
+                3
+            )
+        ));
+    }
+    md
 }
 
 /// Both images rectified, side by side, with horizontal lines: corresponding points of a good
