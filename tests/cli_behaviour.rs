@@ -109,6 +109,47 @@ fn an_interrupted_command_removes_its_unfinished_output() {
 }
 
 #[test]
+fn an_interrupted_recording_saved_elsewhere_is_removed_and_an_old_one_kept() {
+    let dir = empty_dir("interrupt_save");
+    let side = dir.join("side");
+    std::fs::create_dir_all(&side).unwrap();
+    std::fs::write(side.join("d.rrd"), b"an earlier recording").unwrap();
+    let child = stereotag_in(&dir)
+        .args(["demo", "-q", "--save", "side/d.rrd"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while partial_outputs(&side).is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "the recording never started"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(partial_outputs(&side), Vec::<String>::new());
+    assert_eq!(partial_outputs(&dir), Vec::<String>::new());
+    assert_eq!(
+        std::fs::read(side.join("d.rrd")).unwrap(),
+        b"an earlier recording"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn a_reader_that_went_away_is_not_an_error() {
     let (reader, writer) = std::io::pipe().unwrap();
     drop(reader); // every write to the pipe now fails with EPIPE

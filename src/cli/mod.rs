@@ -123,9 +123,13 @@ fn colour_on_stderr() -> bool {
     std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
 }
 
+/// Set by Ctrl-C or SIGTERM: from then on the handler ends the process.
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// Ctrl-C or SIGTERM: removes the outputs under construction and exits with 130, as a shell
 /// does for a command stopped by SIGINT.
 fn interrupted() {
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
     let removed = stereotag::io::remove_partial_outputs();
     if removed > 0 {
         eprintln!("interrupted: the unfinished output was removed");
@@ -201,6 +205,13 @@ pub fn main() -> i32 {
             print_out(&String::from_utf8_lossy(&script))
         }
     };
+    if INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
+        // The work failed because its output was being removed under it, or ended while it was:
+        // the handler says so and exits 130; nothing else is to be said.
+        loop {
+            std::thread::park();
+        }
+    }
     match result {
         Ok(()) => 0,
         Err(err) => {

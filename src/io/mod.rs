@@ -20,7 +20,7 @@ pub use maps::{
     save_features_csv, save_gray_png, save_map_png, save_rgb_png, save_ros_map, save_walls_csv,
     RosMapYaml,
 };
-pub use output::{remove_partial_outputs, OutputDir};
+pub use output::{remove_partial_outputs, OutputDir, PartialFile};
 pub use rig::{
     load_rig, parse_rig, robot_from_forward_camera, save_camera_info, save_opencv_stereo, save_rig,
     save_rig_exports, Camchain, KalibrCamera, DEFAULT_RIG,

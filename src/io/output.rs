@@ -1,7 +1,7 @@
-//! Output directories that appear whole or not at all.
+//! Output directories and files that appear whole or not at all.
 //!
-//! An output is built in a hidden sibling directory (`.NAME.partial-PID`) and renamed into place
-//! when complete. Every such directory of the process is listed, so that a program interrupted by
+//! An output is built in a hidden sibling (`.NAME.partial-PID`, a directory or a file) and renamed
+//! into place when complete. Every such directory of the process is listed, so that a program interrupted by
 //! a signal can remove them ([`remove_partial_outputs`], which the command line calls on Ctrl-C
 //! and SIGTERM), and one left by a process that died (killed, power cut) is removed by the next
 //! output made beside it.
@@ -10,7 +10,7 @@ use super::IoError;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// The staging directories of this process's outputs under construction.
+/// The staging directories and files of this process's outputs under construction.
 static PARTIAL: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 fn partial() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
@@ -31,10 +31,19 @@ pub fn remove_partial_outputs() -> usize {
         } else {
             dir
         };
-        let _ = std::fs::remove_dir_all(gone);
-        let _ = std::fs::remove_dir_all(dir);
+        let _ = remove_path(gone);
+        let _ = remove_path(dir);
     }
     dirs.len()
+}
+
+/// Removes a directory with what it holds, or a file.
+fn remove_path(path: &Path) -> std::io::Result<()> {
+    if std::fs::symlink_metadata(path)?.is_dir() {
+        std::fs::remove_dir_all(path)
+    } else {
+        std::fs::remove_file(path)
+    }
 }
 
 /// The process id in a staging directory's name `.NAME.partial-PID`, if `file_name` is one for
@@ -68,7 +77,7 @@ fn remove_stale(parent: &Path, name: &str) {
         };
         if pid != std::process::id() && !running(pid) {
             let path = entry.path();
-            match std::fs::remove_dir_all(&path) {
+            match remove_path(&path) {
                 Ok(()) => tracing::warn!(
                     "removed {}, the partial output of an interrupted run (process {pid})",
                     path.display()
@@ -162,6 +171,61 @@ impl Drop for OutputDir {
     fn drop(&mut self) {
         if !self.committed {
             let _ = std::fs::remove_dir_all(&self.staging);
+            partial().retain(|p| p != &self.staging);
+        }
+    }
+}
+
+/// A file under construction: written as a hidden sibling (`.NAME.partial-PID`) and renamed
+/// into place by [`PartialFile::commit`], replacing what was there; dropped without commit, or
+/// at Ctrl-C, it is removed and the old file stays.
+#[derive(Debug)]
+pub struct PartialFile {
+    target: PathBuf,
+    staging: PathBuf,
+    committed: bool,
+}
+
+impl PartialFile {
+    /// Starts the file `target` (its directory is made when missing).
+    pub fn create(target: &Path) -> Result<Self, IoError> {
+        let name = target
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        std::fs::create_dir_all(&parent).map_err(|e| IoError::file(&parent, e))?;
+        remove_stale(&parent, &name);
+        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+        partial().push(staging.clone());
+        Ok(Self {
+            target: target.to_path_buf(),
+            staging,
+            committed: false,
+        })
+    }
+
+    /// Where to write the file until it is committed.
+    pub fn path(&self) -> &Path {
+        &self.staging
+    }
+
+    /// Moves the finished file into place.
+    pub fn commit(mut self) -> Result<PathBuf, IoError> {
+        std::fs::rename(&self.staging, &self.target).map_err(|e| IoError::file(&self.target, e))?;
+        self.committed = true;
+        partial().retain(|p| p != &self.staging);
+        Ok(self.target.clone())
+    }
+}
+
+impl Drop for PartialFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.staging);
             partial().retain(|p| p != &self.staging);
         }
     }

@@ -7,6 +7,8 @@ use std::path::Path;
 /// An open recording.
 pub struct Recorder {
     rec: rerun::RecordingStream,
+    /// The `.rrd` files being written, renamed into place when the recording is finished.
+    files: Vec<crate::io::PartialFile>,
 }
 
 impl Recorder {
@@ -27,15 +29,20 @@ impl Recorder {
     /// Opens a recording to the sinks; its layout is sent with what it logs.
     fn new(application: &'static str, sinks: &[Sink]) -> Result<Self, VizError> {
         let mut boxed: Vec<Box<dyn rerun::sink::LogSink>> = Vec::new();
+        let mut files = Vec::new();
         for sink in sinks {
             match sink {
                 Sink::Save(path) => {
-                    boxed.push(Box::new(rerun::sink::FileSink::new(path).map_err(|e| {
-                        VizError::Url {
-                            url: path.display().to_string(),
-                            message: e.to_string(),
-                        }
-                    })?))
+                    let bad = |message: String| VizError::Url {
+                        url: path.display().to_string(),
+                        message,
+                    };
+                    let file =
+                        crate::io::PartialFile::create(path).map_err(|e| bad(e.to_string()))?;
+                    boxed.push(Box::new(
+                        rerun::sink::FileSink::new(file.path()).map_err(|e| bad(e.to_string()))?,
+                    ));
+                    files.push(file);
                 }
                 Sink::Spawn => {
                     rerun::spawn(&rerun::SpawnOptions::default())
@@ -59,14 +66,22 @@ impl Recorder {
             }
         }
         let rec = rerun::RecordingStreamBuilder::new(application).set_sinks(boxed)?;
-        Ok(Self { rec })
+        Ok(Self { rec, files })
     }
 
-    /// Flushes everything to the sinks.
+    /// Flushes everything to the sinks and moves the `.rrd` files into place (until then they
+    /// are hidden partial files, removed if the program stops first).
     pub fn finish(self) -> Result<(), VizError> {
         self.rec.flush_blocking().map_err(|e| VizError::Flush {
             message: e.to_string(),
         })?;
+        // The sinks closed (the files complete) before they move.
+        self.rec.disconnect();
+        for file in self.files {
+            file.commit().map_err(|e| VizError::Flush {
+                message: e.to_string(),
+            })?;
+        }
         Ok(())
     }
 
