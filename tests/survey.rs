@@ -109,6 +109,7 @@ fn plan(map: &Path, out: &Path, tags: Option<&Path>, no_walls: bool) {
         tags,
         no_walls,
         force: false,
+        recording: Default::default(),
     })
     .expect("the plan is made");
 }
@@ -482,6 +483,25 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
     assert!(!tags.is_empty() && tags.len() <= 12, "{tags:?}");
     let coverage = plan["plan"]["coverage"].as_f64().unwrap();
     assert!(coverage > 0.5, "coverage {coverage}");
+    // Its recording: the error over the map, the tags, the layout.
+    let print = rerun()
+        .args(["rrd", "print", "-vvv"])
+        .arg(plan_dir.join("plan.rrd"))
+        .output()
+        .expect("the `rerun` CLI (pip install rerun-sdk==0.36.3) must be on PATH");
+    let text = String::from_utf8_lossy(&print.stdout);
+    for entity in [
+        "/map/grid",
+        "/map/predicted_error",
+        "/map/tags",
+        "/report",
+        "/viewport",
+    ] {
+        assert!(
+            text.contains(&format!("- {entity} - ")),
+            "plan.rrd has no {entity}"
+        );
+    }
     // Chosen tags are apart from each other.
     for (i, a) in tags.iter().enumerate() {
         for b in &tags[i + 1..] {

@@ -8,8 +8,9 @@ pub struct PlanArgs {
     /// A map directory from `stereotag map` or `survey` (map.yaml + map.pgm and corners.csv).
     #[arg(long)]
     map: PathBuf,
-    /// Output directory: plan.json, predicted_error.csv and plan.png, a picture of the map with
-    /// the tags (default: print plan.json).
+    /// Output directory: plan.json, predicted_error.csv, plan.png (a picture of the map with the
+    /// tags) and plan.rrd (the Rerun recording: the predicted error over the map) (default:
+    /// print plan.json).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Largest useful distance to a tag, metres.
@@ -33,6 +34,8 @@ pub struct PlanArgs {
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    rerun: super::RerunArgs,
 }
 
 impl PlanArgs {
@@ -51,6 +54,7 @@ impl PlanArgs {
             tags: self.tags.as_deref(),
             no_walls: self.no_walls,
             force: self.force,
+            recording: self.rerun.request()?,
         })?;
         let json = match &output {
             PlanOutput::Predicted {

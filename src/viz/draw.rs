@@ -1,6 +1,7 @@
 //! Drawing shared by the recordings: conversions to rerun's types, the world's walls and planned
 //! tags, trajectories, the robot, landmarks with their ellipsoids, surveyed walls, maps.
 
+use super::layout::View;
 use super::palette;
 use super::{VizError, ELLIPSOID_SIGMAS, POSE_SAMPLE_S};
 use crate::fusion::Landmark;
@@ -366,6 +367,81 @@ impl<'a> StripBatches<'a> {
         )?;
         Ok(())
     }
+}
+
+/// Width kept right of the map for its legend, pixels of the map.
+const LEGEND_WIDTH_PX: f32 = 30.0;
+
+/// The part of the home the maps show: a map's observed cells and a margin, on the grid's own
+/// cells (every map image of a recording is cropped to it).
+pub(super) struct MapFrame {
+    /// The map, cropped.
+    pub(super) map: OccupancyMap,
+    /// The rectangle shown, metres.
+    pub(super) extent: ([f64; 2], [f64; 2]),
+}
+
+impl MapFrame {
+    pub(super) fn new(corrected: &OccupancyMap) -> Self {
+        const MARGIN_M: f64 = 0.6;
+        let g = &corrected.geometry;
+        let (lo, hi) = corrected.known_extent().unwrap_or((
+            g.origin_m,
+            [
+                g.origin_m[0] + g.width as f64 * g.resolution_m,
+                g.origin_m[1] + g.height as f64 * g.resolution_m,
+            ],
+        ));
+        let lo = [lo[0] - MARGIN_M, lo[1] - MARGIN_M];
+        let hi = [hi[0] + MARGIN_M, hi[1] + MARGIN_M];
+        let map = corrected.cropped(lo, hi);
+        let mg = &map.geometry;
+        let extent = (
+            mg.origin_m,
+            [
+                mg.origin_m[0] + mg.width as f64 * mg.resolution_m,
+                mg.origin_m[1] + mg.height as f64 * mg.resolution_m,
+            ],
+        );
+        Self { map, extent }
+    }
+
+    /// A 2D view of the map at `origin` framed on it, its legend and a margin for the labels.
+    pub(super) fn view(&self, name: &str, origin: &str) -> View {
+        let [w, h] = [
+            self.map.geometry.width as f32,
+            self.map.geometry.height as f32,
+        ];
+        let margin = 0.06 * w.max(h);
+        View::spatial_2d(name, origin).framed(
+            [-margin, -margin],
+            [w + LEGEND_WIDTH_PX + margin, h + margin],
+        )
+    }
+
+    /// Another map of the same grid, cropped the same.
+    pub(super) fn crop(&self, map: &OccupancyMap) -> OccupancyMap {
+        map.cropped(self.extent.0, self.extent.1)
+    }
+}
+
+/// A legend right of the map: each name in its colour, one row each.
+pub(super) fn log_legend(
+    rec: &rerun::RecordingStream,
+    path: &str,
+    map: &OccupancyMap,
+    entries: &[(String, rerun::Color)],
+) -> Result<(), VizError> {
+    let x = map.geometry.width as f32 + 0.5 * LEGEND_WIDTH_PX;
+    let step = map.geometry.height as f32 / entries.len().max(8) as f32;
+    rec.log_static(
+        path,
+        &rerun::Points2D::new((0..entries.len()).map(|i| [x, step * (i as f32 + 0.5)]))
+            .with_colors(entries.iter().map(|(_, c)| *c).collect::<Vec<_>>())
+            .with_labels(entries.iter().map(|(n, _)| n.clone()))
+            .with_radii([rerun::Radius::new_ui_points(0.5)]),
+    )?;
+    Ok(())
 }
 
 /// A markdown table of `metric | value` rows under a title.

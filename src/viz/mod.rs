@@ -22,6 +22,8 @@ mod localize;
 #[cfg(feature = "rerun")]
 mod palette;
 #[cfg(feature = "rerun")]
+mod plan;
+#[cfg(feature = "rerun")]
 mod recorder;
 #[cfg(feature = "rerun")]
 mod survey;
@@ -33,7 +35,7 @@ mod off;
 pub use off::{jpeg_pair, Recorder};
 #[cfg(feature = "rerun")]
 pub use recorder::{jpeg_pair, Recorder};
-pub use scene::{CalibrationScene, LocalizeScene, SurveyScene};
+pub use scene::{CalibrationScene, LocalizeScene, PlanScene, SurveyScene};
 
 use std::path::{Path, PathBuf};
 
@@ -109,6 +111,8 @@ pub enum Recording {
     Calibration,
     /// A later run localised against a survey.
     Localization,
+    /// Where to put tags, with the error to expect.
+    Plan,
 }
 
 impl Recording {
@@ -118,13 +122,14 @@ impl Recording {
             Recording::Survey => "stereotag survey",
             Recording::Calibration => "stereotag calibration",
             Recording::Localization => "stereotag localize",
+            Recording::Plan => "stereotag plan",
         }
     }
 }
 
 /// Where the caller wants a recording: nowhere, or to a file, a new viewer and/or a running
 /// viewer. With no sink named, a workflow records to its output directory's default file
-/// (`survey.rrd`, `localize.rrd`, `calibration.rrd`).
+/// (`survey.rrd`, `localize.rrd`, `calibration.rrd`, `plan.rrd`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RecordingRequest {
     /// Record nothing.

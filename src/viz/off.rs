@@ -1,6 +1,8 @@
 //! The recording in a build without the `rerun` feature: the same API, recording nothing.
 
-use super::{CalibrationScene, LocalizeScene, Recording, RecordingRequest, SurveyScene, VizError};
+use super::{
+    CalibrationScene, LocalizeScene, PlanScene, Recording, RecordingRequest, SurveyScene, VizError,
+};
 use std::path::Path;
 
 /// No recording can be open in this build: the type has no values.
@@ -31,6 +33,11 @@ impl Recorder {
 
     /// Never called: there is no recorder.
     pub fn log_localization(&self, _scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+        match *self {}
+    }
+
+    /// Never called: there is no recorder.
+    pub fn log_plan(&self, _scene: &PlanScene<'_>) -> Result<(), VizError> {
         match *self {}
     }
 

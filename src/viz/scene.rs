@@ -63,3 +63,17 @@ pub struct CalibrationScene<'a> {
     /// Each view's left and right images as JPEG, keyed by view name.
     pub view_images: &'a BTreeMap<String, (Vec<u8>, Vec<u8>)>,
 }
+
+/// What a tag plan's recording shows.
+pub struct PlanScene<'a> {
+    /// The map planned on.
+    pub map: &'a crate::sonar::grid::OccupancyMap,
+    /// Its Hough corners.
+    pub corners: &'a [crate::sonar::hough::Feature],
+    /// The tags (proposed or given), x and y in metres.
+    pub tags_m: &'a [[f64; 2]],
+    /// Whether the tags were proposed (else given).
+    pub proposed: bool,
+    /// The predicted error.
+    pub prediction: &'a crate::plan::Prediction,
+}

@@ -18,18 +18,7 @@ use std::collections::BTreeMap;
 /// Hough accumulator in tabs), the error plots over the whole run and the report on top; the
 /// stereo pair below.
 fn layout(frame: &MapFrame, tag_frame: Option<&TagFrame>) -> Layout {
-    let [w, h] = [
-        frame.map.geometry.width as f32,
-        frame.map.geometry.height as f32,
-    ];
-    // The map and its legend, which sits beside it on the right; a margin for the labels.
-    let margin = 0.06 * w.max(h);
-    let map_view = |name: &str, origin: &str| {
-        View::spatial_2d(name, origin).framed(
-            [-margin, -margin],
-            [w + LEGEND_WIDTH_PX + margin, h + margin],
-        )
-    };
+    let map_view = |name: &str, origin: &str| frame.view(name, origin);
     let (lo, hi) = frame.extent;
     let centre = [
         0.5 * (lo[0] + hi[0]) as f32,
@@ -191,49 +180,6 @@ fn quad_area(c: &[[f64; 2]; 4]) -> f64 {
         })
         .sum();
     0.5 * twice.abs()
-}
-
-/// Width kept right of the map for its legend, pixels of the map.
-const LEGEND_WIDTH_PX: f32 = 30.0;
-
-/// The part of the home the maps show: the corrected map's observed cells and a margin, on the
-/// grid's own cells (every map image of the recording is cropped to it).
-struct MapFrame {
-    /// The corrected map, cropped.
-    map: OccupancyMap,
-    /// The rectangle shown, metres.
-    extent: ([f64; 2], [f64; 2]),
-}
-
-impl MapFrame {
-    fn new(corrected: &OccupancyMap) -> Self {
-        const MARGIN_M: f64 = 0.6;
-        let g = &corrected.geometry;
-        let (lo, hi) = corrected.known_extent().unwrap_or((
-            g.origin_m,
-            [
-                g.origin_m[0] + g.width as f64 * g.resolution_m,
-                g.origin_m[1] + g.height as f64 * g.resolution_m,
-            ],
-        ));
-        let lo = [lo[0] - MARGIN_M, lo[1] - MARGIN_M];
-        let hi = [hi[0] + MARGIN_M, hi[1] + MARGIN_M];
-        let map = corrected.cropped(lo, hi);
-        let mg = &map.geometry;
-        let extent = (
-            mg.origin_m,
-            [
-                mg.origin_m[0] + mg.width as f64 * mg.resolution_m,
-                mg.origin_m[1] + mg.height as f64 * mg.resolution_m,
-            ],
-        );
-        Self { map, extent }
-    }
-
-    /// Another map of the same grid, cropped the same.
-    fn crop(&self, map: &OccupancyMap) -> OccupancyMap {
-        map.cropped(self.extent.0, self.extent.1)
-    }
 }
 
 impl Recorder {
@@ -482,25 +428,6 @@ fn log_map_landmarks(
         }))
         .with_colors([palette::FUSED])
         .with_radii([1.0f32]),
-    )?;
-    Ok(())
-}
-
-/// A legend right of the map: each name in its colour, one row each.
-fn log_legend(
-    rec: &rerun::RecordingStream,
-    path: &str,
-    map: &OccupancyMap,
-    entries: &[(String, rerun::Color)],
-) -> Result<(), VizError> {
-    let x = map.geometry.width as f32 + 0.5 * LEGEND_WIDTH_PX;
-    let step = map.geometry.height as f32 / entries.len().max(8) as f32;
-    rec.log_static(
-        path,
-        &rerun::Points2D::new((0..entries.len()).map(|i| [x, step * (i as f32 + 0.5)]))
-            .with_colors(entries.iter().map(|(_, c)| *c).collect::<Vec<_>>())
-            .with_labels(entries.iter().map(|(n, _)| n.clone()))
-            .with_radii([rerun::Radius::new_ui_points(0.5)]),
     )?;
     Ok(())
 }

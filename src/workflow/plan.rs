@@ -6,6 +6,7 @@ use crate::io::{self, OutputDir};
 use crate::plan::{plan_tags, predict, Plan, PlanConfig, Prediction};
 use crate::sonar::grid::OccupancyMap;
 use crate::sonar::walls::WallSegment;
+use crate::viz::{PlanScene, Recorder, Recording, RecordingRequest};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -14,7 +15,8 @@ use std::path::Path;
 pub struct PlanRequest<'a> {
     /// A map directory from `map` or `survey` (map.yaml + map.pgm, corners.csv, walls.csv).
     pub map: &'a Path,
-    /// Write plan.json, predicted_error.csv and plan.png here (default: nothing written).
+    /// Write plan.json, predicted_error.csv, plan.png and plan.rrd here (default: nothing
+    /// written).
     pub out: Option<&'a Path>,
     /// The settings.
     pub config: PlanConfig,
@@ -24,6 +26,9 @@ pub struct PlanRequest<'a> {
     pub no_walls: bool,
     /// Replace the output directory if it exists.
     pub force: bool,
+    /// Where the recording goes (default: `plan.rrd` in `out`; without `out`, only a sink it
+    /// names).
+    pub recording: RecordingRequest,
 }
 
 /// What the planner found.
@@ -121,9 +126,50 @@ pub fn plan(request: &PlanRequest<'_>) -> Result<PlanOutput> {
         io::save_json(&dir.path("plan.json"), json)?;
         save_predicted_error(&dir.path("predicted_error.csv"), &map, errors)?;
         save_plan_picture(&dir.path("plan.png"), &map, &corners, &output)?;
+        record(request, &map, &corners, &output, &dir.path("plan.rrd"))?;
         dir.commit()?;
+    } else if request.recording.names_a_sink() {
+        // Only the sinks named: there is no output directory for a default file.
+        record(request, &map, &corners, &output, Path::new("plan.rrd"))?;
     }
     Ok(output)
+}
+
+/// Records the plan to the sinks asked for (`default_file` when none is named).
+fn record(
+    request: &PlanRequest<'_>,
+    map: &OccupancyMap,
+    corners: &[crate::sonar::hough::Feature],
+    output: &PlanOutput,
+    default_file: &Path,
+) -> Result<()> {
+    let Some(rec) = Recorder::open(&request.recording, Recording::Plan, default_file)? else {
+        return Ok(());
+    };
+    let (tags_m, prediction, proposed) = tags_of(output);
+    rec.log_plan(&PlanScene {
+        map,
+        corners,
+        tags_m: &tags_m,
+        proposed,
+        prediction,
+    })?;
+    rec.finish()?;
+    Ok(())
+}
+
+/// The tags (proposed or given), the prediction with them and whether they were proposed.
+fn tags_of(output: &PlanOutput) -> (Vec<[f64; 2]>, &Prediction, bool) {
+    match output {
+        PlanOutput::Proposed { plan, .. } => (
+            plan.tags.iter().map(|t| [t.x_m, t.y_m]).collect(),
+            &plan.prediction,
+            true,
+        ),
+        PlanOutput::Predicted {
+            prediction, tags_m, ..
+        } => (tags_m.clone(), prediction, false),
+    }
 }
 
 /// `plan.png`: the map with its Hough corners and the tags (proposed or given), numbered, and
@@ -135,16 +181,8 @@ fn save_plan_picture(
     output: &PlanOutput,
 ) -> Result<()> {
     use crate::picture::{colours, Mark, Overlay};
-    let (tags_m, prediction, what): (Vec<[f64; 2]>, &Prediction, &str) = match output {
-        PlanOutput::Proposed { plan, .. } => (
-            plan.tags.iter().map(|t| [t.x_m, t.y_m]).collect(),
-            &plan.prediction,
-            "proposed",
-        ),
-        PlanOutput::Predicted {
-            prediction, tags_m, ..
-        } => (tags_m.clone(), prediction, "given"),
-    };
+    let (tags_m, prediction, proposed) = tags_of(output);
+    let what = if proposed { "proposed" } else { "given" };
     let mut marks = Mark::corners(corners);
     marks.extend(tags_m.iter().enumerate().map(|(i, &at_m)| Mark {
         at_m,
