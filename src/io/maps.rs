@@ -16,7 +16,7 @@ use std::path::Path;
 pub struct RosMapYaml {
     /// Image file, relative to the YAML.
     pub image: String,
-    /// `trinary`, `scale` or `raw` (map_server's modes); we write `scale`.
+    /// `trinary` (when not given), `scale` or `raw` (map_server's modes); we write `trinary`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mode: Option<String>,
     /// Metres per pixel.
@@ -31,19 +31,57 @@ pub struct RosMapYaml {
     pub free_thresh: f64,
 }
 
-/// Grey value ROS uses for unknown cells.
-const ROS_UNKNOWN: u8 = 205;
+/// The grey of a cell never observed in the maps we write: the middle of the thresholds, so
+/// map_server's trinary rule reads it as unknown (-1). (map_saver's 205 with our free threshold
+/// 0.2 would read as free: (255 - 205) / 255 = 0.196 < 0.2.)
+fn unknown_grey(map: &OccupancyMap) -> u8 {
+    let middle = 0.5 * (map.free_threshold + map.occupied_threshold);
+    (255.0 * (1.0 - middle)).round().clamp(0.0, 255.0) as u8
+}
 
-/// Writes `<stem>.pgm` and `<stem>.yaml` in map_server's convention.
+/// What map_server makes of a pixel's occupancy `(255 - v) / 255` under the thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RosClass {
+    Free,
+    Occupied,
+    /// Between the thresholds: unknown in trinary mode, a scaled value in scale mode.
+    Between,
+}
+
+fn ros_class(occupancy: f64, free_thresh: f64, occupied_thresh: f64) -> RosClass {
+    if occupancy > occupied_thresh {
+        RosClass::Occupied
+    } else if occupancy < free_thresh {
+        RosClass::Free
+    } else {
+        RosClass::Between
+    }
+}
+
+/// The grey of an observed cell of occupancy `c`: `255 (1 - c)`, moved by the least that keeps
+/// map_server's class of it the map's class of `c` (rounding can carry a cell next to a threshold
+/// across it).
+fn cell_grey(c: f64, map: &OccupancyMap) -> u8 {
+    let (free, occupied) = (map.free_threshold, map.occupied_threshold);
+    let want = ros_class(c, free, occupied);
+    let start = (255.0 * (1.0 - c)).round().clamp(0.0, 255.0) as i32;
+    let read = |v: i32| ros_class((255 - v) as f64 / 255.0, free, occupied);
+    (0..=255)
+        .flat_map(|d| [start - d, start + d])
+        .find(|&v| (0..=255).contains(&v) && read(v) == want)
+        .unwrap_or(start) as u8
+}
+
+/// Writes `<stem>.pgm` and `<stem>.yaml` for map_server in trinary mode: it reads every cell
+/// never observed as unknown (-1), every cell the map holds occupied as 100 and free as 0 (cells
+/// between the thresholds are unknown to it too); the grey keeps the map's occupancy otherwise.
 pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), IoError> {
     let g = &map.geometry;
-    let mut pixels = vec![ROS_UNKNOWN; g.width * g.height];
+    let mut pixels = vec![unknown_grey(map); g.width * g.height];
     for row in 0..g.height {
         for col in 0..g.width {
             if let Some(c) = map.occupancy[row * g.width + col] {
-                // map_server reads occupancy as (255 - value) / 255.
-                pixels[(g.height - 1 - row) * g.width + col] =
-                    (255.0 * (1.0 - c)).round().clamp(0.0, 255.0) as u8;
+                pixels[(g.height - 1 - row) * g.width + col] = cell_grey(c, map);
             }
         }
     }
@@ -57,7 +95,7 @@ pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), Io
     write_file(&pgm, &bytes)?;
     let yaml = RosMapYaml {
         image: format!("{stem}.pgm"),
-        mode: Some("scale".into()),
+        mode: Some("trinary".into()),
         resolution: g.resolution_m,
         origin: [g.origin_m[0], g.origin_m[1], 0.0],
         negate: 0,
@@ -68,8 +106,34 @@ pub fn save_ros_map(dir: &Path, stem: &str, map: &OccupancyMap) -> Result<(), Io
     write_file(&path, to_yaml(&path, &yaml)?.as_bytes())
 }
 
+/// A pixel as map_server reads it (its documented rule for each mode), as an occupancy: trinary:
+/// 1 occupied, 0 free, `None` unknown (between the thresholds); scale: 1, 0, or the occupancy
+/// between, `None` only where the pixel is transparent; raw: the value as a percentage, `None`
+/// above 100.
+fn ros_cell(meta: &RosMapYaml, value: u8, alpha: u8) -> Option<f64> {
+    let mode = meta.mode.as_deref().unwrap_or("trinary");
+    if mode == "raw" {
+        return (value <= 100).then_some(value as f64 / 100.0);
+    }
+    let occupancy = if meta.negate != 0 {
+        value as f64 / 255.0
+    } else {
+        (255.0 - value as f64) / 255.0
+    };
+    match (
+        mode,
+        ros_class(occupancy, meta.free_thresh, meta.occupied_thresh),
+    ) {
+        ("scale", _) if alpha == 0 => None,
+        (_, RosClass::Occupied) => Some(1.0),
+        (_, RosClass::Free) => Some(0.0),
+        ("scale", RosClass::Between) => Some(occupancy),
+        _ => None,
+    }
+}
+
 /// Reads and checks a ROS map's YAML and its grey image.
-fn read_ros_map(yaml_path: &Path) -> Result<(RosMapYaml, image::GrayImage), IoError> {
+fn read_ros_map(yaml_path: &Path) -> Result<(RosMapYaml, image::GrayAlphaImage), IoError> {
     let meta: RosMapYaml = parse_yaml(yaml_path, &read_text(yaml_path)?)?;
     if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
         return Err(IoError::content(
@@ -93,26 +157,28 @@ fn read_ros_map(yaml_path: &Path) -> Result<(RosMapYaml, image::GrayImage), IoEr
         .map_err(|e| IoError::file(&image_path, e))?
         .decode()
         .map_err(|e| IoError::content(&image_path, format!("cannot read the map image: {e}")))?
-        .to_luma8();
+        .to_luma_alpha8();
+    if let Some(mode) = meta
+        .mode
+        .as_deref()
+        .filter(|m| !["trinary", "scale", "raw"].contains(m))
+    {
+        return Err(IoError::content(
+            yaml_path,
+            format!("`mode: {mode}`: map_server's modes are trinary, scale and raw"),
+        ));
+    }
     Ok((meta, img))
 }
 
-/// Reads a ROS map as a wall raster: every cell that is not free (occupied or unknown) is an
-/// obstacle, so the unknown space behind walls is solid.
+/// Reads a ROS map as a wall raster, by map_server's rule: every cell that is not free (occupied
+/// or unknown) is an obstacle, so the unknown space behind walls is solid.
 pub fn load_ros_map(yaml_path: &Path) -> Result<Raster, IoError> {
     let (meta, img) = read_ros_map(yaml_path)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let obstacle = img
         .pixels()
-        .map(|p| {
-            let v = p.0[0] as f64;
-            let occ = if meta.negate != 0 {
-                v / 255.0
-            } else {
-                (255.0 - v) / 255.0
-            };
-            occ > meta.free_thresh
-        })
+        .map(|p| ros_cell(&meta, p.0[0], p.0[1]).is_none_or(|o| o >= meta.free_thresh))
         .collect();
     Ok(Raster {
         width: w,
@@ -174,23 +240,14 @@ pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoErro
     write_file(path, s.as_bytes())
 }
 
-/// Reads a ROS map as an occupancy map: occupancy `(255 − v) / 255` per pixel (or `v / 255` with
-/// `negate`), and the grey of unknown cells (205) as unknown.
+/// Reads a ROS map as an occupancy map by map_server's rule for its mode (see [`ros_cell`]):
+/// what map_server reads as unknown is unknown, occupied is 1 and free 0.
 pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
     let (meta, img) = read_ros_map(yaml_path)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let mut occupancy = vec![None; w * h];
     for (x, y, p) in img.enumerate_pixels() {
-        let v = p.0[0];
-        if v == ROS_UNKNOWN {
-            continue;
-        }
-        let occ = if meta.negate != 0 {
-            v as f64 / 255.0
-        } else {
-            (255.0 - v as f64) / 255.0
-        };
-        occupancy[(h - 1 - y as usize) * w + x as usize] = Some(occ);
+        occupancy[(h - 1 - y as usize) * w + x as usize] = ros_cell(&meta, p.0[0], p.0[1]);
     }
     Ok(OccupancyMap {
         geometry: crate::sonar::grid::GridGeometry {
