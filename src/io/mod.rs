@@ -28,8 +28,8 @@ pub use rig::{
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
 pub use survey::{
     load_landmarks, save_landmarks, save_localization_csv, save_survey, save_trajectory_csv,
-    save_visual_turns_csv, save_wpilib_layout, LandmarkRecord, LandmarksFile, Trajectories,
-    LOCALIZATION_HEADER, VISUAL_TURNS_HEADER,
+    save_tum, save_visual_turns_csv, save_wpilib_layout, truth_at, LandmarkRecord, LandmarksFile,
+    Trajectories, LOCALIZATION_HEADER, VISUAL_TURNS_HEADER,
 };
 pub use world::{load_world, LoadedWorld, WorldFile};
 

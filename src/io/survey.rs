@@ -237,6 +237,29 @@ pub fn save_trajectory_csv(path: &Path, t: &Trajectories<'_>) -> Result<(), IoEr
     write_file(path, s.as_bytes())
 }
 
+/// Writes a planar trajectory in the TUM format (`timestamp tx ty tz qx qy qz qw`, one pose a
+/// line, the heading as a rotation about z), which `evo_traj` and `evo_ape` read.
+pub fn save_tum(path: &Path, poses: &[StampedPose]) -> Result<(), IoError> {
+    let mut s = String::from("# timestamp tx ty tz qx qy qz qw (stereotag; z up, metres)\n");
+    for p in poses {
+        let (qz, qw) = (0.5 * p.pose.theta).sin_cos();
+        let _ = writeln!(
+            s,
+            "{:.6} {:.6} {:.6} 0 0 0 {:.9} {:.9}",
+            p.t_s, p.pose.x, p.pose.y, qz, qw
+        );
+    }
+    write_file(path, s.as_bytes())
+}
+
+/// The truth at the times of `at` (interpolated), for the TUM files: evo associates poses by
+/// time, and the reports' ATE takes the truth at the estimate's times.
+pub fn truth_at(truth: &[StampedPose], at: &[StampedPose]) -> Vec<StampedPose> {
+    at.iter()
+        .filter_map(|p| pose_at(truth, p.t_s).map(|pose| StampedPose { t_s: p.t_s, pose }))
+        .collect()
+}
+
 /// Header of `visual_turns.csv`.
 pub const VISUAL_TURNS_HEADER: &str =
     "from_t_s,to_t_s,turn_rad,sigma_rad,odom_turn_rad,gt_turn_rad";
@@ -335,6 +358,15 @@ pub fn save_survey(
             ground_truth: run.ground_truth.as_deref(),
         },
     )?;
+    save_tum(&dir.join("trajectory_odometry.tum"), &run.odometry)?;
+    save_tum(&dir.join("trajectory_online.tum"), &s.online.trajectory)?;
+    save_tum(&dir.join("trajectory_offline.tum"), &s.offline.trajectory)?;
+    if let Some(truth) = run.ground_truth.as_deref() {
+        save_tum(
+            &dir.join("trajectory_ground_truth.tum"),
+            &truth_at(truth, &run.odometry),
+        )?;
+    }
     let displacement: Vec<_> = landmarks
         .iter()
         .filter_map(|l| {

@@ -219,6 +219,17 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
     let truth = run.ground_truth.as_deref();
     let growth = error_growth(&result, truth);
     io::save_localization_csv(&dir.path("localization.csv"), &run.odometry, &result, truth)?;
+    io::save_tum(&dir.path("localized.tum"), &result.trajectory)?;
+    io::save_tum(&dir.path("odometry.tum"), &run.odometry)?;
+    if calibration.is_some() {
+        io::save_tum(&dir.path("odometry_calibrated.tum"), &odometry)?;
+    }
+    if let Some(truth) = truth {
+        io::save_tum(
+            &dir.path("ground_truth.tum"),
+            &io::truth_at(truth, &result.trajectory),
+        )?;
+    }
     let counts = LocalizationCounts {
         walls: walls.len(),
         visual_turns: seen.visual.len(),
