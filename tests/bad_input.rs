@@ -123,7 +123,7 @@ fn a_good_run_maps() {
 /// Maps a good run whose odometry.csv is `odometry`; the run must still map (exit 0, a map
 /// written); returns stderr.
 fn map_warnings(odometry: &str) -> String {
-    let (_tmp, out, code, err) = map_with("odometry.csv", odometry);
+    let (tmp, out, code, err) = map_with("odometry.csv", odometry);
     assert_eq!(code, 0, "{err}");
     assert!(out.join("map.pgm").exists());
     err
@@ -198,9 +198,30 @@ fn unknown_sensor() {
 fn time_going_backwards() {
     check(
         "odometry.csv",
-        "t_s,x_m,y_m,theta_rad\n1,2.5,2.5,0\n0.5,2.5,2.5,0\n",
-        "odometry.csv:3: time 0.5 s goes backwards",
+        "t_s,x_m,y_m,theta_rad\n3,2.5,2.5,0\n0.5,2.5,2.5,0\n",
+        "odometry.csv:3: time 0.5 s goes backwards by 2.500 s",
     );
+}
+
+#[test]
+fn rows_a_little_out_of_order_are_reordered_with_one_warning() {
+    let (tmp, out, code, err) = map_with(
+        "sonar.csv",
+        "t_s,sensor,range_m\n0,0,1.0\n0.4,1,\n0.3,0,0.9\n1,1,1.2\n0.8,0,1.1\n",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.join("map.yaml").exists());
+    assert!(
+        err.contains(
+            "sonar.csv: 2 rows out of time order by up to 0.200 s (the first at line 4) re-ordered"
+        ),
+        "{err}"
+    );
+    assert_eq!(err.matches("out of time order").count(), 1, "{err}");
+    // Re-ordered, the rows are read in time order.
+    let run = stereotag::io::load_run(&tmp.path().join("run")).unwrap();
+    let times: Vec<f64> = run.sonar.iter().map(|r| r.t_s).collect();
+    assert_eq!(times, [0.0, 0.3, 0.4, 0.8, 1.0]);
 }
 
 #[test]

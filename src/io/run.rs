@@ -29,27 +29,83 @@ fn number(path: &Path, line: u64, name: &str, field: &str) -> Result<f64, IoErro
     }
 }
 
-fn check_time(path: &Path, line: u64, t: f64, last: &mut f64) -> Result<(), IoError> {
-    if t < *last {
-        return Err(IoError::line(
+/// How far back in time a row may go, seconds, and still be taken (re-ordered, with a
+/// warning): real logs interleave their sensors' rows a little out of order; a larger jump is a
+/// broken file and an error.
+pub const REORDER_TOLERANCE_S: f64 = 0.5;
+
+/// The time order of a file's rows as they are read.
+struct TimeOrder<'a> {
+    path: &'a Path,
+    latest: f64,
+    late_rows: usize,
+    first_late_line: u64,
+    most_late_s: f64,
+}
+
+impl<'a> TimeOrder<'a> {
+    fn new(path: &'a Path) -> Self {
+        Self {
             path,
-            line,
-            format!("time {t} s goes backwards (previous row {last} s)"),
-        ));
+            latest: f64::NEG_INFINITY,
+            late_rows: 0,
+            first_late_line: 0,
+            most_late_s: 0.0,
+        }
     }
-    *last = t;
-    Ok(())
+
+    /// Takes the time of the row at `line`: an error when it goes back more than the tolerance.
+    fn check(&mut self, line: u64, t: f64) -> Result<(), IoError> {
+        if t >= self.latest {
+            self.latest = t;
+            return Ok(());
+        }
+        let late = self.latest - t;
+        if late > REORDER_TOLERANCE_S {
+            return Err(IoError::line(
+                self.path,
+                line,
+                format!(
+                    "time {t} s goes backwards by {late:.3} s (an earlier row is at {} s); rows \
+                     out of order by up to {REORDER_TOLERANCE_S} s are re-ordered, larger jumps \
+                     are errors",
+                    self.latest
+                ),
+            ));
+        }
+        if self.late_rows == 0 {
+            self.first_late_line = line;
+        }
+        self.late_rows += 1;
+        self.most_late_s = self.most_late_s.max(late);
+        Ok(())
+    }
+
+    /// Puts `rows` in time order (stable) when some were late, saying so once.
+    fn finish<T>(self, mut rows: Vec<T>, time: impl Fn(&T) -> f64) -> Vec<T> {
+        if self.late_rows > 0 {
+            tracing::warn!(
+                "{}: {} rows out of time order by up to {:.3} s (the first at line {}) re-ordered",
+                self.path.display(),
+                self.late_rows,
+                self.most_late_s,
+                self.first_late_line
+            );
+            rows.sort_by(|a, b| time(a).total_cmp(&time(b)));
+        }
+        rows
+    }
 }
 
 /// Reads a pose CSV (`t_s,x_m,y_m,theta_rad`, time-ordered), as odometry.csv and ground_truth.csv.
 pub fn read_poses(path: &Path) -> Result<Vec<StampedPose>, IoError> {
     let text = read_text(path)?;
-    let mut last = f64::NEG_INFINITY;
-    csv_rows(path, &text, POSE_HEADER)?
+    let mut order = TimeOrder::new(path);
+    let rows = csv_rows(path, &text, POSE_HEADER)?
         .into_iter()
         .map(|(line, f)| {
             let t = number(path, line, "t_s", f[0])?;
-            check_time(path, line, t, &mut last)?;
+            order.check(line, t)?;
             let x = number(path, line, "x_m", f[1])?;
             let y = number(path, line, "y_m", f[2])?;
             let th = number(path, line, "theta_rad", f[3])?;
@@ -58,17 +114,18 @@ pub fn read_poses(path: &Path) -> Result<Vec<StampedPose>, IoError> {
                 pose: Pose2::new(x, y, th),
             })
         })
-        .collect()
+        .collect::<Result<Vec<_>, IoError>>()?;
+    Ok(order.finish(rows, |p| p.t_s))
 }
 
 fn read_sonar(path: &Path, sensors: usize) -> Result<Vec<SonarReading>, IoError> {
     let text = read_text(path)?;
-    let mut last = f64::NEG_INFINITY;
-    csv_rows(path, &text, SONAR_HEADER)?
+    let mut order = TimeOrder::new(path);
+    let rows = csv_rows(path, &text, SONAR_HEADER)?
         .into_iter()
         .map(|(line, f)| {
             let t = number(path, line, "t_s", f[0])?;
-            check_time(path, line, t, &mut last)?;
+            order.check(line, t)?;
             let sensor: usize = f[1].parse().map_err(|_| {
                 IoError::line(path, line, format!("sensor `{}` is not a sensor index (0, 1, ...)", f[1]))
             })?;
@@ -90,17 +147,18 @@ fn read_sonar(path: &Path, sensors: usize) -> Result<Vec<SonarReading>, IoError>
             };
             Ok(SonarReading { t_s: t, sensor, range_m })
         })
-        .collect()
+        .collect::<Result<Vec<_>, IoError>>()?;
+    Ok(order.finish(rows, |r| r.t_s))
 }
 
 fn read_stereo(path: &Path) -> Result<Vec<StereoEntry>, IoError> {
     let text = read_text(path)?;
-    let mut last = f64::NEG_INFINITY;
-    csv_rows(path, &text, STEREO_HEADER)?
+    let mut order = TimeOrder::new(path);
+    let rows = csv_rows(path, &text, STEREO_HEADER)?
         .into_iter()
         .map(|(line, f)| {
             let t = number(path, line, "t_s", f[0])?;
-            check_time(path, line, t, &mut last)?;
+            order.check(line, t)?;
             if f[1].is_empty() || f[2].is_empty() {
                 return Err(IoError::line(
                     path,
@@ -114,7 +172,8 @@ fn read_stereo(path: &Path) -> Result<Vec<StereoEntry>, IoError> {
                 right: f[2].to_string(),
             })
         })
-        .collect()
+        .collect::<Result<Vec<_>, IoError>>()?;
+    Ok(order.finish(rows, |e| e.t_s))
 }
 
 /// Reads a run dataset directory.
