@@ -123,7 +123,7 @@ fn a_good_run_maps() {
 /// Maps a good run whose odometry.csv is `odometry`; the run must still map (exit 0, a map
 /// written); returns stderr.
 fn map_warnings(odometry: &str) -> String {
-    let (tmp, out, code, err) = map_with("odometry.csv", odometry);
+    let (_tmp, out, code, err) = map_with("odometry.csv", odometry);
     assert_eq!(code, 0, "{err}");
     assert!(out.join("map.pgm").exists());
     err
