@@ -54,6 +54,7 @@
 //!         pictures: Some(Pictures {
 //!             rig: &repo.join("calibration/rigs/default.yaml"),
 //!             policy: CapturePolicy::default(),
+//!             default_mounting: false,
 //!         }),
 //!         force: false,
 //!     },

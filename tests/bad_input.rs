@@ -738,3 +738,48 @@ fn calibration_target_with_a_wrong_typed_or_unknown_key_names_the_line() {
         assert!(err.contains(want), "{err}\nwanted: {want}");
     }
 }
+
+/// The default rig with its `stereotag:` section replaced by `mounting` (none when empty).
+fn rig_with_mounting(dir: &Path, mounting: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(stereotag::io::DEFAULT_RIG),
+    )
+    .unwrap();
+    let cut = text
+        .find("\nstereotag:")
+        .expect("the default rig has a stereotag section");
+    let path = dir.join("rig.yaml");
+    std::fs::write(&path, format!("{}\n{mounting}", &text[..cut])).unwrap();
+    path
+}
+
+#[test]
+fn a_rig_that_does_not_say_where_it_sits_stops_simulate_with_how_to_say_it() {
+    let identity = "stereotag:\n  robot_from_left:\n  - [1, 0, 0, 0]\n  - [0, 1, 0, 0]\n  - [0, 0, 1, 0]\n  - [0, 0, 0, 1]\n";
+    for (mounting, says) in [("", "says nowhere"), (identity, "is the identity")] {
+        let tmp = tempfile::tempdir().unwrap();
+        let rig = rig_with_mounting(tmp.path(), mounting);
+        let out = tmp.path().join("run");
+        let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/office/world.yaml");
+        let (code, err) = stereotag(&[
+            "simulate",
+            "--world",
+            world.to_str().unwrap(),
+            "--rig",
+            rig.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{err}");
+        for words in [
+            "rig.yaml",
+            says,
+            "robot_from_left",
+            "run.yaml",
+            "--default-mounting",
+        ] {
+            assert!(err.contains(words), "expected {words:?} in: {err}");
+        }
+        assert!(!out.exists(), "nothing may be written");
+    }
+}

@@ -41,6 +41,7 @@ fn simulate_takes_stereo_pictures_when_tags_are_in_view() {
             pictures: Some(Pictures {
                 rig: &common::root().join(stereotag::io::DEFAULT_RIG),
                 policy: Default::default(),
+                default_mounting: false,
             }),
             force: false,
         },

@@ -79,6 +79,7 @@ fn simulate(world: &Path, out: &Path, settings: SimSettings, no_stereo: bool) {
             pictures: (!no_stereo).then(|| Pictures {
                 rig: Path::new(stereotag::io::DEFAULT_RIG),
                 policy: Default::default(),
+                default_mounting: false,
             }),
             force: false,
         },

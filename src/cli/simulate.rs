@@ -40,6 +40,11 @@ pub struct Simulate {
     /// Take pictures only when a tag is in view (none in between for the visual odometry).
     #[arg(long, conflicts_with = "no_stereo")]
     tag_pictures_only: bool,
+    /// When --rig does not say where it sits on the robot (no robot_from_left, or the identity
+    /// that `calibrate` writes), take the left camera at the robot centre, looking ahead, 0.3 m
+    /// up, instead of stopping.
+    #[arg(long, conflicts_with = "no_stereo")]
+    default_mounting: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -76,6 +81,7 @@ impl Simulate {
                 pictures: (!self.no_stereo).then_some(Pictures {
                     rig: &self.rig,
                     policy,
+                    default_mounting: self.default_mounting,
                 }),
                 force: self.force,
             },

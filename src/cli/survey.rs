@@ -83,6 +83,11 @@ pub struct DetectArgs {
     /// it for dim or low-contrast tags.
     #[arg(long, default_value_t = SURVEY_MIN_CONTRAST)]
     min_contrast: u8,
+    /// When the run's rig does not say where it sits on the robot (no robot_from_left, or the
+    /// identity that `calibrate` writes), take the left camera at the robot centre, looking
+    /// ahead, 0.3 m up, instead of stopping.
+    #[arg(long)]
+    default_mounting: bool,
 }
 
 impl DetectArgs {
@@ -95,6 +100,7 @@ impl DetectArgs {
             decimate: self.decimate.unwrap_or(survey_decimate(backend)),
             min_contrast: self.min_contrast,
             tag_size_m: self.tag_size_m,
+            default_mounting: self.default_mounting,
             ..DetectOptions::survey(backend)
         })
     }

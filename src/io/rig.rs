@@ -188,6 +188,78 @@ pub fn load_rig(path: &Path) -> Result<StereoRig, IoError> {
 
 /// [`load_rig`] of a camchain's text already read (`path` names it in errors).
 pub fn parse_rig(path: &Path, text: &str) -> Result<StereoRig, IoError> {
+    let (rig, mounting) = parse_rig_mounting(path, text)?;
+    Ok(StereoRig {
+        robot_from_left: mounting.unwrap_or(rig.robot_from_left),
+        ..rig
+    })
+}
+
+/// Where the left camera sits on the robot when nothing says: at the robot centre looking
+/// straight ahead, 0.3 m up.
+pub fn default_mounting() -> Isometry3<f64> {
+    robot_from_forward_camera(0.0, 0.0, 0.3)
+}
+
+/// Reads the rig a run's pictures were taken with, for `simulate`, `survey` and `localize`,
+/// whose tags are placed through its mounting: `run_mounting` (run.yaml's
+/// `robot.robot_from_left`) when given, else the camchain's `stereotag.robot_from_left`. With
+/// neither, or with the identity (which `stereotag calibrate` writes: a calibration cannot know
+/// the mounting; as a mounting it points the camera at the ceiling), it is an error that says
+/// how to give it, unless `accept_default` takes [`default_mounting`] with a warning.
+pub fn load_mounted_rig(
+    path: &Path,
+    run_mounting: Option<Isometry3<f64>>,
+    accept_default: bool,
+) -> Result<StereoRig, IoError> {
+    let (rig, file_mounting) = parse_rig_mounting(path, &read_text(path)?)?;
+    let problem = match run_mounting.or(file_mounting) {
+        Some(m) if is_identity(&m) => {
+            "its `stereotag.robot_from_left` is the identity, as `stereotag calibrate` writes it \
+             (a calibration cannot know where the rig sits; the identity points the camera at the \
+             ceiling)"
+        }
+        Some(m) => {
+            return Ok(StereoRig {
+                robot_from_left: m,
+                ..rig
+            })
+        }
+        None => {
+            "it says nowhere where the left camera sits on the robot (`stereotag.robot_from_left`)"
+        }
+    };
+    if accept_default {
+        tracing::warn!(
+            "{}: {problem}: taking the left camera at the robot centre, looking ahead, 0.3 m up (--default-mounting)",
+            path.display()
+        );
+        return Ok(StereoRig {
+            robot_from_left: default_mounting(),
+            ..rig
+        });
+    }
+    Err(IoError::content(
+        path,
+        format!(
+            "{problem}. Give the mounting as `stereotag: robot_from_left:` (a 4x4 matrix, camera \
+             to robot: camera z forward is robot x for a camera looking ahead) in this file or as \
+             `robot: robot_from_left: [x, y, z, roll, pitch, yaw]` in run.yaml, or pass \
+             --default-mounting to take the left camera at the robot centre, looking ahead, 0.3 m up"
+        ),
+    ))
+}
+
+/// Whether a pose is the identity (to a micrometre and a microradian).
+fn is_identity(m: &Isometry3<f64>) -> bool {
+    m.translation.vector.norm() < 1e-6 && m.rotation.angle() < 1e-6
+}
+
+/// A camchain's rig (with [`default_mounting`]) and its `stereotag.robot_from_left`, if given.
+fn parse_rig_mounting(
+    path: &Path,
+    text: &str,
+) -> Result<(StereoRig, Option<Isometry3<f64>>), IoError> {
     let chain: Camchain = parse_yaml(path, text)?;
     let left = camera_from(path, "cam0", &chain.cam0)?;
     let right = camera_from(path, "cam1", &chain.cam1)?;
@@ -196,20 +268,21 @@ pub fn parse_rig(path: &Path, text: &str) -> Result<StereoRig, IoError> {
             IoError::content(path, "`cam1.T_cn_cnm1` (right_from_left) is missing")
         })?;
     let right_from_left = isometry_from(path, "cam1.T_cn_cnm1", t)?;
-    let robot_from_left = match chain
+    let mounting = match chain
         .stereotag
         .as_ref()
         .and_then(|s| s.robot_from_left.as_ref())
     {
-        Some(rows) => isometry_from(path, "stereotag.robot_from_left", rows)?,
-        None => robot_from_forward_camera(0.0, 0.0, 0.3),
+        Some(rows) => Some(isometry_from(path, "stereotag.robot_from_left", rows)?),
+        None => None,
     };
-    Ok(StereoRig {
+    let rig = StereoRig {
         left,
         right,
         right_from_left,
-        robot_from_left,
-    })
+        robot_from_left: default_mounting(),
+    };
+    Ok((rig, mounting))
 }
 
 /// Writes a stereo rig as a Kalibr camchain YAML file.
@@ -362,4 +435,30 @@ pub fn save_rig_exports(dir: &Path, rig: &StereoRig) -> Result<Rectification, Io
         &rect.right_projection(),
     )?;
     Ok(rect)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_mounting_comes_from_the_run_the_file_or_the_flag() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = read_text(Path::new(DEFAULT_RIG)).unwrap();
+        let bare = &text[..text.find("\nstereotag:").unwrap()];
+        let path = dir.path().join("rig.yaml");
+        std::fs::write(&path, bare).unwrap();
+        assert!(load_mounted_rig(&path, None, false).is_err());
+        let taken = load_mounted_rig(&path, None, true).unwrap();
+        assert_eq!(taken.robot_from_left, default_mounting());
+        let from_run = robot_from_forward_camera(0.1, 0.2, 0.5);
+        let given = load_mounted_rig(&path, Some(from_run), false).unwrap();
+        assert_eq!(given.robot_from_left, from_run);
+        // The identity (calibrate's) is refused even when the run gives it.
+        assert!(load_mounted_rig(&path, Some(Isometry3::identity()), false).is_err());
+        // The bundled rig says where it sits.
+        let bundled = load_mounted_rig(Path::new(DEFAULT_RIG), None, false).unwrap();
+        let plain = load_rig(Path::new(DEFAULT_RIG)).unwrap();
+        assert_eq!(bundled.robot_from_left, plain.robot_from_left);
+    }
 }

@@ -54,6 +54,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
             pictures: Some(Pictures {
                 rig: Path::new(DEFAULT_RIG),
                 policy: CapturePolicy::default(),
+                default_mounting: false,
             }),
             force: false,
         },

@@ -190,7 +190,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         keep_images: false,
         ..request.detect.clone()
     };
-    let seen = match load_run_rig(request.run_dir, &run)? {
+    let seen = match load_run_rig(request.run_dir, &run, request.detect.default_mounting)? {
         Some(rig) => detect_run(
             &options,
             request.run_dir,

@@ -33,6 +33,9 @@ pub struct DetectOptions {
     pub visual_odometry: bool,
     /// Keep each pair's images for the recording.
     pub keep_images: bool,
+    /// Take the default mounting ([`crate::io::default_mounting`]) for a rig that does not say
+    /// where it sits on the robot, rather than stop (see [`crate::io::load_mounted_rig`]).
+    pub default_mounting: bool,
 }
 
 /// The survey's default `decimate` for a backend: 1.5 for the C library (the museum survey in
@@ -64,6 +67,7 @@ impl DetectOptions {
             tag_size_m: None,
             visual_odometry: true,
             keep_images: false,
+            default_mounting: false,
         }
     }
 }
@@ -179,7 +183,7 @@ struct TurnStart {
 ///
 /// let dir = Path::new("runs/office");
 /// let run = load_run(dir)?;
-/// let rig = load_run_rig(dir, &run)?.expect("the run has stereo pairs");
+/// let rig = load_run_rig(dir, &run, false)?.expect("the run has stereo pairs");
 /// let options = DetectOptions::survey(Backend::ApriltagC);
 /// let seen = detect_run(&options, dir, &run, &rig, None, &Silent)?;
 /// for s in &seen.sightings {

@@ -2,6 +2,7 @@
 //! a capture policy asks for, written as a run dataset.
 
 use super::{relative_path, Error, Result};
+use crate::camera::StereoRig;
 use crate::io::{self, OutputDir};
 use crate::progress::Progress;
 use crate::render::{RenderConfig, Renderer};
@@ -55,6 +56,9 @@ pub struct Pictures<'a> {
     pub rig: &'a Path,
     /// When to take them.
     pub policy: CapturePolicy,
+    /// Take the default mounting for a rig that does not say where it sits on the robot, rather
+    /// than stop (see [`io::load_mounted_rig`]).
+    pub default_mounting: bool,
 }
 
 /// What to simulate.
@@ -85,8 +89,13 @@ pub struct Simulated {
 /// taken) into a new directory. Progress: simulated seconds, then pictures rendered.
 pub fn simulate(request: &SimulateRequest<'_>, progress: &dyn Progress) -> Result<Simulated> {
     let loaded = io::load_world(request.world)?;
+    // The rig and its mounting checked before the long work, not after.
+    let rig = match &request.pictures {
+        Some(p) => Some(io::load_mounted_rig(p.rig, None, p.default_mounting)?),
+        None => None,
+    };
     let dir = OutputDir::create(request.out, request.force)?;
-    let simulated = simulate_into(request, &loaded, &dir, progress)?;
+    let simulated = simulate_into(request, &loaded, rig.as_ref(), &dir, progress)?;
     dir.commit()?;
     let run = &simulated.output.run;
     tracing::info!(
@@ -105,6 +114,7 @@ pub fn simulate(request: &SimulateRequest<'_>, progress: &dyn Progress) -> Resul
 fn simulate_into(
     request: &SimulateRequest<'_>,
     loaded: &io::LoadedWorld,
+    rig: Option<&StereoRig>,
     dir: &OutputDir,
     progress: &dyn Progress,
 ) -> Result<Simulated> {
@@ -125,14 +135,17 @@ fn simulate_into(
             .into_owned(),
     );
     output.run.meta.mapping = Some(loaded.mapping.clone());
-    if let Some(pictures) = request
-        .pictures
-        .as_ref()
-        .filter(|_| !loaded.world.tags.is_empty())
-    {
+    if let (Some(pictures), Some(rig)) = (
+        request
+            .pictures
+            .as_ref()
+            .filter(|_| !loaded.world.tags.is_empty()),
+        rig,
+    ) {
         take_pictures(
             &loaded.world,
             pictures,
+            rig,
             dir,
             &mut output,
             config.seed,
@@ -151,20 +164,20 @@ fn simulate_into(
 fn take_pictures(
     world: &crate::world::World,
     pictures: &Pictures<'_>,
+    rig: &StereoRig,
     dir: &OutputDir,
     output: &mut SimOutput,
     seed: u64,
     progress: &dyn Progress,
 ) -> Result<()> {
-    let rig = io::load_rig(pictures.rig)?;
     let truth = output.run.ground_truth.clone().unwrap_or_default();
     let config = RenderConfig::default();
-    let plan = plan_captures(world, &rig, &truth, &pictures.policy, &config)?;
+    let plan = plan_captures(world, rig, &truth, &pictures.policy, &config)?;
     for sub in ["stereo/left", "stereo/right"] {
         io::create_dir(&dir.path(sub))?;
     }
     progress.start("render", plan.len() as u64);
-    let renderer = Renderer::new(&rig);
+    let renderer = Renderer::new(rig);
     for (k, p) in plan.iter().enumerate() {
         let pair = renderer.render(
             world,
@@ -188,7 +201,7 @@ fn take_pictures(
         progress.advance(1);
     }
     progress.finish();
-    io::save_rig(&dir.path("rig.yaml"), &rig)?;
+    io::save_rig(&dir.path("rig.yaml"), rig)?;
     output.run.meta.robot.rig = Some("rig.yaml".into());
     Ok(())
 }

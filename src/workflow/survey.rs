@@ -75,8 +75,14 @@ fn calibration_of(survey_dir: &Path) -> Result<OdometryCalibration> {
         })
 }
 
-/// The stereo rig of a run with run.yaml's mounting, or `None` when the run has no pictures.
-pub fn load_run_rig(run_dir: &Path, run: &RunDataset) -> Result<Option<StereoRig>> {
+/// The stereo rig of a run with its mounting (run.yaml's, else the rig file's; see
+/// [`io::load_mounted_rig`], `default_mounting` its flag), or `None` when the run has no
+/// pictures.
+pub fn load_run_rig(
+    run_dir: &Path,
+    run: &RunDataset,
+    default_mounting: bool,
+) -> Result<Option<StereoRig>> {
     if run.stereo.is_empty() {
         tracing::warn!(
             "the run has no stereo pairs (stereo.csv is empty): sonar and odometry only"
@@ -89,14 +95,17 @@ pub fn load_run_rig(run_dir: &Path, run: &RunDataset) -> Result<Option<StereoRig
             "the run has stereo pairs but run.yaml names no rig (robot.rig)",
         )
     })?;
-    let mut rig = io::load_rig(&run_dir.join(rig_name))?;
-    if let Some(v) = run.meta.robot.robot_from_left {
-        rig.robot_from_left = nalgebra::Isometry3::from_parts(
+    let from_run = run.meta.robot.robot_from_left.map(|v| {
+        nalgebra::Isometry3::from_parts(
             nalgebra::Translation3::new(v[0], v[1], v[2]),
             nalgebra::UnitQuaternion::from_euler_angles(v[3], v[4], v[5]),
-        );
-    }
-    Ok(Some(rig))
+        )
+    });
+    Ok(Some(io::load_mounted_rig(
+        &run_dir.join(rig_name),
+        from_run,
+        default_mounting,
+    )?))
 }
 
 /// A run and what surveying it needs, loaded.
@@ -138,7 +147,11 @@ pub fn survey_into(
         Recording::Survey,
         &dir.path("survey.rrd"),
     )?;
-    let rig = load_run_rig(request.run_dir, &inputs.run)?;
+    let rig = load_run_rig(
+        request.run_dir,
+        &inputs.run,
+        request.detect.default_mounting,
+    )?;
     let options = DetectOptions {
         keep_images: recorder.is_some(),
         visual_odometry: inputs.fuse.visual_odometry,
