@@ -240,7 +240,7 @@ pub fn save_features_csv(path: &Path, features: &[Feature]) -> Result<(), IoErro
     write_file(path, s.as_bytes())
 }
 
-/// Reads a ROS map as an occupancy map by map_server's rule for its mode (see [`ros_cell`]):
+/// Reads a ROS map as an occupancy map by map_server's rule for its mode (trinary, scale, raw):
 /// what map_server reads as unknown is unknown, occupied is 1 and free 0.
 pub fn load_ros_occupancy(yaml_path: &Path) -> Result<OccupancyMap, IoError> {
     let (meta, img) = read_ros_map(yaml_path)?;
