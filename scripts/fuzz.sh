@@ -15,7 +15,7 @@ secs="${1:-600}"
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(run_dataset world_yaml rig_yaml target_yaml corners_csv survey_files image_detect)
+    targets=(run_dataset world_yaml rig_yaml target_yaml corners_csv survey_files image_detect carmen_log)
 fi
 export CARGO_TARGET_DIR="${CARGO_FUZZ_TARGET_DIR:-$HOME/.cache/stereotag-fuzz-target}"
 nul() { printf '\0'; }
@@ -33,6 +33,11 @@ seed() {
             for w in samples/*/world.yaml; do cp "$w" "$d/$(basename "$(dirname "$w")")"; done
             { cat samples/willow/world.yaml; nul; cat samples/willow/*.yaml 2>/dev/null | head -20; } > "$d/willow_map" ;;
         rig_yaml) cp calibration/rigs/*.yaml "$d/" ;;
+        carmen_log)
+            for l in ../shared/data/radish/*.log.gz; do
+                [ -f "$l" ] && zcat "$l" | sed -n 1,40p > "$d/$(basename "$l" .log.gz)"
+            done
+            printf 'ROBOTLASER1 0 -1.5 3.0 1.5 80 0.01 0 3 1 2 3 0 1.2 2.0 0.0 1.0 2.0 0.0 0 0 0 0 0 101.0 host 101.1\n' > "$d/robotlaser" ;;
         target_yaml) cp calibration/targets/*.yaml "$d/" ;;
         corners_csv)
             local c=../shared/data/euroc_aprilgrid/calib/cam_april/cam0

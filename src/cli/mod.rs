@@ -5,6 +5,7 @@ mod calibrate;
 mod config;
 mod demo;
 mod detect;
+mod import;
 mod localize;
 mod map;
 mod plan;
@@ -61,6 +62,11 @@ enum Command {
     ///
     /// Example: stereotag simulate --world samples/office/world.yaml --out runs/office
     Simulate(simulate::Simulate),
+    /// Bring a robot's log in as a run dataset: a CARMEN log (Radish), its laser turned into
+    /// sonar-like readings.
+    ///
+    /// Example: stereotag import --carmen ../shared/data/radish/aces-corrected.log.gz --as-sonar frontal5 --out runs/aces
+    Import(import::Import),
     /// Build the occupancy grid and Hough corner features of a run; scores them if the world is known.
     ///
     /// Example: stereotag map --run runs/office --out maps/office --poses ground-truth
@@ -190,6 +196,7 @@ pub fn main() -> i32 {
         Command::Demo(c) => c.run(cli.quiet),
         Command::Samples(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
+        Command::Import(c) => c.run(),
         Command::Map(c) => c.run(),
         Command::Survey(c) => c.run(cli.quiet),
         Command::Localize(c) => c.run(cli.quiet),

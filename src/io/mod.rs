@@ -6,6 +6,7 @@
 
 mod bundled;
 mod calib;
+pub mod carmen;
 mod maps;
 mod output;
 mod rig;
@@ -26,7 +27,7 @@ pub use rig::{
     save_camera_info, save_opencv_stereo, save_rig, save_rig_exports, Camchain, KalibrCamera,
     DEFAULT_RIG,
 };
-pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run};
+pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run, REORDER_TOLERANCE_S};
 pub use survey::{
     load_landmarks, save_landmarks, save_localization_csv, save_survey, save_trajectory_csv,
     save_tum, save_visual_turns_csv, save_wpilib_layout, truth_at, LandmarkRecord, LandmarksFile,

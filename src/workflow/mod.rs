@@ -21,6 +21,7 @@
 pub mod calibrate;
 pub mod demo;
 pub mod detect;
+pub mod import;
 pub mod localize;
 pub mod map;
 pub mod plan;
