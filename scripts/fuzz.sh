@@ -72,6 +72,7 @@ PY
 }
 run() {
     local t="$1" log="fuzz/logs/$1.log"
+    rm -f "fuzz/logs/$t.done"
     seed "$t"
     cargo +nightly fuzz run -O -a "$t" "fuzz/corpus/$t" -- -max_total_time="$secs" -timeout=20 \
         -rss_limit_mb=4096 -print_final_stats=1 > "$log" 2>&1 || true
@@ -79,6 +80,8 @@ run() {
     runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
     crash=$(ls "fuzz/artifacts/$t" 2>/dev/null | wc -l)
     echo "$t: $runs executions in $secs s, $crash crash inputs"
+    # Marks a run that got to its end: one stopped by `set -e` in its subshell has none.
+    [ "$runs" = "?" ] || touch "fuzz/logs/$t.done"
 }
 mkdir -p fuzz/logs
 cargo +nightly fuzz build -O -a
@@ -89,6 +92,10 @@ for ((i = 0; i < ${#targets[@]}; i += 2)); do
 done
 if [ "${FUZZ_FAIL_ON_CRASH:-0}" = 1 ]; then
     for t in "${targets[@]}"; do
+        if [ ! -e "fuzz/logs/$t.done" ]; then
+            echo "fuzz: $t did not run to its end (see fuzz/logs/$t.log)" >&2
+            exit 1
+        fi
         if [ -n "$(ls "fuzz/artifacts/$t" 2>/dev/null)" ]; then
             echo "fuzz: $t left crash inputs in fuzz/artifacts/$t" >&2
             exit 1
