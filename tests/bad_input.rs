@@ -39,10 +39,17 @@ fn good_run(dir: &Path) {
 /// Maps a good run with one file replaced by `content`: the temporary directory (run and map in
 /// it), the map's path, the exit status and stderr.
 fn map_with(file: &str, content: &str) -> (tempfile::TempDir, std::path::PathBuf, i32, String) {
+    map_with_files(&[(file, content)])
+}
+
+/// [`map_with`] with several files replaced.
+fn map_with_files(files: &[(&str, &str)]) -> (tempfile::TempDir, std::path::PathBuf, i32, String) {
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");
     good_run(&run);
-    std::fs::write(run.join(file), content).unwrap();
+    for (file, content) in files {
+        std::fs::write(run.join(file), content).unwrap();
+    }
     let out = tmp.path().join("map");
     let (code, err) = stereotag(&[
         "map",
@@ -140,12 +147,29 @@ fn an_odometry_jump_is_named_with_its_line_and_the_run_still_maps() {
 
 #[test]
 fn a_run_the_grid_does_not_cover_is_warned_about() {
-    // Odometry from a robot whose log starts at (-10, -10): the paper's grid starts at (0, 0).
-    let err = map_warnings("t_s,x_m,y_m,theta_rad\n0,-10,-10,0\n1,-9.9,-10,0\n");
+    // Odometry from a robot whose log starts at (-10, -10), run.yaml setting the paper's grid
+    // (from (0, 0)).
+    let yaml = "format: stereotag-run/1\nrobot:\n  sonar:\n    name: two\n    sensors:\n      - {x_m: 0.2, y_m: 0.0, bearing_rad: 0.0}\n      - {x_m: 0.0, y_m: 0.2, bearing_rad: 1.5708}\nmapping:\n  grid:\n    origin_m: [0.0, 0.0]\n";
+    let (_tmp, _out, code, err) = map_with_files(&[
+        ("run.yaml", yaml),
+        (
+            "odometry.csv",
+            "t_s,x_m,y_m,theta_rad\n0,-10,-10,0\n1,-9.9,-10,0\n",
+        ),
+    ]);
+    assert_eq!(code, 0, "{err}");
     assert!(
         err.contains("3 of 3 sonar echoes (100%) fall outside the grid (x 0.0..16.0 m"),
         "{err}"
     );
+}
+
+#[test]
+fn a_run_yaml_without_a_grid_gets_one_fitted_to_the_run() {
+    // The same robot, run.yaml silent: the grid is fitted and every echo falls on it.
+    let err = map_warnings("t_s,x_m,y_m,theta_rad\n0,-10,-10,0\n1,-9.9,-10,0\n");
+    assert!(err.contains("run.yaml sets no grid"), "{err}");
+    assert!(!err.contains("outside the grid"), "{err}");
 }
 
 #[test]

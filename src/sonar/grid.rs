@@ -82,7 +82,55 @@ pub enum GridError {
     },
 }
 
+/// The paper's cell size, metres (the fitted grids').
+const FITTED_CELL_M: f64 = 0.2;
+/// Margin around the trajectory and the sensors' reach in a fitted grid, metres.
+const FITTED_MARGIN_M: f64 = 1.0;
+/// Largest fitted grid side, cells (1 km at 20 cm): a longer run is a reset or a glitch in its
+/// odometry more often than a building.
+const FITTED_MAX_CELLS: usize = 5000;
+
 impl GridConfig {
+    /// The paper's settings on a grid of 20 cm cells over `trajectory` and the reach of the
+    /// sonars of `layout`, with a margin; `None` when the trajectory is empty or the grid would
+    /// be over 1 km on a side.
+    pub fn fitted(
+        trajectory: &[crate::geometry::StampedPose],
+        layout: &crate::sonar::SonarLayout,
+    ) -> Option<GridConfig> {
+        let reach = layout.max_range_m
+            + layout
+                .sensors
+                .iter()
+                .map(|s| s.x_m.hypot(s.y_m))
+                .fold(0.0, f64::max)
+            + FITTED_MARGIN_M;
+        let first = trajectory.first()?;
+        let (lo, hi) = trajectory.iter().fold(
+            ([first.pose.x, first.pose.y], [first.pose.x, first.pose.y]),
+            |(lo, hi), p| {
+                (
+                    [lo[0].min(p.pose.x), lo[1].min(p.pose.y)],
+                    [hi[0].max(p.pose.x), hi[1].max(p.pose.y)],
+                )
+            },
+        );
+        let origin_m = [
+            ((lo[0] - reach) / FITTED_CELL_M).floor() * FITTED_CELL_M,
+            ((lo[1] - reach) / FITTED_CELL_M).floor() * FITTED_CELL_M,
+        ];
+        let cells =
+            |from: f64, to: f64| ((to + reach - from) / FITTED_CELL_M).ceil().max(1.0) as usize;
+        let (width_cells, height_cells) = (cells(origin_m[0], hi[0]), cells(origin_m[1], hi[1]));
+        (width_cells <= FITTED_MAX_CELLS && height_cells <= FITTED_MAX_CELLS).then(|| GridConfig {
+            origin_m,
+            width_cells,
+            height_cells,
+            resolution_m: FITTED_CELL_M,
+            ..GridConfig::default()
+        })
+    }
+
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), GridError> {
         let bad = |key, value: f64, reason| Err(GridError::Invalid { key, value, reason });
@@ -512,6 +560,39 @@ impl OccupancyGrid for LogOddsGrid {
 mod tests {
     use super::*;
     use crate::geometry::Pose2;
+
+    #[test]
+    fn the_grid_covers_the_trajectory_and_the_reach() {
+        let t = [
+            crate::geometry::StampedPose {
+                t_s: 0.0,
+                pose: Pose2::new(-3.0, 1.0, 0.0),
+            },
+            crate::geometry::StampedPose {
+                t_s: 1.0,
+                pose: Pose2::new(40.0, 12.0, 0.0),
+            },
+        ];
+        let g = GridConfig::fitted(&t, &crate::sonar::SonarLayout::frontal5()).unwrap();
+        let reach = 2.1 + 0.2 + FITTED_MARGIN_M;
+        assert!(g.origin_m[0] <= -3.0 - reach && g.origin_m[1] <= 1.0 - reach);
+        assert!(g.origin_m[0] + g.width_cells as f64 * FITTED_CELL_M >= 40.0 + reach);
+        assert!(g.origin_m[1] + g.height_cells as f64 * FITTED_CELL_M >= 12.0 + reach);
+        assert_eq!(g.resolution_m, FITTED_CELL_M);
+    }
+
+    #[test]
+    fn a_run_over_a_kilometre_gets_no_fitted_grid() {
+        let t: Vec<crate::geometry::StampedPose> = [0.0, 2000.0]
+            .iter()
+            .map(|&x| crate::geometry::StampedPose {
+                t_s: x,
+                pose: Pose2::new(x, 0.0, 0.0),
+            })
+            .collect();
+        assert!(GridConfig::fitted(&t, &crate::sonar::SonarLayout::frontal5()).is_none());
+        assert!(GridConfig::fitted(&[], &crate::sonar::SonarLayout::frontal5()).is_none());
+    }
 
     #[test]
     fn cropping_keeps_the_cells_and_their_place() {

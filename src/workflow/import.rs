@@ -60,11 +60,6 @@ pub struct ImportSummary {
     pub grid_cells: [usize; 2],
 }
 
-/// The paper's cell size, metres.
-const CELL_M: f64 = 0.2;
-/// Margin around the trajectory and the sensors' reach in the fitted grid, metres.
-const GRID_MARGIN_M: f64 = 1.0;
-
 /// Imports a CARMEN log as a run: odometry from the `ODOM` lines (the scans' odometry fields
 /// when there are none), each laser scan as one reading per sonar of `as_sonar` (the nearest
 /// return in the sonar's cone, none within its range: no echo), the scans' poses as the ground
@@ -128,7 +123,14 @@ pub fn import_carmen(request: &ImportRequest<'_>) -> Result<(RunDataset, ImportS
         .is_some_and(|n| n.to_string_lossy().contains("corrected"));
     let ground_truth = corrected.then(|| shift(poses_of(&scans)));
     let odometry = shift(odometry);
-    let grid = fitted_grid(ground_truth.as_deref().unwrap_or(&odometry), layout);
+    let grid = GridConfig::fitted(ground_truth.as_deref().unwrap_or(&odometry), layout)
+        .unwrap_or_else(|| {
+            tracing::warn!(
+                "{}: the run spans over 1 km: run.yaml keeps the paper's grid; set mapping.grid",
+                request.carmen.display()
+            );
+            GridConfig::default()
+        });
     let summary = ImportSummary {
         log: request.carmen.display().to_string(),
         odometry_poses: odometry.len(),
@@ -321,38 +323,6 @@ fn field_of_view(scan: &LaserScan) -> FieldOfView {
     }
 }
 
-/// A grid of the paper's 20 cm cells over the trajectory and the sensors' reach, with a margin.
-fn fitted_grid(trajectory: &[StampedPose], layout: &SonarLayout) -> GridConfig {
-    let reach = layout.max_range_m
-        + layout
-            .sensors
-            .iter()
-            .map(|s| s.x_m.hypot(s.y_m))
-            .fold(0.0, f64::max)
-        + GRID_MARGIN_M;
-    let (lo, hi) = trajectory.iter().fold(
-        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
-        |(lo, hi), p| {
-            (
-                [lo[0].min(p.pose.x), lo[1].min(p.pose.y)],
-                [hi[0].max(p.pose.x), hi[1].max(p.pose.y)],
-            )
-        },
-    );
-    let origin_m = [
-        ((lo[0] - reach) / CELL_M).floor() * CELL_M,
-        ((lo[1] - reach) / CELL_M).floor() * CELL_M,
-    ];
-    let cells = |from: f64, to: f64| ((to + reach - from) / CELL_M).ceil().max(1.0) as usize;
-    GridConfig {
-        origin_m,
-        width_cells: cells(origin_m[0], hi[0]),
-        height_cells: cells(origin_m[1], hi[1]),
-        resolution_m: CELL_M,
-        ..GridConfig::default()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -413,25 +383,5 @@ mod tests {
         assert!(unseen
             .iter()
             .all(|&k| layout.sensors[k].bearing_rad.cos() < 0.0));
-    }
-
-    #[test]
-    fn the_grid_covers_the_trajectory_and_the_reach() {
-        let t = [
-            StampedPose {
-                t_s: 0.0,
-                pose: Pose2::new(-3.0, 1.0, 0.0),
-            },
-            StampedPose {
-                t_s: 1.0,
-                pose: Pose2::new(40.0, 12.0, 0.0),
-            },
-        ];
-        let g = fitted_grid(&t, &SonarLayout::frontal5());
-        let reach = 2.1 + 0.2 + GRID_MARGIN_M;
-        assert!(g.origin_m[0] <= -3.0 - reach && g.origin_m[1] <= 1.0 - reach);
-        assert!(g.origin_m[0] + g.width_cells as f64 * CELL_M >= 40.0 + reach);
-        assert!(g.origin_m[1] + g.height_cells as f64 * CELL_M >= 12.0 + reach);
-        assert_eq!(g.resolution_m, CELL_M);
     }
 }

@@ -57,10 +57,11 @@ pub struct MapOutput {
 /// ```
 pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     let run = load_run(request.run_dir)?;
-    let config = match request.config {
-        Some(p) => io::parse_yaml::<MappingConfig>(p, &io::read_text(p)?)?,
-        None => run.meta.mapping.clone().unwrap_or_default(),
+    let given = match request.config {
+        Some(p) => Some(io::parse_yaml::<MappingConfig>(p, &io::read_text(p)?)?),
+        None => None,
     };
+    let config = super::mapping_of_run(&run, given);
     let world = world_of_run(request.world, request.run_dir, &run);
     let output = map_and_score(&run, request.poses, &config, world.as_deref())?;
     let dir = OutputDir::create(request.out, request.force)?;

@@ -147,6 +147,49 @@ pub fn load_run(run_dir: &Path) -> Result<RunDataset> {
     Ok(run)
 }
 
+/// The mapping settings of a run: `given` (a `--config` file), else run.yaml's, else the paper's
+/// on a grid of 20 cm cells fitted to the run's odometry and the sonars' reach (said once; the
+/// paper's own 16 m grid when the run spans over 1 km). Either way the Hough accumulator reaches
+/// the grid's farthest corner, so no echo on the grid is left out of it.
+pub fn mapping_of_run(
+    run: &RunDataset,
+    given: Option<crate::sonar::map::MappingConfig>,
+) -> crate::sonar::map::MappingConfig {
+    let mut config = given.or_else(|| run.meta.mapping.clone()).unwrap_or_else(|| {
+        let mut config = crate::sonar::map::MappingConfig::default();
+        match crate::sonar::grid::GridConfig::fitted(&run.odometry, &run.meta.robot.sonar) {
+            Some(grid) => {
+                tracing::info!(
+                    "run.yaml sets no grid: {} x {} cells of {} m from ({:.1}, {:.1}) m, fitted to the odometry and the sonars' reach",
+                    grid.width_cells,
+                    grid.height_cells,
+                    grid.resolution_m,
+                    grid.origin_m[0],
+                    grid.origin_m[1]
+                );
+                config.grid = grid;
+            }
+            None => tracing::warn!(
+                "run.yaml sets no grid and the odometry spans over 1 km (a reset or a glitch?): the paper's grid is used; set mapping.grid"
+            ),
+        }
+        config
+    });
+    let g = &config.grid;
+    let far = [0.0, g.width_cells as f64 * g.resolution_m]
+        .iter()
+        .flat_map(|dx| {
+            [0.0, g.height_cells as f64 * g.resolution_m]
+                .map(|dy| (g.origin_m[0] + dx).hypot(g.origin_m[1] + dy))
+        })
+        .fold(0.0, f64::max);
+    let hough = &mut config.hough;
+    if far + hough.rho_step_m > hough.rho_max_m {
+        hough.rho_max_m = far + hough.rho_step_m;
+    }
+    config
+}
+
 /// The world file of a run: the one given, else the one run.yaml names if it exists.
 pub fn world_of_run(given: Option<&Path>, run_dir: &Path, run: &RunDataset) -> Option<PathBuf> {
     given.map(Path::to_path_buf).or_else(|| {

@@ -123,7 +123,7 @@ impl Inputs {
         let world = load_world_of_run(request.world, request.run_dir, &run)?;
         let fuse = io::load_fuse_config(request.config)?;
         let calibration = request.calibration_from.map(calibration_of).transpose()?;
-        let mapping = run.meta.mapping.clone().unwrap_or_default();
+        let mapping = super::mapping_of_run(&run, None);
         Ok(Self {
             run,
             world,
