@@ -89,6 +89,19 @@ pub struct RunSightings {
     pub visual: Vec<VisualTurn>,
     /// For each pair, its images when kept for the recording.
     pub images: Vec<Option<KeptPair>>,
+    /// Sightings left out: triangulated below the floor or far above any wall (a wrong rig
+    /// mounting, or a false match between the cameras); see [`plausible_height_m`].
+    pub implausible_height: usize,
+}
+
+/// Heights (robot frame z, metres) a tag may be triangulated at: from 0.3 m below the floor to
+/// 0.5 m above the highest wall of the world, or 3.5 m without one (a home's ceiling is under
+/// 3 m).
+pub fn plausible_height_m(world: Option<&World>) -> (f64, f64) {
+    let top = world
+        .and_then(|w| w.walls.iter().map(|wall| wall.height_m).reduce(f64::max))
+        .map_or(3.5, |h| h + 0.5);
+    (-0.3, top)
 }
 
 /// Most memory the decoded pairs kept for the recording may take, bytes; a longer run's pairs
@@ -266,6 +279,7 @@ pub fn detect_run(
             out.visual.extend(pair.turn);
         }
     }
+    leave_out_implausible_heights(&mut out, world);
     tracing::info!(
         "{} tag sightings in {} stereo pairs",
         out.sightings.len(),
@@ -279,6 +293,24 @@ pub fn detect_run(
         );
     }
     Ok(out)
+}
+
+/// Leaves out the sightings triangulated at heights no tag can be at, saying how many once.
+fn leave_out_implausible_heights(out: &mut RunSightings, world: Option<&World>) {
+    let (low, high) = plausible_height_m(world);
+    let plausible = |s: &TagSighting| (low..=high).contains(&s.position_in_robot_m[2]);
+    if let Some(first) = out.sightings.iter().find(|s| !plausible(s)) {
+        let left_out = out.sightings.iter().filter(|s| !plausible(s)).count();
+        tracing::warn!(
+            "{left_out} tag sightings left out: triangulated outside {low}..{high} m of height \
+             (the first: tag {} at {:.2} m in pair {}); is the rig's robot_from_left right?",
+            first.id,
+            first.position_in_robot_m[2],
+            first.frame
+        );
+        out.sightings.retain(plausible);
+        out.implausible_height = left_out;
+    }
 }
 
 /// A `decimate` the detectors take (finite, at least 1), or the error naming it.
@@ -486,6 +518,31 @@ impl<T> Drop for Pooled<'_, T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sightings_below_the_floor_or_far_above_the_walls_are_left_out() {
+        let at = |frame: usize, z: f64| TagSighting {
+            t_s: frame as f64,
+            frame,
+            id: frame as u32,
+            family: TagFamily::Tag36h11,
+            size_m: 0.16,
+            position_in_robot_m: [2.0, 0.0, z],
+            covariance_m2: [[0.0; 3]; 3],
+            yaw_in_robot_rad: 0.0,
+            yaw_sigma_rad: 0.1,
+            corners_px: None,
+        };
+        let mut seen = RunSightings {
+            sightings: vec![at(0, 1.2), at(1, 4.8), at(2, -0.6), at(3, 3.4)],
+            ..RunSightings::default()
+        };
+        leave_out_implausible_heights(&mut seen, None);
+        let kept: Vec<usize> = seen.sightings.iter().map(|s| s.frame).collect();
+        assert_eq!(kept, [0, 3]);
+        assert_eq!(seen.implausible_height, 2);
+        assert_eq!(plausible_height_m(None), (-0.3, 3.5));
+    }
     use std::cell::Cell;
 
     #[test]

@@ -185,6 +185,10 @@ pub fn survey_into(
     let result = result?;
     let mut metrics = survey_metrics(&result, seen.sightings.len());
     metrics.insert(
+        "sightings.implausible_height".into(),
+        seen.implausible_height as f64,
+    );
+    metrics.insert(
         "online.calibration_from_earlier_survey".into(),
         f64::from(u8::from(inputs.calibration.is_some())),
     );
