@@ -51,6 +51,24 @@ fn a_huge_tag_id_in_a_corner_csv_is_a_located_error() {
 
 /// image_detect: a PBM header saying 0 x 4 decoded to an empty image, and the kornia backend's
 /// decimation (`1 + (w - 1) / f`) underflowed. Images under 4 px either way now find nothing.
+/// image_detect (the CI smoke run, 10 s): `P50 353 353`, a PGM of no columns and 353 rows, made
+/// the AprilGrid corner refinement's blur split rows of zero pixels (a panic).
+#[test]
+fn an_image_of_no_columns_refines_no_corner() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("image.bin");
+    std::fs::write(&path, b"P50 353 353").unwrap();
+    let image = stereotag::io::load_gray(&path).unwrap();
+    assert_eq!(image.width(), 0);
+    let mut grid = AprilGridMultiScale::new().unwrap();
+    let found = grid.detect(&image).unwrap_or_default();
+    assert!(stereotag::calib::aprilgrid::refine_aprilgrid(&image, &found, 6, 0.3).is_empty());
+    for (w, h) in [(0, 353), (353, 0)] {
+        let empty = GrayImage::new(w, h);
+        assert!(stereotag::calib::aprilgrid::refine_aprilgrid(&empty, &[], 6, 0.3).is_empty());
+    }
+}
+
 #[test]
 fn an_empty_image_finds_no_tag() {
     let dir = tempfile::tempdir().unwrap();

@@ -9,6 +9,13 @@ use image::GrayImage;
 /// The blur of a float image.
 pub fn binomial5(plane: &Plane) -> Plane {
     let (w, h) = (plane.w, plane.h);
+    if w == 0 || h == 0 {
+        return Plane {
+            w,
+            h,
+            data: Vec::new(),
+        };
+    }
     let tap = |a: f32, b: f32, c: f32, d: f32, e: f32| (a + e + 4.0 * (b + d) + 6.0 * c) / 16.0;
     let clamp = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
     let mut tmp = vec![0.0f32; w * h];
@@ -36,6 +43,14 @@ pub fn binomial5(plane: &Plane) -> Plane {
 /// integers.
 pub fn binomial5_gray(image: &GrayImage) -> Plane {
     let (w, h) = (image.width() as usize, image.height() as usize);
+    if w == 0 || h == 0 {
+        // An image file may say it has no columns (a PGM header `P5 0 353 ...`).
+        return Plane {
+            w,
+            h,
+            data: Vec::new(),
+        };
+    }
     let src = image.as_raw();
     let taps = |a: u16, b: u16, c: u16, d: u16, e: u16| a + e + 4 * (b + d) + 6 * c;
     let mut rows = vec![0u16; w * h];
