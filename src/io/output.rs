@@ -91,6 +91,23 @@ fn remove_stale(parent: &Path, name: &str) {
     }
 }
 
+/// The hidden sibling `.NAME.partial-PID` an output `target` is built in (its directory made
+/// when missing, stale ones of dead processes removed).
+fn staging_beside(target: &Path) -> Result<PathBuf, IoError> {
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let parent = match target.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(|e| IoError::file(&parent, e))?;
+    remove_stale(&parent, &name);
+    let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+    Ok(staging)
+}
+
 /// An output directory under construction. Files are written into a hidden sibling directory;
 /// [`OutputDir::commit`] renames it into place. Dropped without commit, it is removed.
 #[derive(Debug)]
@@ -109,17 +126,7 @@ impl OutputDir {
                 path: target.to_path_buf(),
             });
         }
-        let name = target
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "out".into());
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        std::fs::create_dir_all(&parent).map_err(|e| IoError::file(&parent, e))?;
-        remove_stale(&parent, &name);
-        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+        let staging = staging_beside(target)?;
         if staging.exists() {
             std::fs::remove_dir_all(&staging).map_err(|e| IoError::file(&staging, e))?;
         }
@@ -189,17 +196,7 @@ pub struct PartialFile {
 impl PartialFile {
     /// Starts the file `target` (its directory is made when missing).
     pub fn create(target: &Path) -> Result<Self, IoError> {
-        let name = target
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "out".into());
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        std::fs::create_dir_all(&parent).map_err(|e| IoError::file(&parent, e))?;
-        remove_stale(&parent, &name);
-        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+        let staging = staging_beside(target)?;
         partial().push(staging.clone());
         Ok(Self {
             target: target.to_path_buf(),

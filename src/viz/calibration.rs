@@ -137,15 +137,13 @@ impl Recorder {
             )?;
         }
         log_rig(rec, &calib.rig)?;
-        for (side, color) in [("left", palette::LEFT), ("right", palette::RIGHT)] {
-            rec.log_static(
-                format!("rms/{side}"),
-                &rerun::SeriesLines::new()
-                    .with_names([side])
-                    .with_colors([color])
-                    .with_widths([2.0f32]),
-            )?;
-        }
+        log_series_styles(
+            rec,
+            &[
+                ("rms/left", "left", palette::LEFT),
+                ("rms/right", "right", palette::RIGHT),
+            ],
+        )?;
         log_board_outlines(rec, calib)?;
         log_all_residuals(rec, calib)?;
         for (side, counts) in [

@@ -444,6 +444,23 @@ pub(super) fn log_legend(
     Ok(())
 }
 
+/// Each plotted series' name and colour: `(entity path, name, colour)`.
+pub(super) fn log_series_styles(
+    rec: &rerun::RecordingStream,
+    series: &[(&str, &str, rerun::Color)],
+) -> Result<(), VizError> {
+    for &(path, name, color) in series {
+        rec.log_static(
+            path,
+            &rerun::SeriesLines::new()
+                .with_names([name])
+                .with_colors([color])
+                .with_widths([2.0f32]),
+        )?;
+    }
+    Ok(())
+}
+
 /// A markdown table of `metric | value` rows under a title.
 pub(super) fn metrics_markdown<'m>(
     title: &str,

@@ -170,32 +170,27 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
     } else {
         "odometry"
     };
-    for (path, name, color) in [
-        (
-            "metrics/position_error_m/localized",
-            "localized",
-            palette::OFFLINE,
-        ),
-        (
-            "metrics/position_error_m/odometry",
-            odometry,
-            palette::ODOMETRY,
-        ),
-        ("metrics/sigma_m", "σ (filter's own)", palette::SIGMA),
-        (
-            "metrics/since_sighting_m",
-            "distance since a sighting, m",
-            palette::FUSED,
-        ),
-    ] {
-        rec.log_static(
-            path,
-            &rerun::SeriesLines::new()
-                .with_names([name])
-                .with_colors([color])
-                .with_widths([2.0f32]),
-        )?;
-    }
+    log_series_styles(
+        rec,
+        &[
+            (
+                "metrics/position_error_m/localized",
+                "localized",
+                palette::OFFLINE,
+            ),
+            (
+                "metrics/position_error_m/odometry",
+                odometry,
+                palette::ODOMETRY,
+            ),
+            ("metrics/sigma_m", "σ (filter's own)", palette::SIGMA),
+            (
+                "metrics/since_sighting_m",
+                "distance since a sighting, m",
+                palette::FUSED,
+            ),
+        ],
+    )?;
     let r = scene.result;
     let truth = scene.run.ground_truth.as_deref();
     let tracked = scene.calibrated_odometry.unwrap_or(&scene.run.odometry);

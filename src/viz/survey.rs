@@ -552,54 +552,49 @@ fn log_cameras(
 }
 
 /// Each plotted series' name and colour, the trajectories' colours as on the map.
-fn log_series_styles(rec: &rerun::RecordingStream) -> Result<(), VizError> {
-    for (path, name, color) in [
-        (
-            "metrics/position_error_m/odometry",
-            "odometry",
-            palette::ODOMETRY,
-        ),
-        ("metrics/position_error_m/online", "online", palette::ONLINE),
-        (
-            "metrics/position_error_m/offline",
-            "offline",
-            palette::OFFLINE,
-        ),
-        (
-            "metrics/online_sigma_m",
-            "online σ (filter's own)",
-            palette::SIGMA,
-        ),
-        ("metrics/tag_nis", "tag NIS", palette::FUSED),
-        (
-            "metrics/turn_deg/visual_error",
-            "cameras' turn error",
-            palette::OFFLINE,
-        ),
-        (
-            "metrics/turn_deg/wheels_error",
-            "wheels' turn error",
-            palette::ODOMETRY,
-        ),
-        (
-            "metrics/turn_deg/visual_sigma",
-            "cameras' turn σ",
-            palette::SIGMA,
-        ),
-    ] {
-        rec.log_static(
-            path,
-            &rerun::SeriesLines::new()
-                .with_names([name])
-                .with_colors([color])
-                .with_widths([2.0f32]),
-        )?;
-    }
+fn log_survey_series(rec: &rerun::RecordingStream) -> Result<(), VizError> {
+    log_series_styles(
+        rec,
+        &[
+            (
+                "metrics/position_error_m/odometry",
+                "odometry",
+                palette::ODOMETRY,
+            ),
+            ("metrics/position_error_m/online", "online", palette::ONLINE),
+            (
+                "metrics/position_error_m/offline",
+                "offline",
+                palette::OFFLINE,
+            ),
+            (
+                "metrics/online_sigma_m",
+                "online σ (filter's own)",
+                palette::SIGMA,
+            ),
+            ("metrics/tag_nis", "tag NIS", palette::FUSED),
+            (
+                "metrics/turn_deg/visual_error",
+                "cameras' turn error",
+                palette::OFFLINE,
+            ),
+            (
+                "metrics/turn_deg/wheels_error",
+                "wheels' turn error",
+                palette::ODOMETRY,
+            ),
+            (
+                "metrics/turn_deg/visual_sigma",
+                "cameras' turn σ",
+                palette::SIGMA,
+            ),
+        ],
+    )?;
     Ok(())
 }
 
 fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(), VizError> {
-    log_series_styles(rec)?;
+    log_survey_series(rec)?;
     let s = scene.survey;
     let truth = scene.run.ground_truth.as_deref();
     let mut next = f64::NEG_INFINITY;
