@@ -1,43 +1,142 @@
+use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::sonar::SonarLayout;
-use stereotag::workflow::import::{import_carmen, ImportRequest};
+use stereotag::workflow::import::{
+    import_bag, import_carmen, BagRequest, BagTopics, CarmenRequest,
+};
 
 /// Arguments of `stereotag import`.
 #[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("log").required(true).args(["bag", "carmen"])))]
 pub struct Import {
+    /// A ROS 2 bag: its directory (metadata.yaml and .mcap files) or one .mcap file. Reads
+    /// Image/CompressedImage pairs, CameraInfo, Odometry, Range, LaserScan and tf. ROS 1 bags and
+    /// SQLite (.db3) bags: convert them first with `rosbags-convert --src IN --dst OUT_DIR
+    /// --dst-storage mcap` (pip install rosbags).
+    #[arg(long, value_name = "BAG")]
+    bag: Option<PathBuf>,
     /// A CARMEN log (Radish and the classic 2D SLAM data sets; `.gz` for gzip): ODOM, FLASER,
     /// RLASER and ROBOTLASER1 lines; the scans' poses of a `*-corrected` log become the ground
-    /// truth.
+    /// truth. Needs --as-sonar.
     #[arg(long, value_name = "LOG[.gz]")]
-    carmen: PathBuf,
-    /// The run directory to write (run.yaml, odometry.csv, sonar.csv, ground_truth.csv and
-    /// import.json, what was read).
+    carmen: Option<PathBuf>,
+    /// The run directory to write (run.yaml, odometry.csv, sonar.csv, stereo.csv and pictures,
+    /// rig.yaml, ground_truth.csv when known, and import.json: what was read).
     #[arg(long)]
     out: PathBuf,
     /// Turn the laser into this sonar ring (frontal5 or pioneer16): per scan, each sonar's
-    /// reading is the nearest laser return inside its cone (no echo beyond its range). Needed:
-    /// maps from the laser itself are not supported yet.
+    /// reading is the nearest laser return inside its cone (no echo beyond its range). A bag's
+    /// Range topics are then not read.
     #[arg(long, value_name = "LAYOUT")]
-    as_sonar: String,
+    as_sonar: Option<String>,
+    /// Bag: the left camera's Image or CompressedImage topic (default: the one image topic whose
+    /// name says "left").
+    #[arg(long, value_name = "TOPIC")]
+    left: Option<String>,
+    /// Bag: the right camera's image topic (default: the one whose name says "right").
+    #[arg(long, value_name = "TOPIC")]
+    right: Option<String>,
+    /// Bag: the wheel odometry, nav_msgs/Odometry (default: the bag's one Odometry topic).
+    #[arg(long, value_name = "TOPIC")]
+    odom: Option<String>,
+    /// Bag: sonar Range topics, repeatable, `*` and `?` globs (default: every Range topic, in
+    /// name order; sensor k of the run is the k-th).
+    #[arg(long, value_name = "TOPIC|GLOB")]
+    sonar: Vec<String>,
+    /// Bag: the LaserScan topic for --as-sonar (default: the bag's one LaserScan topic).
+    #[arg(long, value_name = "TOPIC")]
+    scan: Option<String>,
+    /// Bag: a ground-truth trajectory (nav_msgs/Odometry from a simulator or motion capture):
+    /// written as ground_truth.csv, and the run's frame becomes its frame.
+    #[arg(long, value_name = "TOPIC")]
+    ground_truth: Option<String>,
+    /// Bag: the robot's tf frame, whose pose the odometry gives and on which the sensors are
+    /// placed.
+    #[arg(long, default_value = "base_link", value_name = "FRAME")]
+    base_frame: String,
+    /// Bag: left and right images further apart than this (milliseconds) are not a pair.
+    #[arg(long, default_value_t = stereotag::workflow::import::bag::DEFAULT_SYNC_MS)]
+    sync_ms: f64,
+    /// Bag: a Kalibr camchain for the cameras instead of their CameraInfo (the mounting still
+    /// from tf when it has the left camera's frame, else from the camchain).
+    #[arg(long, value_name = "CAMCHAIN")]
+    rig: Option<PathBuf>,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
 }
 
 impl Import {
-    pub fn run(&self) -> anyhow::Result<()> {
-        let layout = SonarLayout::by_name(&self.as_sonar).ok_or_else(|| {
-            super::UsageError(format!(
-                "--as-sonar {}: the layouts are frontal5 and pioneer16",
-                self.as_sonar
+    pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        let layout = self
+            .as_sonar
+            .as_deref()
+            .map(|name| {
+                SonarLayout::by_name(name).ok_or_else(|| {
+                    UsageError(format!(
+                        "--as-sonar {name}: the layouts are frontal5 and pioneer16"
+                    ))
+                })
+            })
+            .transpose()?;
+        if let Some(log) = &self.carmen {
+            let bag_only = [
+                ("--left", self.left.is_some()),
+                ("--right", self.right.is_some()),
+                ("--odom", self.odom.is_some()),
+                ("--sonar", !self.sonar.is_empty()),
+                ("--scan", self.scan.is_some()),
+                ("--ground-truth", self.ground_truth.is_some()),
+                ("--rig", self.rig.is_some()),
+            ];
+            if let Some((flag, _)) = bag_only.iter().find(|f| f.1) {
+                return Err(UsageError(format!("{flag} is for --bag, not --carmen")).into());
+            }
+            let Some(layout) = layout else {
+                return Err(UsageError(
+                    "--carmen needs --as-sonar frontal5 or pioneer16: runs of laser scans are not supported yet".into(),
+                )
+                .into());
+            };
+            import_carmen(&CarmenRequest {
+                carmen: log,
+                out: &self.out,
+                as_sonar: layout,
+                force: self.force,
+            })?;
+            return Ok(());
+        }
+        let bag = self
+            .bag
+            .as_deref()
+            .expect("clap requires --bag or --carmen");
+        if !(self.sync_ms.is_finite() && self.sync_ms >= 0.0) {
+            return Err(UsageError(format!(
+                "--sync-ms {}: give a number of milliseconds, 0 or more",
+                self.sync_ms
             ))
-        })?;
-        import_carmen(&ImportRequest {
-            carmen: &self.carmen,
-            out: &self.out,
-            as_sonar: layout,
-            force: self.force,
-        })?;
+            .into());
+        }
+        import_bag(
+            &BagRequest {
+                bag,
+                out: &self.out,
+                topics: BagTopics {
+                    left: self.left.clone(),
+                    right: self.right.clone(),
+                    odom: self.odom.clone(),
+                    sonar: self.sonar.clone(),
+                    scan: self.scan.clone(),
+                    ground_truth: self.ground_truth.clone(),
+                },
+                base_frame: self.base_frame.clone(),
+                sync_ms: self.sync_ms,
+                rig: self.rig.as_deref(),
+                as_sonar: layout,
+                force: self.force,
+            },
+            &Bars::new(quiet),
+        )?;
         Ok(())
     }
 }

@@ -62,8 +62,10 @@ enum Command {
     ///
     /// Example: stereotag simulate --world samples/office/world.yaml --out runs/office
     Simulate(simulate::Simulate),
-    /// Bring a robot's log in as a run dataset: a CARMEN log (Radish), its laser turned into
-    /// sonar-like readings.
+    /// Bring a robot's log in as a run dataset: a ROS 2 bag (stereo images, odometry, sonar or
+    /// laser, tf) or a CARMEN log (Radish), a laser optionally turned into sonar-like readings.
+    ///
+    /// Example: stereotag import --bag robot_run/ --out runs/robot
     ///
     /// Example: stereotag import --carmen ../shared/data/radish/aces-corrected.log.gz --as-sonar frontal5 --out runs/aces
     Import(import::Import),
@@ -196,7 +198,7 @@ pub fn main() -> i32 {
         Command::Demo(c) => c.run(cli.quiet),
         Command::Samples(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
-        Command::Import(c) => c.run(),
+        Command::Import(c) => c.run(cli.quiet),
         Command::Map(c) => c.run(),
         Command::Survey(c) => c.run(cli.quiet),
         Command::Localize(c) => c.run(cli.quiet),

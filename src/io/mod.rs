@@ -10,6 +10,7 @@ pub mod carmen;
 mod maps;
 mod output;
 mod rig;
+pub mod rosbag;
 mod run;
 mod survey;
 mod world;

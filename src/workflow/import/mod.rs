@@ -1,0 +1,193 @@
+//! A robot's log brought in as a run dataset: ROS 2 bags ([`bag`]) and CARMEN logs (Radish and
+//! the classic 2D SLAM data sets, [`carmen`]), a laser optionally turned into sonar-like readings
+//! so the paper's method runs on real buildings.
+
+pub mod bag;
+pub mod carmen;
+
+pub use bag::{import_bag, BagRequest, BagSummary, BagTopics};
+pub use carmen::{import_carmen, CarmenRequest, CarmenSummary};
+
+use crate::geometry::StampedPose;
+use crate::io;
+use crate::io::carmen::LaserScan;
+use crate::sonar::{SonarLayout, SonarReading};
+
+/// Poses in time order: those earlier than one before them by up to
+/// [`io::REORDER_TOLERANCE_S`] re-ordered, those further back left out, both counted.
+pub(crate) struct TimeOrdered {
+    /// The poses, in time order.
+    pub poses: Vec<StampedPose>,
+    /// Poses re-ordered.
+    pub reordered: usize,
+    /// Poses left out.
+    pub dropped: usize,
+    /// The time of the first left out.
+    pub first_dropped_s: f64,
+}
+
+pub(crate) fn time_ordered(logged: Vec<StampedPose>) -> TimeOrdered {
+    let mut latest = f64::NEG_INFINITY;
+    let mut out = TimeOrdered {
+        poses: Vec::with_capacity(logged.len()),
+        reordered: 0,
+        dropped: 0,
+        first_dropped_s: f64::NAN,
+    };
+    for p in logged {
+        if p.t_s < latest - io::REORDER_TOLERANCE_S {
+            if out.dropped == 0 {
+                out.first_dropped_s = p.t_s;
+            }
+            out.dropped += 1;
+            continue;
+        }
+        if p.t_s < latest {
+            out.reordered += 1;
+        }
+        latest = latest.max(p.t_s);
+        out.poses.push(p);
+    }
+    out.poses.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    out
+}
+
+/// Each scan as one reading per sonar whose beam axis the laser sees: the nearest laser return
+/// inside the sonar's cone, measured from the sonar, or no echo when none is within its range.
+/// Also the sensors no scan sees.
+pub(crate) fn sonar_readings(
+    scans: &[LaserScan],
+    layout: &SonarLayout,
+    start_s: f64,
+) -> (Vec<SonarReading>, Vec<usize>) {
+    let mut readings = Vec::new();
+    let mut seen = vec![false; layout.sensors.len()];
+    for scan in scans {
+        // The returns in the robot frame.
+        let points: Vec<[f64; 2]> = scan
+            .ranges_m
+            .iter()
+            .enumerate()
+            .filter(|(_, &r)| r > 0.0)
+            .map(|(i, &r)| {
+                let a = scan.start_rad + i as f64 * scan.step_rad;
+                let p = scan
+                    .laser_in_robot
+                    .transform_point(nalgebra::Point2::new(r * a.cos(), r * a.sin()));
+                [p.x, p.y]
+            })
+            .collect();
+        let fov = field_of_view(scan);
+        for (k, sensor) in layout.sensors.iter().enumerate() {
+            if !fov.sees(sensor.bearing_rad) {
+                continue;
+            }
+            seen[k] = true;
+            let nearest = points
+                .iter()
+                .filter_map(|p| {
+                    let (dx, dy) = (p[0] - sensor.x_m, p[1] - sensor.y_m);
+                    let off = crate::geometry::wrap_angle(dy.atan2(dx) - sensor.bearing_rad);
+                    (off.abs() <= 0.5 * layout.cone_rad).then(|| dx.hypot(dy))
+                })
+                .fold(f64::INFINITY, f64::min);
+            readings.push(SonarReading {
+                t_s: scan.t_s - start_s,
+                sensor: k,
+                range_m: (nearest <= layout.max_range_m).then_some(nearest),
+            });
+        }
+    }
+    let unseen = (0..seen.len()).filter(|&k| !seen[k]).collect();
+    (readings, unseen)
+}
+
+/// The bearings a scan covers, in the robot frame.
+struct FieldOfView {
+    /// The middle bearing.
+    middle_rad: f64,
+    /// Half the width.
+    half_rad: f64,
+    /// The step between two ranges.
+    step_rad: f64,
+}
+
+impl FieldOfView {
+    /// Whether a beam axis at `bearing_rad` is in view, to a step of the laser's.
+    fn sees(&self, bearing_rad: f64) -> bool {
+        crate::geometry::wrap_angle(bearing_rad - self.middle_rad).abs()
+            <= self.half_rad + self.step_rad + 1e-9
+    }
+}
+
+fn field_of_view(scan: &LaserScan) -> FieldOfView {
+    let width = scan.step_rad * scan.ranges_m.len().saturating_sub(1) as f64;
+    FieldOfView {
+        middle_rad: scan.laser_in_robot.theta + scan.start_rad + 0.5 * width,
+        half_rad: 0.5 * width.abs(),
+        step_rad: scan.step_rad.abs(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+
+    fn scan(ranges: Vec<f64>) -> LaserScan {
+        let n = ranges.len();
+        LaserScan {
+            t_s: 10.0,
+            start_rad: -std::f64::consts::FRAC_PI_2,
+            step_rad: std::f64::consts::PI / (n - 1) as f64,
+            ranges_m: ranges,
+            pose: Pose2::new(0.0, 0.0, 0.0),
+            laser_in_robot: Pose2::new(0.0, 0.0, 0.0),
+            line: 1,
+        }
+    }
+
+    #[test]
+    fn each_sonar_takes_the_nearest_return_in_its_cone() {
+        // 181 beams, 1 degree apart: a wall 1.5 m ahead, one beam at 10 degrees left at 0.9 m.
+        let mut ranges = vec![30.0; 181];
+        for r in &mut ranges[75..=105] {
+            *r = 1.5;
+        }
+        ranges[100] = 0.9;
+        let layout = SonarLayout::frontal5();
+        let (readings, unseen) = sonar_readings(&[scan(ranges)], &layout, 4.0);
+        assert!(unseen.is_empty());
+        assert_eq!(readings.len(), 5);
+        let ahead = readings.iter().find(|r| r.sensor == 2).unwrap();
+        assert_eq!(ahead.t_s, 6.0);
+        // The sonar sits 0.2 m ahead of the centre: the 0.9 m return at 10 degrees is its nearest.
+        let expect = {
+            let (x, y) = (
+                0.9 * 10f64.to_radians().cos(),
+                0.9 * 10f64.to_radians().sin(),
+            );
+            (x - 0.2).hypot(y)
+        };
+        assert!((ahead.range_m.unwrap() - expect).abs() < 1e-9);
+        // The side sonars see only the far returns: no echo within 2.1 m.
+        assert!(readings
+            .iter()
+            .find(|r| r.sensor == 0)
+            .unwrap()
+            .range_m
+            .is_none());
+    }
+
+    #[test]
+    fn sonars_behind_a_front_laser_are_left_out() {
+        let layout = SonarLayout::pioneer16();
+        let (readings, unseen) = sonar_readings(&[scan(vec![3.0; 181])], &layout, 0.0);
+        // The eight front sonars (bearings -90..90 degrees) are seen, the rear ones not (the two
+        // rear side sonars at +-90 degrees face the laser's edges and count as seen).
+        assert_eq!(readings.len() + unseen.len(), 16);
+        assert!(unseen
+            .iter()
+            .all(|&k| layout.sensors[k].bearing_rad.cos() < 0.0));
+    }
+}
