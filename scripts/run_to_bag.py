@@ -4,7 +4,7 @@ independent writer of the bags `stereotag import --bag` reads (its test fixtures
 feed a simulated run to ROS tools.
 
     python3 scripts/run_to_bag.py RUN_DIR OUT_BAG_DIR [--compressed] [--other-names]
-        [--laser WORLD_YAML] [--pairs N] [--break WHAT]
+        [--laser WORLD_YAML] [--pairs N] [--image-rate HZ] [--break WHAT]
 
 What the bag holds (as a ROS 2 robot logs it):
 - the stereo pairs as sensor_msgs/Image mono8 (or CompressedImage png with --compressed, the
@@ -39,8 +39,11 @@ from rosbags.typesys import Stores, get_typestore
 BASE_NS = 1_700_000_000 * 10**9
 
 
+TIME_SCALE = 1.0
+
+
 def ns(t):
-    return BASE_NS + round(float(t) * 1e9)
+    return BASE_NS + round(float(t) * TIME_SCALE * 1e9)
 
 
 def rows(path):
@@ -107,8 +110,14 @@ def main():
     ap.add_argument("--other-names", action="store_true")
     ap.add_argument("--laser", type=Path)
     ap.add_argument("--pairs", type=int)
+    ap.add_argument("--image-rate", type=float, help="re-time the run so its pairs come at this rate (Hz), for speed figures")
     ap.add_argument("--break", dest="broken", choices=["encoding", "right-size", "no-tf", "info-size"])
     a = ap.parse_args()
+    if a.image_rate:
+        # Every time scaled so the pairs come at the rate asked (sonar and odometry with them).
+        global TIME_SCALE
+        pairs = rows(a.run / "stereo.csv")
+        TIME_SCALE = (len(pairs) / a.image_rate) / float(pairs[-1]["t_s"])
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types

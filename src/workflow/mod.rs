@@ -6,6 +6,7 @@
 //! | job | function |
 //! |---|---|
 //! | simulate a robot in a world, pictures included | [`simulate::simulate`] |
+//! | bring a ROS 2 bag or a CARMEN log in as a run | [`import::import_bag`], [`import::import_carmen`] |
 //! | the sonar map of a run | [`map::map`] |
 //! | survey a run: landmarks, corrected trajectory and map | [`survey::survey`] |
 //! | track a later run against a survey | [`localize::localize`] |

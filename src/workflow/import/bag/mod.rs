@@ -10,6 +10,7 @@
 
 mod pictures;
 mod rig;
+mod sonar;
 mod topics;
 
 pub use topics::{CAMERA_INFO, COMPRESSED_IMAGE, IMAGE, LASER_SCAN, ODOMETRY, RANGE, TF_MESSAGE};
@@ -21,11 +22,10 @@ use topics::{topic_error, Roles};
 /// hardware-triggered stereo cameras stamp both images alike; 10 ms is under a third of a 30 Hz
 /// camera's frame time, so no image can pair with its neighbour's partner.
 pub const DEFAULT_SYNC_MS: f64 = 10.0;
-use super::{sonar_readings, time_ordered};
+use super::time_ordered;
 use crate::camera::StereoRig;
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
 use crate::geometry::{pose_at, Pose2, StampedPose};
-use crate::io::carmen::LaserScan;
 use crate::io::rosbag::cdr::{self, CameraInfo, CdrError};
 use crate::io::rosbag::tf::TfTree;
 use crate::io::rosbag::{message_error, Bag, Message};
@@ -33,7 +33,7 @@ use crate::io::{self, IoError, OutputDir};
 use crate::progress::Progress;
 use crate::sonar::grid::GridConfig;
 use crate::sonar::map::MappingConfig;
-use crate::sonar::{SonarLayout, SonarReading, SonarSensor};
+use crate::sonar::SonarLayout;
 use crate::workflow::Result;
 use nalgebra::Isometry3;
 use rayon::prelude::*;
@@ -158,6 +158,20 @@ pub fn import_bag(
 ) -> Result<(RunDataset, BagSummary)> {
     let bag = Bag::open(request.bag)?;
     let roles = Roles::choose(&bag, &request.topics, request.as_sonar.is_some())?;
+    if request.rig.is_none() {
+        let sides = [
+            (&roles.left, &roles.left_info),
+            (&roles.right, &roles.right_info),
+        ];
+        if let Some((Some(images), _)) =
+            sides.iter().find(|(i, info)| i.is_some() && info.is_none())
+        {
+            return Err(topic_error(
+                &bag,
+                format!("no {CAMERA_INFO} beside {images} (looked for camera_info in its namespaces): pass --rig camchain.yaml"),
+            ));
+        }
+    }
     let dir = OutputDir::create(request.out, request.force)?;
     let mut gathered = Gathered::new(&roles, request.sync_ms, request.bag, dir.path(""));
     progress.start(
@@ -618,123 +632,7 @@ impl Gathered {
             })
             .collect();
 
-        // Sonar.
-        let (layout, sonar, too_close, left_out) = if let Some(layout) = &request.as_sonar {
-            let mut scans = Vec::with_capacity(self.scans.len());
-            let mut laser_in_robot: BTreeMap<String, (Pose2, bool)> = BTreeMap::new();
-            for (t, frame, s) in &self.scans {
-                if !laser_in_robot.contains_key(frame) {
-                    let m = mount(&self.tf, path, base, frame, "the laser")?;
-                    // A laser mounted upside down sweeps its angles the other way.
-                    let flipped = m.rotation.to_rotation_matrix()[(2, 2)] < 0.0;
-                    laser_in_robot.insert(frame.clone(), (flat(&m), flipped));
-                }
-                let (mounting, flipped) = laser_in_robot[frame];
-                let sign = if flipped { -1.0 } else { 1.0 };
-                let valid =
-                    |r: f32| r.is_finite() && r >= s.range_min && r <= s.range_max && r > 0.0;
-                scans.push(LaserScan {
-                    t_s: seconds(*t),
-                    start_rad: sign * s.angle_min as f64,
-                    step_rad: sign * s.angle_increment as f64,
-                    ranges_m: s
-                        .ranges
-                        .iter()
-                        .map(|&r| if valid(r) { r as f64 } else { 0.0 })
-                        .collect(),
-                    pose: Pose2::new(0.0, 0.0, 0.0),
-                    laser_in_robot: mounting,
-                    line: 0,
-                });
-            }
-            let (readings, unseen) = sonar_readings(&scans, layout, 0.0);
-            if !unseen.is_empty() {
-                tracing::warn!(
-                    "{}: the laser does not see the cones of sensors {unseen:?} of {}: they have no readings",
-                    path.display(),
-                    layout.name
-                );
-            }
-            (layout.clone(), readings, 0, 0)
-        } else {
-            let mut sensors = Vec::with_capacity(roles.sonar.len());
-            let mut first_sensor: Option<RangeSensor> = None;
-            for (k, topic) in roles.sonar.iter().enumerate() {
-                let Some(s) = self.sensors[k].clone() else {
-                    return Err(topic_error(
-                        bag,
-                        format!(
-                            "sonar topic {topic} has no messages: choose the sonars with --sonar"
-                        ),
-                    ));
-                };
-                let m = mount(&self.tf, path, base, &s.frame, &format!("sonar {topic}"))?;
-                let f = flat(&m);
-                sensors.push(SonarSensor {
-                    x_m: f.x,
-                    y_m: f.y,
-                    bearing_rad: f.theta,
-                });
-                match &first_sensor {
-                    None => first_sensor = Some(s),
-                    Some(f)
-                        if (f.field_of_view - s.field_of_view).abs() > 0.01 * f.field_of_view
-                            || (f.max_range - s.max_range).abs() > 0.01 * f.max_range =>
-                    {
-                        tracing::warn!(
-                            "{}: {topic}'s cone ({} rad, {} m) differs from {}'s ({} rad, {} m): a run has one cone for all its sonars; the first is used",
-                            path.display(),
-                            s.field_of_view,
-                            s.max_range,
-                            roles.sonar[0],
-                            f.field_of_view,
-                            f.max_range
-                        );
-                    }
-                    Some(_) => {}
-                }
-            }
-            let first_sensor = first_sensor.expect("at least one sonar topic");
-            let layout = SonarLayout {
-                name: "ros2-bag".into(),
-                cone_rad: decimal(first_sensor.field_of_view),
-                max_range_m: decimal(first_sensor.max_range),
-                sensors,
-            };
-            let (mut too_close, mut left_out) = (0, 0);
-            let mut readings = Vec::with_capacity(self.ranges.len());
-            for r in &self.ranges {
-                let s = self.sensors[r.sensor].as_ref().expect("seen");
-                // REP 117: +inf no echo within reach, -inf nearer than the minimum; a finite
-                // range at or beyond the maximum is also no echo (drivers before REP 117).
-                let range_m = if r.range == f32::INFINITY
-                    || (r.range.is_finite() && r.range >= s.max_range)
-                {
-                    None
-                } else if r.range == f32::NEG_INFINITY {
-                    too_close += 1;
-                    Some(decimal(s.min_range.max(0.0)))
-                } else if r.range.is_finite() && r.range >= s.min_range {
-                    Some(decimal(r.range))
-                } else {
-                    left_out += 1;
-                    continue;
-                };
-                readings.push(SonarReading {
-                    t_s: seconds(r.stamp_ns),
-                    sensor: r.sensor,
-                    range_m,
-                });
-            }
-            readings.sort_by(|a, b| a.t_s.total_cmp(&b.t_s).then(a.sensor.cmp(&b.sensor)));
-            if left_out > 0 {
-                tracing::warn!(
-                    "{}: {left_out} Range messages left out: NaN, or finite and below min_range",
-                    path.display()
-                );
-            }
-            (layout, readings, too_close, left_out)
-        };
+        let (layout, sonar, too_close, left_out) = self.sonar(bag, roles, request, &seconds)?;
 
         // The rig.
         let (rig, rig_from, image_size) = if roles.left.is_some() && !self.stereo.is_empty() {
