@@ -87,3 +87,21 @@ fn an_empty_image_finds_no_tag() {
         assert!(c.detect(&image).unwrap().is_empty());
     }
 }
+
+/// ros2_bag: an MCAP record claiming 0x6f00..0711 bytes made the reader allocate that much to
+/// read it in (AddressSanitizer: allocation too big). The file is now read a MiB at a time and a
+/// record longer than the file is an error.
+#[test]
+fn an_mcap_record_longer_than_its_file_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.mcap");
+    std::fs::write(
+        &path,
+        b"\x89MCAP0\r\n\x00\x00\x07\x00\x00\x00\x00\x00odo~\x00",
+    )
+    .unwrap();
+    let err = stereotag::io::rosbag::Bag::open(&path)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("bad.mcap"), "{err}");
+}

@@ -396,7 +396,7 @@ fn broken_bags_are_refused_naming_what_is_wrong() {
     // Truncated, and a flipped byte inside the first chunk (its CRC then fails).
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    refused(&cut, &[], &["cut.mcap", "ended in the middle"]);
+    refused(&cut, &[], &["cut.mcap", "cut short"]);
     let mut flipped = bytes.clone();
     flipped[bytes.len() / 4] ^= 0xff;
     let crc = dir.path().join("crc.mcap");
@@ -432,6 +432,51 @@ fn broken_bags_are_refused_naming_what_is_wrong() {
         let bag = dir.path().join(what);
         write_bag(run, &bag, &["--pairs", "3", "--break", what]);
         refused(&bag, &[], expect);
+    }
+    // zstd-compressed chunks (rosbags-convert --compress zstd) read alike.
+    let zstd = dir.path().join("zstd");
+    let status = Command::new("python3")
+        .args([
+            "-m",
+            "rosbags.convert",
+            "--src",
+            s(&good),
+            "--dst",
+            s(&zstd),
+        ])
+        .args([
+            "--dst-storage",
+            "mcap",
+            "--compress",
+            "zstd",
+            "--compress-mode",
+            "storage",
+        ])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let (plain, packed) = (dir.path().join("plain_run"), dir.path().join("zstd_run"));
+    for (bag, out) in [(&good, &plain), (&zstd, &packed)] {
+        ok(&[
+            "import",
+            "--bag",
+            s(bag),
+            "--ground-truth",
+            "/ground_truth",
+            "--out",
+            s(out),
+        ]);
+    }
+    for f in [
+        "stereo.csv",
+        "odometry.csv",
+        "sonar.csv",
+        "stereo/left/000002.png",
+    ] {
+        assert!(
+            std::fs::read(plain.join(f)).unwrap() == std::fs::read(packed.join(f)).unwrap(),
+            "{f}"
+        );
     }
     // A ROS 1 bag is pointed to the converter.
     let ros1 = dir.path().join("old.bag");

@@ -170,36 +170,136 @@ fn bag_files(path: &Path) -> Result<Vec<PathBuf>, IoError> {
     Ok(files)
 }
 
-/// Calls `on` with every record of an MCAP file, in file order (chunks decompressed, CRCs
-/// checked).
+/// Calls `on` with every record of an MCAP file, in file order (chunks unpacked by
+/// [`chunk_records`]).
 fn records(
     path: &Path,
     mut on: impl FnMut(Record<'_>) -> Result<(), IoError>,
 ) -> Result<(), IoError> {
     let mut file = std::fs::File::open(path).map_err(|e| IoError::file(path, e))?;
+    let size = file.metadata().map_err(|e| IoError::file(path, e))?.len();
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
+            .with_emit_chunks(true)
+            .with_record_length_limit(usize::try_from(size).unwrap_or(usize::MAX))
             .with_validate_data_section_crc(true)
             .with_validate_summary_section_crc(true),
     );
-    let damaged =
-        |e: mcap::McapError| IoError::content(path, format!("not a whole MCAP file: {e}"));
+    let damaged = |e: mcap::McapError| {
+        let what = match e {
+            mcap::McapError::UnexpectedEof => {
+                "it ends in the middle of a record: the file is cut short".to_owned()
+            }
+            mcap::McapError::RecordTooLarge { len, .. } => format!(
+                "a record of {len} bytes runs past its end ({size} bytes): the file is cut short or damaged"
+            ),
+            e => e.to_string(),
+        };
+        IoError::content(path, format!("not a whole MCAP file: {what}"))
+    };
     while let Some(event) = reader.next_event() {
         match event.map_err(damaged)? {
             LinearReadEvent::ReadRequest(n) => {
+                // At most a MiB at a time: a damaged length asks for more than the file holds.
                 let read = file
-                    .read(reader.insert(n))
+                    .read(reader.insert(n.min(READ_SIZE)))
                     .map_err(|e| IoError::file(path, e))?;
                 reader.notify_read(read);
             }
-            LinearReadEvent::Record { data, opcode } => {
-                on(mcap::parse_record(opcode, data).map_err(damaged)?)?;
-            }
+            LinearReadEvent::Record { data, opcode } => match mcap::parse_record(opcode, data) {
+                Ok(Record::Chunk { header, data }) => chunk_records(path, &header, &data, &mut on)?,
+                Ok(record) => on(record)?,
+                Err(e) => return Err(damaged(e)),
+            },
         }
     }
     Ok(())
 }
+
+/// Calls `on` with every record of a chunk: decompressed (zstd, lz4) to the size its header
+/// says, its CRC checked when it has one, each record's length checked against what is left.
+fn chunk_records(
+    path: &Path,
+    header: &mcap::records::ChunkHeader,
+    data: &[u8],
+    on: &mut impl FnMut(Record<'_>) -> Result<(), IoError>,
+) -> Result<(), IoError> {
+    let bad = |what: String| {
+        IoError::content(
+            path,
+            format!(
+                "not a whole MCAP file: the chunk of messages from log time {:.3} s {what}",
+                header.message_start_time as f64 * 1e-9
+            ),
+        )
+    };
+    let unpacked: std::borrow::Cow<'_, [u8]> = match header.compression.as_str() {
+        "" => data.into(),
+        "zstd" | "lz4" => {
+            let mut out = Vec::new();
+            let limit = header.uncompressed_size;
+            let read = if header.compression == "zstd" {
+                zstd::stream::read::Decoder::new(data)
+                    .and_then(|d| d.take(limit).read_to_end(&mut out))
+            } else {
+                lz4::Decoder::new(data).and_then(|d| d.take(limit).read_to_end(&mut out))
+            };
+            read.map_err(|e| {
+                bad(format!(
+                    "cannot be decompressed ({}: {e})",
+                    header.compression
+                ))
+            })?;
+            out.into()
+        }
+        other => {
+            return Err(bad(format!(
+                "is compressed as `{other}` (zstd and lz4 are read)"
+            )))
+        }
+    };
+    if unpacked.len() as u64 != header.uncompressed_size {
+        return Err(bad(format!(
+            "holds {} bytes where its header says {}",
+            unpacked.len(),
+            header.uncompressed_size
+        )));
+    }
+    if header.uncompressed_crc != 0 {
+        let crc = crc32fast::hash(&unpacked);
+        if crc != header.uncompressed_crc {
+            return Err(bad(format!(
+                "fails its CRC (expected {:08X}, got {crc:08X})",
+                header.uncompressed_crc
+            )));
+        }
+    }
+    let mut rest: &[u8] = &unpacked;
+    while !rest.is_empty() {
+        let (op, len) = match rest {
+            [op, l0, l1, l2, l3, l4, l5, l6, l7, ..] => (
+                *op,
+                u64::from_le_bytes([*l0, *l1, *l2, *l3, *l4, *l5, *l6, *l7]),
+            ),
+            _ => return Err(bad("ends inside a record's header".into())),
+        };
+        let body = &rest[9..];
+        let Some(len) = usize::try_from(len).ok().filter(|&n| n <= body.len()) else {
+            return Err(bad(format!(
+                "has a record of {len} bytes where {} are left",
+                body.len()
+            )));
+        };
+        let record = mcap::parse_record(op, &body[..len])
+            .map_err(|e| bad(format!("has a record that cannot be read: {e}")))?;
+        on(record)?;
+        rest = &body[len..];
+    }
+    Ok(())
+}
+
+/// Bytes read from a bag file at a time.
+const READ_SIZE: usize = 1 << 20;
 
 /// A channel of one file: its topic's index in [`Bag::topics`].
 type Channels = HashMap<u16, usize>;
@@ -333,5 +433,97 @@ impl Bag {
             })?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write as _;
+
+    /// Two records of an opcode MCAP leaves to applications (0x80), as a chunk's records.
+    fn records_bytes() -> Vec<u8> {
+        let mut out = Vec::new();
+        for body in [&b"first"[..], b"second record"] {
+            out.push(0x80);
+            out.extend((body.len() as u64).to_le_bytes());
+            out.extend(body);
+        }
+        out
+    }
+
+    fn header(compression: &str, raw: &[u8], crc: u32) -> mcap::records::ChunkHeader {
+        mcap::records::ChunkHeader {
+            message_start_time: 0,
+            message_end_time: 0,
+            uncompressed_size: raw.len() as u64,
+            uncompressed_crc: crc,
+            compression: compression.into(),
+            compressed_size: 0,
+        }
+    }
+
+    fn bodies(h: &mcap::records::ChunkHeader, data: &[u8]) -> Result<Vec<Vec<u8>>, IoError> {
+        let mut got = Vec::new();
+        chunk_records(Path::new("t.mcap"), h, data, &mut |r| {
+            if let Record::Unknown { data, .. } = r {
+                got.push(data.to_vec());
+            }
+            Ok(())
+        })?;
+        Ok(got)
+    }
+
+    #[test]
+    fn chunks_unpack_plain_zstd_and_lz4_with_their_crc() {
+        let raw = records_bytes();
+        let crc = crc32fast::hash(&raw);
+        let zstd = zstd::encode_all(raw.as_slice(), 3).unwrap();
+        let mut lz4 = lz4::EncoderBuilder::new().build(Vec::new()).unwrap();
+        lz4.write_all(&raw).unwrap();
+        let (lz4, done) = lz4.finish();
+        done.unwrap();
+        for (compression, data) in [("", raw.clone()), ("zstd", zstd), ("lz4", lz4)] {
+            let got = bodies(&header(compression, &raw, crc), &data).unwrap();
+            assert_eq!(
+                got,
+                vec![b"first".to_vec(), b"second record".to_vec()],
+                "{compression}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_damaged_chunk_is_an_error_not_a_panic() {
+        let raw = records_bytes();
+        let crc = crc32fast::hash(&raw);
+        let mut flipped = raw.clone();
+        flipped[12] ^= 1;
+        let e = bodies(&header("", &raw, crc), &flipped)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("CRC"), "{e}");
+        // A record claiming more than the chunk holds (mcap's own walk subtracts and wraps).
+        let mut long = raw.clone();
+        long[1] = 200;
+        let e = bodies(&header("", &long, 0), &long)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bytes where"), "{e}");
+        let e = bodies(&header("", &raw[..5], 0), &raw[..5])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("inside a record's header"), "{e}");
+        let e = bodies(&header("brotli", &raw, 0), &raw)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("brotli"), "{e}");
+        // Decompressing to less than the header says.
+        let mut h = header("zstd", &raw, 0);
+        h.uncompressed_size += 10;
+        let e = bodies(&h, &zstd::encode_all(raw.as_slice(), 3).unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("header says"), "{e}");
     }
 }
