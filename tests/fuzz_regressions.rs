@@ -105,3 +105,22 @@ fn an_mcap_record_longer_than_its_file_is_an_error() {
         .to_string();
     assert!(err.contains("bad.mcap"), "{err}");
 }
+
+/// ros2_bag: an attachment record shorter than its own header made mcap's `parse_record` slice
+/// out of bounds (a panic). Records the bag is not read for are no longer parsed.
+#[test]
+fn a_short_mcap_attachment_is_passed_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("attached.mcap");
+    let mut bytes = b"\x89MCAP0\r\n".to_vec();
+    // An attachment record (opcode 0x09) of 33 bytes: too short for its fields and CRC.
+    bytes.push(0x09);
+    bytes.extend(33u64.to_le_bytes());
+    bytes.extend([0u8; 33]);
+    std::fs::write(&path, &bytes).unwrap();
+    // Cut short (no footer or end magic): an error naming the file, not a panic.
+    let err = stereotag::io::rosbag::Bag::open(&path)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("attached.mcap"), "{err}");
+}

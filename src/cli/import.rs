@@ -2,12 +2,12 @@ use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::sonar::SonarLayout;
 use stereotag::workflow::import::{
-    import_bag, import_carmen, BagRequest, BagTopics, CarmenRequest,
+    import_asl, import_bag, import_carmen, AslRequest, BagRequest, BagTopics, CarmenRequest,
 };
 
 /// Arguments of `stereotag import`.
 #[derive(Debug, clap::Args)]
-#[command(group(clap::ArgGroup::new("log").required(true).args(["bag", "carmen"])))]
+#[command(group(clap::ArgGroup::new("log").required(true).args(["bag", "asl", "carmen"])))]
 pub struct Import {
     /// A ROS 2 bag: its directory (metadata.yaml and .mcap files) or one .mcap file. Reads
     /// Image/CompressedImage pairs, CameraInfo, Odometry, Range, LaserScan and tf. ROS 1 bags and
@@ -15,6 +15,16 @@ pub struct Import {
     /// --dst-storage mcap` (pip install rosbags).
     #[arg(long, value_name = "BAG")]
     bag: Option<PathBuf>,
+    /// An ASL dataset folder (the EuRoC layout: cam0/ and cam1/ with data.csv, data/ and
+    /// sensor.yaml, here or in mav0/): stereo pairs, the rig from sensor.yaml (T_BS: the camera on
+    /// the body, taken as the robot), the ground truth from state_groundtruth_estimate0/. Needs
+    /// --odometry. The run has no sonar.
+    #[arg(long, value_name = "DIR")]
+    asl: Option<PathBuf>,
+    /// ASL: the odometry, a TUM file (`timestamp tx ty tz qx qy qz qw`, seconds on the pictures'
+    /// clock).
+    #[arg(long, value_name = "TUM")]
+    odometry: Option<PathBuf>,
     /// A CARMEN log (Radish and the classic 2D SLAM data sets; `.gz` for gzip): ODOM, FLASER,
     /// RLASER and ROBOTLASER1 lines; the scans' poses of a `*-corrected` log become the ground
     /// truth. Needs --as-sonar.
@@ -54,7 +64,7 @@ pub struct Import {
     /// placed.
     #[arg(long, default_value = "base_link", value_name = "FRAME")]
     base_frame: String,
-    /// Bag: left and right images further apart than this (milliseconds) are not a pair.
+    /// Bag and ASL: left and right images further apart than this (milliseconds) are not a pair.
     #[arg(long, default_value_t = stereotag::workflow::import::bag::DEFAULT_SYNC_MS)]
     sync_ms: f64,
     /// Bag: a Kalibr camchain for the cameras instead of their CameraInfo (the mounting still
@@ -79,6 +89,42 @@ impl Import {
                 })
             })
             .transpose()?;
+        if self.odometry.is_some() && self.asl.is_none() {
+            return Err(UsageError("--odometry is for --asl".into()).into());
+        }
+        if !(self.sync_ms.is_finite() && self.sync_ms >= 0.0) {
+            return Err(UsageError(format!(
+                "--sync-ms {}: give a number of milliseconds, 0 or more",
+                self.sync_ms
+            ))
+            .into());
+        }
+        if let Some(dir) = &self.asl {
+            let bag_only = [
+                ("--as-sonar", self.as_sonar.is_some()),
+                ("--left", self.left.is_some()),
+                ("--right", self.right.is_some()),
+                ("--odom", self.odom.is_some()),
+                ("--sonar", !self.sonar.is_empty()),
+                ("--scan", self.scan.is_some()),
+                ("--ground-truth", self.ground_truth.is_some()),
+                ("--rig", self.rig.is_some()),
+            ];
+            if let Some((flag, _)) = bag_only.iter().find(|f| f.1) {
+                return Err(UsageError(format!("{flag} is for --bag, not --asl")).into());
+            }
+            import_asl(
+                &AslRequest {
+                    asl: dir,
+                    odometry: self.odometry.as_deref(),
+                    out: &self.out,
+                    sync_ms: self.sync_ms,
+                    force: self.force,
+                },
+                &Bars::new(quiet),
+            )?;
+            return Ok(());
+        }
         if let Some(log) = &self.carmen {
             let bag_only = [
                 ("--left", self.left.is_some()),
@@ -110,13 +156,6 @@ impl Import {
             .bag
             .as_deref()
             .expect("clap requires --bag or --carmen");
-        if !(self.sync_ms.is_finite() && self.sync_ms >= 0.0) {
-            return Err(UsageError(format!(
-                "--sync-ms {}: give a number of milliseconds, 0 or more",
-                self.sync_ms
-            ))
-            .into());
-        }
         import_bag(
             &BagRequest {
                 bag,

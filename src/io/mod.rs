@@ -4,6 +4,7 @@
 //! the file and line of the first problem. Writers go through [`OutputDir`], which builds the
 //! output under a temporary name and renames it into place, so a failure leaves nothing half-written.
 
+pub mod asl;
 mod bundled;
 mod calib;
 pub mod carmen;

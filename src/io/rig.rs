@@ -60,7 +60,7 @@ pub struct Camchain {
     pub stereotag: Option<StereotagExtras>,
 }
 
-fn camera_from(path: &Path, key: &str, c: &KalibrCamera) -> Result<Camera, IoError> {
+pub(crate) fn camera_from(path: &Path, key: &str, c: &KalibrCamera) -> Result<Camera, IoError> {
     let bad = |m: String| IoError::content(path, format!("`{key}.{m}"));
     if c.camera_model != "pinhole" {
         return Err(bad(format!(
@@ -103,7 +103,11 @@ fn camera_from(path: &Path, key: &str, c: &KalibrCamera) -> Result<Camera, IoErr
     Ok(cam)
 }
 
-fn isometry_from(path: &Path, key: &str, rows: &[Vec<f64>]) -> Result<Isometry3<f64>, IoError> {
+pub(crate) fn isometry_from(
+    path: &Path,
+    key: &str,
+    rows: &[Vec<f64>],
+) -> Result<Isometry3<f64>, IoError> {
     let shape_ok = rows.len() == 4 && rows.iter().all(|r| r.len() == 4);
     if !shape_ok || rows.iter().flatten().any(|v| !v.is_finite()) {
         return Err(IoError::content(

@@ -133,7 +133,11 @@ fn read_sonar(path: &Path, sensors: usize) -> Result<Vec<SonarReading>, IoError>
                 return Err(IoError::line(
                     path,
                     line,
-                    format!("unknown sensor {sensor}: run.yaml's sonar layout has {sensors} sensors (0..{})", sensors - 1),
+                    if sensors == 0 {
+                        format!("sensor {sensor}: run.yaml's sonar layout has no sensors (a run without sonar has no readings)")
+                    } else {
+                        format!("unknown sensor {sensor}: run.yaml's sonar layout has {sensors} sensors (0..{})", sensors - 1)
+                    },
                 ));
             }
             let range_m = if f[2].is_empty() {
@@ -193,12 +197,6 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
                 "format is `{}`; this stereotag reads `{RUN_FORMAT}`",
                 meta.format
             ),
-        ));
-    }
-    if meta.robot.sonar.sensors.is_empty() {
-        return Err(IoError::content(
-            &meta_path,
-            "robot.sonar.sensors is empty; at least one sonar is needed",
         ));
     }
     let layout = &meta.robot.sonar;

@@ -170,6 +170,14 @@ fn bag_files(path: &Path) -> Result<Vec<PathBuf>, IoError> {
     Ok(files)
 }
 
+/// The records a bag is read for (schemas, channels, messages and chunks), parsed; `None` for the
+/// others, which are passed over unparsed (mcap's parser panics on some damaged attachments).
+fn parse(opcode: u8, body: &[u8]) -> Option<mcap::McapResult<Record<'_>>> {
+    use mcap::records::op;
+    matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE | op::CHUNK)
+        .then(|| mcap::parse_record(opcode, body))
+}
+
 /// Calls `on` with every record of an MCAP file, in file order (chunks unpacked by
 /// [`chunk_records`]).
 fn records(
@@ -206,10 +214,13 @@ fn records(
                     .map_err(|e| IoError::file(path, e))?;
                 reader.notify_read(read);
             }
-            LinearReadEvent::Record { data, opcode } => match mcap::parse_record(opcode, data) {
-                Ok(Record::Chunk { header, data }) => chunk_records(path, &header, &data, &mut on)?,
-                Ok(record) => on(record)?,
-                Err(e) => return Err(damaged(e)),
+            LinearReadEvent::Record { data, opcode } => match parse(opcode, data) {
+                None => {}
+                Some(Ok(Record::Chunk { header, data })) => {
+                    chunk_records(path, &header, &data, &mut on)?
+                }
+                Some(Ok(record)) => on(record)?,
+                Some(Err(e)) => return Err(damaged(e)),
             },
         }
     }
@@ -290,9 +301,9 @@ fn chunk_records(
                 body.len()
             )));
         };
-        let record = mcap::parse_record(op, &body[..len])
-            .map_err(|e| bad(format!("has a record that cannot be read: {e}")))?;
-        on(record)?;
+        if let Some(record) = parse(op, &body[..len]) {
+            on(record.map_err(|e| bad(format!("has a record that cannot be read: {e}")))?)?;
+        }
         rest = &body[len..];
     }
     Ok(())

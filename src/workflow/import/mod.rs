@@ -1,10 +1,12 @@
-//! A robot's log brought in as a run dataset: ROS 2 bags ([`bag`]) and CARMEN logs (Radish and
-//! the classic 2D SLAM data sets, [`carmen`]), a laser optionally turned into sonar-like readings
-//! so the paper's method runs on real buildings.
+//! A robot's log brought in as a run dataset: ROS 2 bags ([`bag`]), ASL folders ([`asl`]) and
+//! CARMEN logs (Radish and the classic 2D SLAM data sets, [`carmen`]), a laser optionally turned
+//! into sonar-like readings so the paper's method runs on real buildings.
 
+pub mod asl;
 pub mod bag;
 pub mod carmen;
 
+pub use asl::{import_asl, AslRequest, AslSummary};
 pub use bag::{import_bag, BagRequest, BagSummary, BagTopics};
 pub use carmen::{import_carmen, CarmenRequest, CarmenSummary};
 
@@ -24,6 +26,39 @@ pub(crate) struct TimeOrdered {
     pub dropped: usize,
     /// The time of the first left out.
     pub first_dropped_s: f64,
+}
+
+/// The odometry in the run's frame, and that frame said in words: with a ground truth, the
+/// truth's frame, the odometry moved to start at the truth's pose at its first time (`truth_name`
+/// names the truth); without, the robot's pose at the first odometry pose (the odometry moved to
+/// start at the origin).
+pub(crate) fn anchored(
+    odometry: &[StampedPose],
+    truth: &[StampedPose],
+    truth_name: &str,
+) -> (Vec<StampedPose>, String) {
+    let Some(first) = odometry.first() else {
+        return (Vec::new(), String::new());
+    };
+    let (world_from_odom, frame) = match crate::geometry::pose_at(truth, first.t_s) {
+        Some(start) => (
+            start.compose(&first.pose.inverse()),
+            format!("the ground truth's frame ({truth_name}): the odometry starts at its pose"),
+        ),
+        None => (
+            first.pose.inverse(),
+            "the robot's pose at the first odometry pose (the odometry moved to start at the origin)"
+                .to_owned(),
+        ),
+    };
+    let poses = odometry
+        .iter()
+        .map(|p| StampedPose {
+            t_s: p.t_s,
+            pose: world_from_odom.compose(&p.pose),
+        })
+        .collect();
+    (poses, frame)
 }
 
 pub(crate) fn time_ordered(logged: Vec<StampedPose>) -> TimeOrdered {

@@ -22,10 +22,10 @@ use topics::{topic_error, Roles};
 /// hardware-triggered stereo cameras stamp both images alike; 10 ms is under a third of a 30 Hz
 /// camera's frame time, so no image can pair with its neighbour's partner.
 pub const DEFAULT_SYNC_MS: f64 = 10.0;
-use super::time_ordered;
+use super::{anchored, time_ordered};
 use crate::camera::StereoRig;
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
-use crate::geometry::{pose_at, Pose2, StampedPose};
+use crate::geometry::{Pose2, StampedPose};
 use crate::io::rosbag::cdr::{self, CameraInfo, CdrError};
 use crate::io::rosbag::tf::TfTree;
 use crate::io::rosbag::{message_error, Bag, Message};
@@ -605,32 +605,19 @@ impl Gathered {
                 odometry.reordered
             );
         }
-        let Some(first) = odometry.poses.first().copied() else {
+        if odometry.poses.is_empty() {
             return Err(topic_error(
                 bag,
                 format!("{} has no messages: a run needs odometry", roles.odom),
             ));
-        };
+        }
         let mut truth = truth;
         truth.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-        let (world_from_odom, frame) = match pose_at(&truth, first.t_s) {
-            Some(start) => (
-                start.compose(&first.pose.inverse()),
-                format!("the ground truth's frame ({}): the odometry starts at its pose", roles.ground_truth.as_deref().unwrap_or("")),
-            ),
-            None => (
-                first.pose.inverse(),
-                "the robot's pose at the first odometry message (the odometry moved to start at the origin)".to_owned(),
-            ),
-        };
-        let trajectory: Vec<StampedPose> = odometry
-            .poses
-            .iter()
-            .map(|p| StampedPose {
-                t_s: p.t_s,
-                pose: world_from_odom.compose(&p.pose),
-            })
-            .collect();
+        let (trajectory, frame) = anchored(
+            &odometry.poses,
+            &truth,
+            roles.ground_truth.as_deref().unwrap_or(""),
+        );
 
         let (layout, sonar, too_close, left_out) = self.sonar(bag, roles, request, &seconds)?;
 

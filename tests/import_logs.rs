@@ -1,6 +1,6 @@
-//! `stereotag import --bag` on ROS 2 bags written by an independent writer, the Python `rosbags`
-//! package (`scripts/run_to_bag.py`), from a simulated office run: the imported run must be the
-//! run the bag was written from, and survey as it does.
+//! `stereotag import` of a simulated office run written as a ROS 2 bag by an independent writer
+//! (the Python `rosbags` package, `scripts/run_to_bag.py`) and as an ASL folder: the imported run
+//! must be the run it was written from, and survey as it does.
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -482,4 +482,172 @@ fn broken_bags_are_refused_naming_what_is_wrong() {
     let ros1 = dir.path().join("old.bag");
     std::fs::write(&ros1, b"#ROSBAG V2.0\n").unwrap();
     refused(&ros1, &[], &["ROS 1", "rosbags-convert"]);
+}
+
+/// The run as an ASL folder (`mav0/cam{0,1}` with data.csv, data/ and sensor.yaml, the ground
+/// truth in `state_groundtruth_estimate0`) and its odometry as a TUM file, stamped from 1.7e9 s.
+fn write_asl(run: &Path, out: &Path) -> PathBuf {
+    const BASE_NS: i64 = 1_700_000_000_000_000_000;
+    let ns = |t: f64| BASE_NS + (t * 1e9).round() as i64;
+    let mav = out.join("mav0");
+    let rig = stereotag::io::load_rig(&run.join("rig.yaml")).unwrap();
+    let rows: Vec<Vec<String>> = text(&run.join("stereo.csv"))
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    for (k, (camera, body_from_camera)) in [
+        (rig.left, rig.robot_from_left),
+        (rig.right, rig.robot_from_left * rig.left_from_right()),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let dir = mav.join(format!("cam{k}"));
+        std::fs::create_dir_all(dir.join("data")).unwrap();
+        let mut list = String::from("#timestamp [ns],filename\n");
+        for r in &rows {
+            let stamp = ns(r[0].parse().unwrap());
+            list += &format!("{stamp},{stamp}.png\n");
+            std::os::unix::fs::symlink(
+                run.join(&r[1 + k]),
+                dir.join("data").join(format!("{stamp}.png")),
+            )
+            .unwrap();
+        }
+        std::fs::write(dir.join("data.csv"), list).unwrap();
+        let m = body_from_camera.to_matrix();
+        let t_bs: Vec<String> = (0..4)
+            .flat_map(|i| (0..4).map(move |j| (i, j)))
+            .map(|(i, j)| format!("{:.17}", m[(i, j)]))
+            .collect();
+        let stereotag::camera::Distortion::Radtan { k1, k2, p1, p2, .. } = camera.distortion else {
+            panic!("the simulated rig is radtan");
+        };
+        std::fs::write(
+            dir.join("sensor.yaml"),
+            format!(
+                "sensor_type: camera\ncomment: simulated\nT_BS:\n  cols: 4\n  rows: 4\n  data: [{}]\nrate_hz: 20\nresolution: [{}, {}]\ncamera_model: pinhole\nintrinsics: [{}, {}, {}, {}]\ndistortion_model: radial-tangential\ndistortion_coefficients: [{k1}, {k2}, {p1}, {p2}]\n",
+                t_bs.join(", "), camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy
+            ),
+        )
+        .unwrap();
+    }
+    let truth = mav.join("state_groundtruth_estimate0");
+    std::fs::create_dir_all(&truth).unwrap();
+    let mut gt = String::from("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n");
+    for r in csv_numbers(&run.join("ground_truth.csv")) {
+        let (qz, qw) = (0.5 * r[3]).sin_cos();
+        gt += &format!(
+            "{},{:.9},{:.9},0,{qw:.12},0,0,{qz:.12}\n",
+            ns(r[0]),
+            r[1],
+            r[2]
+        );
+    }
+    std::fs::write(truth.join("data.csv"), gt).unwrap();
+    let odometry: Vec<stereotag::geometry::StampedPose> = csv_numbers(&run.join("odometry.csv"))
+        .iter()
+        .map(|r| stereotag::geometry::StampedPose {
+            t_s: 1.7e9 + r[0],
+            pose: stereotag::geometry::Pose2::new(r[1], r[2], r[3]),
+        })
+        .collect();
+    let tum = out.join("odometry.tum");
+    stereotag::io::save_tum(&tum, &odometry).unwrap();
+    tum
+}
+
+#[test]
+fn an_asl_folder_imports_as_its_run_and_surveys_alike() {
+    let run = office_run();
+    let dir = tempfile::tempdir().unwrap();
+    let (asl, imported) = (dir.path().join("asl"), dir.path().join("imported"));
+    let tum = write_asl(run, &asl);
+    // Without odometry: refused, saying how to give it.
+    let (code, err) = stereotag(&["import", "--asl", s(&asl), "--out", s(&imported)]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--odometry") && !imported.exists(), "{err}");
+    ok(&[
+        "import",
+        "--asl",
+        s(&asl),
+        "--odometry",
+        s(&tum),
+        "--out",
+        s(&imported),
+    ]);
+    let times = |p: &Path| -> Vec<f64> {
+        csv_numbers(&p.join("stereo.csv"))
+            .iter()
+            .map(|r| r[0])
+            .collect()
+    };
+    assert_eq!(times(run), times(&imported));
+    assert_csv_close(
+        &run.join("odometry.csv"),
+        &imported.join("odometry.csv"),
+        2e-5,
+    );
+    assert_csv_close(
+        &run.join("ground_truth.csv"),
+        &imported.join("ground_truth.csv"),
+        2e-5,
+    );
+    let first = text(&imported.join("stereo.csv"))
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .nth(2)
+        .unwrap()
+        .to_owned();
+    assert!(
+        std::fs::read(run.join("stereo/right/000000.png")).unwrap()
+            == std::fs::read(imported.join(first)).unwrap()
+    );
+    let (a, b) = (
+        stereotag::io::load_rig(&run.join("rig.yaml")).unwrap(),
+        stereotag::io::load_rig(&imported.join("rig.yaml")).unwrap(),
+    );
+    assert_eq!(a.left, b.left);
+    assert!((a.right_from_left.to_matrix() - b.right_from_left.to_matrix()).norm() < 1e-9);
+    assert!((a.robot_from_left.to_matrix() - b.robot_from_left.to_matrix()).norm() < 1e-8);
+    // No sonar: the same landmarks as the run's survey within millimetres (the sonar barely
+    // moves a survey of tags).
+    let world = "samples/office/world.yaml";
+    let (sa, sb) = (dir.path().join("survey_run"), dir.path().join("survey_asl"));
+    for (r, out) in [(run, &sa), (imported.as_path(), &sb)] {
+        ok(&[
+            "survey",
+            "--run",
+            s(r),
+            "--world",
+            world,
+            "--out",
+            s(out),
+            "--no-rerun",
+            "-q",
+        ]);
+    }
+    let (la, lb) = (landmarks(&sa), landmarks(&sb));
+    assert_eq!(la.len(), lb.len());
+    for ((ia, pa), (ib, pb)) in la.iter().zip(&lb) {
+        assert_eq!(ia, ib);
+        assert!(
+            (pa[0] - pb[0]).hypot(pa[1] - pb[1]) < 5e-3,
+            "tag {ia}: {pa:?} vs {pb:?}"
+        );
+    }
+    let ate = |p: &Path| {
+        json(&p.join("report.json"))["metrics"]["ate_m.offline"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(
+        (ate(&sa) - ate(&sb)).abs() < 3e-3,
+        "offline ATE {} vs {}",
+        ate(&sa),
+        ate(&sb)
+    );
 }
