@@ -55,7 +55,10 @@ impl Map {
 /// Prints the off-grid warning, the counts and, with a world, the scores.
 fn print_summary(output: &MapOutput) {
     let (map, metrics) = (&output.map, &output.metrics);
-    if let Some(w) = map.off_grid_warning() {
+    for w in [map.off_grid_warning(), map.unplaced_warning()]
+        .into_iter()
+        .flatten()
+    {
         tracing::warn!("{w}");
     }
     let get = |k: &str| metrics.get(k).copied().unwrap_or(f64::NAN);

@@ -128,7 +128,10 @@ impl SurveyArgs {
 
 /// Prints the landmarks, the planned-versus-surveyed table and the before/after figures.
 pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: Option<&World>) {
-    if let Some(w) = s.raw.off_grid_warning() {
+    for w in [s.raw.off_grid_warning(), s.raw.unplaced_warning()]
+        .into_iter()
+        .flatten()
+    {
         tracing::warn!("{w}");
     }
     let get = |k: &str| metrics.get(k).copied();

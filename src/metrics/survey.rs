@@ -165,6 +165,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
     m.insert("echoes".into(), survey.raw.echoes as f64);
     m.insert("echoes.off_grid".into(), survey.raw.echoes_off_grid as f64);
     m.insert(
+        "readings.unplaced".into(),
+        survey.raw.readings_unplaced as f64,
+    );
+    m.insert(
         "sightings.fused".into(),
         survey.online.accepted.len() as f64,
     );

@@ -47,6 +47,9 @@ pub struct SonarMap {
     /// Echoes whose point (the sensor's position plus the range along its axis) lies outside the
     /// grid: what the grid loses when it does not cover the run.
     pub echoes_off_grid: usize,
+    /// Readings left out: their time lies outside the trajectory's span (beyond
+    /// [`crate::sonar::PLACE_TOLERANCE_S`]), so no pose places them.
+    pub readings_unplaced: usize,
     /// Seconds per stage.
     pub timings_s: BTreeMap<String, f64>,
 }
@@ -57,6 +60,18 @@ pub struct SonarMap {
 pub const OFF_GRID_WARN: f64 = 0.25;
 
 impl SonarMap {
+    /// What to tell the user when readings were left out for want of a pose.
+    pub fn unplaced_warning(&self) -> Option<String> {
+        (self.readings_unplaced > 0).then(|| {
+            format!(
+                "{} of {} sonar readings are left out: their time lies more than {} s before the first or after the last pose placing them",
+                self.readings_unplaced,
+                self.readings + self.readings_unplaced,
+                crate::sonar::PLACE_TOLERANCE_S
+            )
+        })
+    }
+
     /// What to tell the user when the grid does not cover the run (more than [`OFF_GRID_WARN`]
     /// of the echoes fell outside it and are lost): how many, where the grid lies, what to set.
     pub fn off_grid_warning(&self) -> Option<String> {
@@ -109,6 +124,7 @@ pub fn map_trajectory(
     let readings = timed("place_readings", &mut timings_s, || {
         sonar.placed(trajectory)
     });
+    let readings_unplaced = sonar.readings.len() - readings.len();
     let counting = timed("grid_counting", &mut timings_s, || {
         counting_map(layout, &readings, config)
     })?;
@@ -174,6 +190,7 @@ pub fn map_trajectory(
         readings: readings.len(),
         echoes,
         echoes_off_grid,
+        readings_unplaced,
         timings_s,
     })
 }

@@ -162,9 +162,21 @@ pub struct PlacedReading {
     pub range_m: Option<f64>,
 }
 
+/// Readings further than this (seconds) before the trajectory's first pose or after its last
+/// have no pose to be placed at and are left out (a log's sonar may start before its odometry).
+pub const PLACE_TOLERANCE_S: f64 = 0.5;
+
+/// Whether a reading at `t_s` lies within [`PLACE_TOLERANCE_S`] of the trajectory's span.
+pub fn within_trajectory(trajectory: &[StampedPose], t_s: f64) -> bool {
+    match (trajectory.first(), trajectory.last()) {
+        (Some(a), Some(b)) => t_s >= a.t_s - PLACE_TOLERANCE_S && t_s <= b.t_s + PLACE_TOLERANCE_S,
+        _ => false,
+    }
+}
+
 /// Places readings in the world along a trajectory: each at the robot's pose interpolated at its
-/// time, composed with its sensor's mount. Readings of unknown sensors, or outside an empty
-/// trajectory, are left out.
+/// time (held at the end poses within [`PLACE_TOLERANCE_S`]), composed with its sensor's mount.
+/// Readings of unknown sensors, or outside the trajectory's span, are left out.
 pub fn place_readings(
     readings: &[SonarReading],
     layout: &SonarLayout,
@@ -174,6 +186,9 @@ pub fn place_readings(
         .iter()
         .filter_map(|r| {
             let sensor = layout.sensors.get(r.sensor)?;
+            if !within_trajectory(trajectory, r.t_s) {
+                return None;
+            }
             let robot = pose_at(trajectory, r.t_s)?;
             Some(PlacedReading {
                 t_s: r.t_s,
@@ -197,5 +212,35 @@ impl SonarLog<'_> {
     /// Every reading placed in the world along `trajectory` ([`place_readings`]).
     pub fn placed(&self, trajectory: &[StampedPose]) -> Vec<PlacedReading> {
         place_readings(self.readings, self.layout, trajectory)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+
+    #[test]
+    fn readings_outside_the_trajectory_are_left_out() {
+        let trajectory: Vec<StampedPose> = (0..=10)
+            .map(|i| StampedPose {
+                t_s: 10.0 + i as f64,
+                pose: Pose2::new(i as f64, 0.0, 0.0),
+            })
+            .collect();
+        let readings: Vec<SonarReading> = [8.0, 9.6, 10.0, 15.0, 20.4, 21.0]
+            .iter()
+            .map(|&t_s| SonarReading {
+                t_s,
+                sensor: 2,
+                range_m: Some(1.0),
+            })
+            .collect();
+        let placed = place_readings(&readings, &SonarLayout::frontal5(), &trajectory);
+        // 8.0 and 21.0 are over 0.5 s outside 10..20 s; 9.6 and 20.4 are held at the ends.
+        let times: Vec<f64> = placed.iter().map(|r| r.t_s).collect();
+        assert_eq!(times, vec![9.6, 10.0, 15.0, 20.4]);
+        assert!((placed[0].world_from_sensor.x - 0.2).abs() < 1e-12);
+        assert!((placed[2].world_from_sensor.x - 5.2).abs() < 1e-12);
     }
 }
