@@ -142,3 +142,13 @@ run calibrate --target "$t/t.yaml" --left '../shared/data/mrpt_stereo_calib/*_le
 run rig /nonexistent/rig.yaml --out "$t/rigout"
 run config --default colours
 run render --calibration-sequence 3 --target "$t/t.yaml" --out "$t/calseq"
+# import: logs that are not what they say.
+printf '#ROSBAG V2.0\n' > "$t/old.bag"
+run import --bag "$t/old.bag" --out "$t/imp"
+mkdir -p "$t/emptybag"
+run import --bag "$t/emptybag" --out "$t/imp"
+printf '\x89MCAP0\r\n\x01' > "$t/cut.mcap"
+run import --bag "$t/cut.mcap" --out "$t/imp"
+run import --bag "$t/cut.mcap" --odometry "$t/odom.tum" --out "$t/imp"
+run import --carmen ../shared/data/radish/aces-corrected.log.gz --out "$t/imp"
+run import --asl "$t/emptybag" --out "$t/imp"
