@@ -95,8 +95,21 @@ fn any_near(flags: &[bool], g: &GridGeometry, idx: usize) -> bool {
 
 /// Scores a map against the world's walls.
 pub fn score_map(map: &OccupancyMap, world: &World) -> MapScore {
+    score_map_against(map, &wall_cells(world, &map.geometry))
+}
+
+/// Scores a map against reference wall cells on its own grid (row-major from the bottom row, as
+/// [`wall_cells`] gives them, or the occupied cells of a reference map such as a laser's).
+///
+/// # Panics
+/// When `truth` is not one flag a cell of the map's grid.
+pub fn score_map_against(map: &OccupancyMap, truth: &[bool]) -> MapScore {
     let g = &map.geometry;
-    let truth = wall_cells(world, g);
+    assert_eq!(
+        truth.len(),
+        g.width * g.height,
+        "the reference is on another grid"
+    );
     let occupied: Vec<bool> = (0..truth.len()).map(|i| map.is_occupied(i)).collect();
     let (mut occ, mut occ_ok, mut walls_seen, mut walls_found, mut free, mut free_ok) =
         (0, 0, 0, 0, 0, 0);

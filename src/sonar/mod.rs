@@ -8,6 +8,7 @@ pub mod corners;
 pub mod grid;
 pub mod hough;
 pub mod map;
+pub mod rays;
 pub mod tangent;
 pub mod walls;
 
