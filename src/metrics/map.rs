@@ -116,7 +116,7 @@ pub fn score_map_against(map: &OccupancyMap, truth: &[bool]) -> MapScore {
     for i in 0..truth.len() {
         if occupied[i] {
             occ += 1;
-            occ_ok += any_near(&truth, g, i) as usize;
+            occ_ok += any_near(truth, g, i) as usize;
         }
         if truth[i] && map.occupancy[i].is_some() {
             walls_seen += 1;
