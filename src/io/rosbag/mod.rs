@@ -452,14 +452,24 @@ mod tests {
     use super::*;
     use std::io::Write as _;
 
-    /// Two records of an opcode MCAP leaves to applications (0x80), as a chunk's records.
+    /// Two message records (channel 1, sequence, log and publish time, then the data), as a
+    /// chunk's records, and a record of an opcode the reader passes over (0x80).
     fn records_bytes() -> Vec<u8> {
         let mut out = Vec::new();
-        for body in [&b"first"[..], b"second record"] {
-            out.push(0x80);
+        for (k, data) in [&b"first"[..], b"second record"].into_iter().enumerate() {
+            let mut body = Vec::new();
+            body.extend(1u16.to_le_bytes());
+            body.extend((k as u32).to_le_bytes());
+            body.extend(100u64.to_le_bytes());
+            body.extend(100u64.to_le_bytes());
+            body.extend(data);
+            out.push(mcap::records::op::MESSAGE);
             out.extend((body.len() as u64).to_le_bytes());
             out.extend(body);
         }
+        out.push(0x80);
+        out.extend(3u64.to_le_bytes());
+        out.extend(b"app");
         out
     }
 
@@ -477,7 +487,7 @@ mod tests {
     fn bodies(h: &mcap::records::ChunkHeader, data: &[u8]) -> Result<Vec<Vec<u8>>, IoError> {
         let mut got = Vec::new();
         chunk_records(Path::new("t.mcap"), h, data, &mut |r| {
-            if let Record::Unknown { data, .. } = r {
+            if let Record::Message { data, .. } = r {
                 got.push(data.to_vec());
             }
             Ok(())
@@ -509,7 +519,7 @@ mod tests {
         let raw = records_bytes();
         let crc = crc32fast::hash(&raw);
         let mut flipped = raw.clone();
-        flipped[12] ^= 1;
+        flipped[40] ^= 1;
         let e = bodies(&header("", &raw, crc), &flipped)
             .unwrap_err()
             .to_string();
