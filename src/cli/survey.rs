@@ -175,7 +175,11 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
             off
         );
     }
-    if let (Some(p0), Some(r0), Some(p1), Some(r1)) = (
+    if s.raw.readings == 0 {
+        tracing::info!(
+            "no sonar readings: the survey stands on the tags and the odometry, its map is empty"
+        );
+    } else if let (Some(p0), Some(r0), Some(p1), Some(r1)) = (
         get("map.occupied_precision"),
         get("map.occupied_recall"),
         get("map_corrected.occupied_precision"),
