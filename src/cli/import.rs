@@ -39,11 +39,11 @@ pub struct Import {
     /// Range topics are then not read.
     #[arg(long, value_name = "LAYOUT")]
     as_sonar: Option<String>,
-    /// Bag: the left camera's Image or CompressedImage topic (default: the one image topic whose
-    /// name says "left").
+    /// Bag: the left camera's Image or CompressedImage topic (default: of the bag's two image
+    /// topics, the one named left, infra1 or cam0).
     #[arg(long, value_name = "TOPIC")]
     left: Option<String>,
-    /// Bag: the right camera's image topic (default: the one whose name says "right").
+    /// Bag: the right camera's image topic (default: the one named right, infra2 or cam1).
     #[arg(long, value_name = "TOPIC")]
     right: Option<String>,
     /// Bag: the wheel odometry, nav_msgs/Odometry (default: the bag's one Odometry topic).

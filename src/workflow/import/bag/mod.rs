@@ -42,7 +42,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 
 /// Which topics are which: each `None` (or empty) is found by its message type when the bag has
-/// one topic of that type (for the images: one topic whose name says `left` and one `right`).
+/// one topic of that type (for the images: two topics, told apart by `left`/`right`, `infra1`/
+/// `infra2` or `cam0`/`cam1` in their names).
 #[derive(Debug, Clone, Default)]
 pub struct BagTopics {
     /// The left camera's `Image` or `CompressedImage` topic.

@@ -48,6 +48,34 @@ pub(super) fn glob_match(glob: &str, name: &str) -> bool {
     go(&g, &n)
 }
 
+/// The left and right camera among two image topics, by the words their names use for the two
+/// cameras: `left`/`right`, `infra1`/`infra2` (RealSense), `cam0`/`cam1` (Kalibr, EuRoC).
+/// `None` unless there are exactly two topics and the pairs of words that tell them apart agree.
+pub(super) fn stereo_pair(names: &[&str]) -> Option<(usize, usize)> {
+    if names.len() != 2 {
+        return None;
+    }
+    let lower: Vec<String> = names.iter().map(|n| n.to_lowercase()).collect();
+    let mut told: Vec<(usize, usize)> = [("left", "right"), ("infra1", "infra2"), ("cam0", "cam1")]
+        .iter()
+        .filter_map(|(l, r)| {
+            let has = |i: usize, w: &str| lower[i].contains(w);
+            if has(0, l) && has(1, r) && !has(0, r) && !has(1, l) {
+                Some((0, 1))
+            } else if has(1, l) && has(0, r) && !has(1, r) && !has(0, l) {
+                Some((1, 0))
+            } else {
+                None
+            }
+        })
+        .collect();
+    told.dedup();
+    match told.as_slice() {
+        [one] => Some(*one),
+        _ => None,
+    }
+}
+
 /// An error about the bag's topics, listing them.
 pub(super) fn topic_error(bag: &Bag, what: String) -> Error {
     IoError::content(
@@ -97,22 +125,16 @@ impl Roles {
             ),
             (None, None) => {
                 let all = of_type(&images);
-                let side = |word: &str| -> Vec<&TopicInfo> {
-                    all.iter()
-                        .copied()
-                        .filter(|t| t.name.to_lowercase().contains(word))
-                        .collect()
-                };
-                let (l, r) = (side("left"), side("right"));
-                match (all.len(), l.as_slice(), r.as_slice()) {
-                    (0, _, _) => (None, None),
-                    (2, [l], [r]) => (Some(l.name.clone()), Some(r.name.clone())),
+                let names: Vec<&str> = all.iter().map(|t| t.name.as_str()).collect();
+                match (all.len(), stereo_pair(&names)) {
+                    (0, _) => (None, None),
+                    (_, Some((l, r))) => (Some(names[l].to_owned()), Some(names[r].to_owned())),
                     _ => {
                         return Err(topic_error(
                             bag,
                             format!(
                                 "cannot tell the left and right image topics among {}: name them with --left and --right",
-                                all.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+                                names.join(", ")
                             ),
                         ))
                     }
@@ -282,5 +304,38 @@ impl Roles {
         } else {
             "not used".into()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_two_cameras_are_told_apart_by_their_names() {
+        assert_eq!(
+            stereo_pair(&["/stereo/right/image_raw", "/stereo/left/image_raw"]),
+            Some((1, 0))
+        );
+        assert_eq!(
+            stereo_pair(&[
+                "/camera/infra1/image_rect_raw",
+                "/camera/infra2/image_rect_raw"
+            ]),
+            Some((0, 1))
+        );
+        assert_eq!(
+            stereo_pair(&["/cam0/image_raw", "/cam1/image_raw"]),
+            Some((0, 1))
+        );
+        assert_eq!(stereo_pair(&["/left/cam0", "/left/cam1"]), Some((0, 1)));
+        assert_eq!(stereo_pair(&["/right/cam1", "/left/cam0"]), Some((1, 0)));
+        // Words that disagree, three topics, or none of the words: not told.
+        assert_eq!(stereo_pair(&["/left/cam1", "/right/cam0"]), None);
+        assert_eq!(stereo_pair(&["/a/image", "/b/image"]), None);
+        assert_eq!(
+            stereo_pair(&["/left/image", "/right/image", "/left/image/compressed"]),
+            None
+        );
     }
 }
