@@ -77,6 +77,21 @@ pub struct Import {
 }
 
 impl Import {
+    /// The first flag given that only a bag import reads.
+    fn bag_flag(&self) -> Option<&'static str> {
+        [
+            ("--left", self.left.is_some()),
+            ("--right", self.right.is_some()),
+            ("--odom", self.odom.is_some()),
+            ("--sonar", !self.sonar.is_empty()),
+            ("--scan", self.scan.is_some()),
+            ("--ground-truth", self.ground_truth.is_some()),
+            ("--rig", self.rig.is_some()),
+        ]
+        .into_iter()
+        .find_map(|(flag, given)| given.then_some(flag))
+    }
+
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let layout = self
             .as_sonar
@@ -100,17 +115,12 @@ impl Import {
             .into());
         }
         if let Some(dir) = &self.asl {
-            let bag_only = [
-                ("--as-sonar", self.as_sonar.is_some()),
-                ("--left", self.left.is_some()),
-                ("--right", self.right.is_some()),
-                ("--odom", self.odom.is_some()),
-                ("--sonar", !self.sonar.is_empty()),
-                ("--scan", self.scan.is_some()),
-                ("--ground-truth", self.ground_truth.is_some()),
-                ("--rig", self.rig.is_some()),
-            ];
-            if let Some((flag, _)) = bag_only.iter().find(|f| f.1) {
+            if let Some(flag) = self
+                .as_sonar
+                .as_ref()
+                .map(|_| "--as-sonar")
+                .or(self.bag_flag())
+            {
                 return Err(UsageError(format!("{flag} is for --bag, not --asl")).into());
             }
             import_asl(
@@ -126,16 +136,7 @@ impl Import {
             return Ok(());
         }
         if let Some(log) = &self.carmen {
-            let bag_only = [
-                ("--left", self.left.is_some()),
-                ("--right", self.right.is_some()),
-                ("--odom", self.odom.is_some()),
-                ("--sonar", !self.sonar.is_empty()),
-                ("--scan", self.scan.is_some()),
-                ("--ground-truth", self.ground_truth.is_some()),
-                ("--rig", self.rig.is_some()),
-            ];
-            if let Some((flag, _)) = bag_only.iter().find(|f| f.1) {
+            if let Some(flag) = self.bag_flag() {
                 return Err(UsageError(format!("{flag} is for --bag, not --carmen")).into());
             }
             let Some(layout) = layout else {

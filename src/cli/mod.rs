@@ -63,9 +63,12 @@ enum Command {
     /// Example: stereotag simulate --world samples/office/world.yaml --out runs/office
     Simulate(simulate::Simulate),
     /// Bring a robot's log in as a run dataset: a ROS 2 bag (stereo images, odometry, sonar or
-    /// laser, tf) or a CARMEN log (Radish), a laser optionally turned into sonar-like readings.
+    /// laser, tf), an ASL/EuRoC folder or a CARMEN log (Radish), a laser optionally turned into
+    /// sonar-like readings.
     ///
     /// Example: stereotag import --bag robot_run/ --out runs/robot
+    ///
+    /// Example: stereotag import --asl MH_01/ --odometry MH_01.tum --out runs/mh01
     ///
     /// Example: stereotag import --carmen ../shared/data/radish/aces-corrected.log.gz --as-sonar frontal5 --out runs/aces
     Import(import::Import),

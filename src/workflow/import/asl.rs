@@ -3,10 +3,10 @@
 //! taken as the robot), the odometry from a TUM file and the ground truth from
 //! `state_groundtruth_estimate0` when the folder has one. Such a run has no sonar.
 
-use super::{anchored, time_ordered};
+use super::{anchored, flat, time_ordered};
 use crate::camera::StereoRig;
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
-use crate::geometry::{Pose2, StampedPose};
+use crate::geometry::StampedPose;
 use crate::io::asl::{asl_root, read_asl_camera, read_asl_ground_truth, read_tum, AslCamera};
 use crate::io::{self, IoError, OutputDir};
 use crate::progress::Progress;
@@ -14,7 +14,6 @@ use crate::sonar::grid::GridConfig;
 use crate::sonar::map::MappingConfig;
 use crate::sonar::SonarLayout;
 use crate::workflow::{Error, Result};
-use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -59,12 +58,6 @@ pub struct AslSummary {
     pub linked: usize,
     /// Copied.
     pub copied: usize,
-}
-
-/// x, y and heading of a 3D pose.
-fn flat(p: &Isometry3<f64>) -> Pose2 {
-    let r = p.rotation.to_rotation_matrix();
-    Pose2::new(p.translation.x, p.translation.y, r[(1, 0)].atan2(r[(0, 0)]))
 }
 
 /// Left and right frames matched by stamp within `tolerance_ns` (each used once, in time

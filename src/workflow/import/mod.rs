@@ -28,6 +28,12 @@ pub(crate) struct TimeOrdered {
     pub first_dropped_s: f64,
 }
 
+/// x, y and heading of a 3D pose (a log's pose of the robot or a sensor, seen from above).
+pub(crate) fn flat(p: &nalgebra::Isometry3<f64>) -> crate::geometry::Pose2 {
+    let r = p.rotation.to_rotation_matrix();
+    crate::geometry::Pose2::new(p.translation.x, p.translation.y, r[(1, 0)].atan2(r[(0, 0)]))
+}
+
 /// The odometry in the run's frame, and that frame said in words: with a ground truth, the
 /// truth's frame, the odometry moved to start at the truth's pose at its first time (`truth_name`
 /// names the truth); without, the robot's pose at the first odometry pose (the odometry moved to

@@ -22,10 +22,10 @@ use topics::{topic_error, Roles};
 /// hardware-triggered stereo cameras stamp both images alike; 10 ms is under a third of a 30 Hz
 /// camera's frame time, so no image can pair with its neighbour's partner.
 pub const DEFAULT_SYNC_MS: f64 = 10.0;
-use super::{anchored, time_ordered};
+use super::{anchored, flat, time_ordered};
 use crate::camera::StereoRig;
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
-use crate::geometry::{Pose2, StampedPose};
+use crate::geometry::StampedPose;
 use crate::io::rosbag::cdr::{self, CameraInfo, CdrError};
 use crate::io::rosbag::tf::TfTree;
 use crate::io::rosbag::{message_error, Bag, Message};
@@ -511,12 +511,6 @@ impl Gathered {
 /// A `float32` as the decimal it was written from (2.1, not 2.0999999046325684).
 fn decimal(x: f32) -> f64 {
     x.to_string().parse().unwrap_or(x as f64)
-}
-
-/// x, y and heading of a 3D pose.
-fn flat(p: &Isometry3<f64>) -> Pose2 {
-    let r = p.rotation.to_rotation_matrix();
-    Pose2::new(p.translation.x, p.translation.y, r[(1, 0)].atan2(r[(0, 0)]))
 }
 
 /// A tf lookup as an error naming the bag.

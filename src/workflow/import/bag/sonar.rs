@@ -1,12 +1,12 @@
 //! A bag's sonar: the `Range` topics placed by tf (REP 117's conventions), or a `LaserScan`
 //! turned into a sonar ring's readings.
 
-use super::{decimal, flat, mount, topic_error, BagRequest, Gathered, RangeSensor, Roles};
+use super::{decimal, mount, topic_error, BagRequest, Gathered, RangeSensor, Roles};
 use crate::geometry::Pose2;
 use crate::io::carmen::LaserScan;
 use crate::io::rosbag::Bag;
 use crate::sonar::{SonarLayout, SonarReading, SonarSensor};
-use crate::workflow::import::sonar_readings;
+use crate::workflow::import::{flat, sonar_readings};
 use crate::workflow::Result;
 use std::collections::BTreeMap;
 
