@@ -27,11 +27,12 @@ pub struct Import {
     odometry: Option<PathBuf>,
     /// A CARMEN log (Radish and the classic 2D SLAM data sets; `.gz` for gzip): ODOM, FLASER,
     /// RLASER and ROBOTLASER1 lines; the scans' poses of a `*-corrected` log become the ground
-    /// truth. Needs --as-sonar.
+    /// truth. The laser becomes the run's lidar (lidar.csv), or sonar with --as-sonar.
     #[arg(long, value_name = "LOG[.gz]")]
     carmen: Option<PathBuf>,
     /// The run directory to write (run.yaml, odometry.csv, sonar.csv, stereo.csv and pictures,
-    /// rig.yaml, ground_truth.csv when known, and import.json: what was read).
+    /// rig.yaml, lidar.csv for a laser, ground_truth.csv when known, and import.json: what was
+    /// read).
     #[arg(long)]
     out: PathBuf,
     /// Turn the laser into this sonar ring (frontal5 or pioneer16): per scan, each sonar's
@@ -139,12 +140,6 @@ impl Import {
             if let Some(flag) = self.bag_flag() {
                 return Err(UsageError(format!("{flag} is for --bag, not --carmen")).into());
             }
-            let Some(layout) = layout else {
-                return Err(UsageError(
-                    "--carmen needs --as-sonar frontal5 or pioneer16: runs of laser scans are not supported yet".into(),
-                )
-                .into());
-            };
             import_carmen(&CarmenRequest {
                 carmen: log,
                 out: &self.out,

@@ -10,9 +10,8 @@ use crate::fusion::{
 use crate::progress::timed;
 use crate::sonar::grid::{GridError, OccupancyMap};
 use crate::sonar::map::{
-    counting_map, counting_map_along, map_trajectory, MappingConfig, SonarMap,
+    counting_map, counting_map_along, layout_walls, map_trajectory, MappingConfig, SonarMap,
 };
-use crate::sonar::walls::map_walls;
 use crate::visual::sightings::TagSighting;
 use crate::visual::vo::VisualTurn;
 use std::collections::BTreeMap;
@@ -138,7 +137,7 @@ fn hold_tail(
         .filter(|r| r.t_s <= last_t)
         .collect();
     let grid = counting_map(layout, &readings, mapping)?;
-    let walls = map_walls(&readings, 0.5 * layout.cone_rad, layout.max_range_m, &grid);
+    let walls = layout_walls(layout, &readings, &grid);
     offline.trajectory = hold_tail_to_walls(
         &run.odometry,
         visual,

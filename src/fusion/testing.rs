@@ -19,6 +19,7 @@ pub(crate) fn corridor() -> (
 ) {
     let layout = crate::sonar::SonarLayout {
         name: "left".into(),
+        beam: crate::sonar::BeamModel::Cone,
         cone_rad: 30f64.to_radians(),
         max_range_m: 2.1,
         sensors: vec![crate::sonar::SonarSensor {

@@ -1,8 +1,8 @@
 //! The run dataset directory (DESIGN.md): `run.yaml`, `odometry.csv`, `sonar.csv`, `stereo.csv`,
-//! `ground_truth.csv`.
+//! `ground_truth.csv`, and `lidar.csv` for a robot with a laser.
 
 use super::{csv_rows, parse_yaml, read_text, to_yaml, write_file, IoError};
-use crate::dataset::{RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
+use crate::dataset::{LidarScan, RunDataset, RunMeta, StereoEntry, RUN_FORMAT};
 use crate::geometry::Pose2;
 use crate::geometry::StampedPose;
 use crate::sonar::SonarReading;
@@ -180,6 +180,83 @@ fn read_stereo(path: &Path) -> Result<Vec<StereoEntry>, IoError> {
     Ok(order.finish(rows, |e| e.t_s))
 }
 
+/// The header of `lidar.csv` for a laser of `beams` beams: `t_s,r0,r1,...`.
+fn lidar_header(beams: usize) -> String {
+    let mut h = String::from("t_s");
+    for k in 0..beams {
+        let _ = write!(h, ",r{k}");
+    }
+    h
+}
+
+/// Reads `lidar.csv`: `t_s,r0,...,r<beams-1>`, one scan a row, time-ordered; an empty range is no
+/// return. Ranges below `range_min_m` or at or beyond `range_max_m` are no returns too.
+fn read_lidar(
+    path: &Path,
+    lidar: &crate::dataset::LidarDescription,
+) -> Result<Vec<LidarScan>, IoError> {
+    let text = read_text(path)?;
+    let mut lines = text.lines().enumerate();
+    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    if header != lidar_header(lidar.beams) {
+        let columns = header.split(',').count();
+        return Err(IoError::line(
+            path,
+            1,
+            format!(
+                "expected the header `t_s,r0,...,r{}` (run.yaml's lidar has {} beams), found {} columns starting `{}`",
+                lidar.beams - 1,
+                lidar.beams,
+                columns,
+                header.chars().take(40).collect::<String>()
+            ),
+        ));
+    }
+    let mut order = TimeOrder::new(path);
+    let mut scans = Vec::new();
+    for (i, line) in lines {
+        let (line_no, line) = (i as u64 + 1, line.trim());
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != lidar.beams + 1 {
+            return Err(IoError::line(
+                path,
+                line_no,
+                format!(
+                    "expected {} fields (the time and {} ranges), found {}",
+                    lidar.beams + 1,
+                    lidar.beams,
+                    fields.len()
+                ),
+            ));
+        }
+        let t = number(path, line_no, "t_s", fields[0])?;
+        order.check(line_no, t)?;
+        let ranges_m = fields[1..]
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                if f.is_empty() {
+                    return Ok(None);
+                }
+                let r = number(path, line_no, &format!("r{k}"), f)?;
+                if r < 0.0 {
+                    return Err(IoError::line(
+                        path,
+                        line_no,
+                        format!("r{k} is {r}; expected >= 0 or empty for no return"),
+                    ));
+                }
+                Ok((r >= lidar.range_min_m && r < lidar.range_max_m).then_some(r))
+            })
+            .collect::<Result<Vec<_>, IoError>>()?;
+        scans.push(LidarScan { t_s: t, ranges_m });
+    }
+    Ok(order.finish(scans, |s| s.t_s))
+}
+
 /// Reads a run dataset directory.
 pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     if !dir.is_dir() {
@@ -213,6 +290,16 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
             "robot.sonar: cone_rad must be in (0, pi), max_range_m positive, sensor poses finite",
         ));
     }
+    if let Some(lidar) = &meta.robot.lidar {
+        lidar
+            .check()
+            .map_err(|e| IoError::content(&meta_path, format!("robot.lidar: {e}")))?;
+    } else if meta.robot.ranging == Some(crate::dataset::RangeSensor::Lidar) {
+        return Err(IoError::content(
+            &meta_path,
+            "robot.ranging is lidar but robot.lidar describes no laser",
+        ));
+    }
     let odometry = read_poses(&dir.join("odometry.csv"))?;
     if odometry.is_empty() {
         return Err(IoError::content(
@@ -233,12 +320,17 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     } else {
         None
     };
+    let lidar = match &meta.robot.lidar {
+        Some(l) => read_lidar(&dir.join("lidar.csv"), l)?,
+        None => Vec::new(),
+    };
     Ok(RunDataset {
         meta,
         odometry,
         sonar,
         stereo,
         ground_truth,
+        lidar,
     })
 }
 
@@ -278,6 +370,22 @@ pub fn save_run(dir: &Path, run: &RunDataset) -> Result<(), IoError> {
     write_file(&dir.join("stereo.csv"), s.as_bytes())?;
     if let Some(gt) = &run.ground_truth {
         write_file(&dir.join("ground_truth.csv"), poses_csv(gt).as_bytes())?;
+    }
+    if let Some(lidar) = &run.meta.robot.lidar {
+        let mut s = lidar_header(lidar.beams);
+        s.push('\n');
+        for scan in &run.lidar {
+            let _ = write!(s, "{:.4}", scan.t_s);
+            for r in &scan.ranges_m {
+                match r {
+                    Some(m) => write!(s, ",{m:.3}"),
+                    None => write!(s, ","),
+                }
+                .ok();
+            }
+            s.push('\n');
+        }
+        write_file(&dir.join("lidar.csv"), s.as_bytes())?;
     }
     Ok(())
 }

@@ -227,7 +227,7 @@ pub fn simulate(
         odometry: Vec::new(),
         ground_truth: Vec::new(),
         sonar: Vec::new(),
-        grid: CountingGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?,
+        grid: CountingGrid::for_layout(config.grid.clone(), layout)?,
     };
     let mut explorer = Explorer::new(e);
     let mut t = 0.0;
@@ -264,6 +264,8 @@ pub fn simulate(
             format: RUN_FORMAT.into(),
             robot: RobotDescription {
                 sonar: layout.clone(),
+                lidar: None,
+                ranging: None,
                 rig: None,
                 robot_from_left: None,
             },
@@ -278,6 +280,7 @@ pub fn simulate(
         sonar: log.sonar,
         stereo: Vec::new(),
         ground_truth: Some(log.ground_truth),
+        lidar: Vec::new(),
     };
     Ok(SimOutput {
         run,

@@ -60,7 +60,7 @@ fn tangents(
 ) -> impl Iterator<Item = (f64, f64, (f64, f64))> + '_ {
     let step = ANGLE_STEP_DEG.to_radians();
     let (range, p) = (r.range_m.unwrap_or(f64::NAN), r.world_from_sensor);
-    let usable = range.is_finite() && range > 0.0;
+    let usable = range.is_finite() && range >= 0.0;
     let steps = usable.then(|| cone_steps(p.theta, half_cone_rad));
     steps.into_iter().flatten().filter_map(move |cs| {
         let a = cs.k as f64 * step;

@@ -8,7 +8,7 @@
 //! hit or miss instead, over the very same cells, so the two can be compared like for like.
 
 use crate::geometry::wrap_angle;
-use crate::sonar::PlacedReading;
+use crate::sonar::{BeamModel, PlacedReading, SonarLayout};
 use serde::{Deserialize, Serialize};
 
 /// Settings of a grid. Defaults are the paper's office experiment.
@@ -82,8 +82,9 @@ pub enum GridError {
     },
 }
 
-/// The paper's cell size, metres (the fitted grids').
+/// The paper's cell size, metres (the fitted grids' for sonar).
 const FITTED_CELL_M: f64 = 0.2;
+
 /// Margin around the trajectory and the sensors' reach in a fitted grid, metres.
 const FITTED_MARGIN_M: f64 = 1.0;
 /// Largest fitted grid side, cells (1 km at 20 cm): a longer run is a reset or a glitch in its
@@ -105,6 +106,7 @@ impl GridConfig {
                 .map(|s| s.x_m.hypot(s.y_m))
                 .fold(0.0, f64::max)
             + FITTED_MARGIN_M;
+        let cell = FITTED_CELL_M;
         let first = trajectory.first()?;
         let (lo, hi) = trajectory.iter().fold(
             ([first.pose.x, first.pose.y], [first.pose.x, first.pose.y]),
@@ -116,17 +118,16 @@ impl GridConfig {
             },
         );
         let origin_m = [
-            ((lo[0] - reach) / FITTED_CELL_M).floor() * FITTED_CELL_M,
-            ((lo[1] - reach) / FITTED_CELL_M).floor() * FITTED_CELL_M,
+            ((lo[0] - reach) / cell).floor() * cell,
+            ((lo[1] - reach) / cell).floor() * cell,
         ];
-        let cells =
-            |from: f64, to: f64| ((to + reach - from) / FITTED_CELL_M).ceil().max(1.0) as usize;
+        let cells = |from: f64, to: f64| ((to + reach - from) / cell).ceil().max(1.0) as usize;
         let (width_cells, height_cells) = (cells(origin_m[0], hi[0]), cells(origin_m[1], hi[1]));
         (width_cells <= FITTED_MAX_CELLS && height_cells <= FITTED_MAX_CELLS).then(|| GridConfig {
             origin_m,
             width_cells,
             height_cells,
-            resolution_m: FITTED_CELL_M,
+            resolution_m: cell,
             ..GridConfig::default()
         })
     }
@@ -258,6 +259,86 @@ impl GridGeometry {
         }
     }
 
+    /// Calls `visit(index, evidence)` for each cell a thin ray crosses ([`crate::sonar::BeamModel::Ray`]):
+    /// every cell from the sensor's up to the cell at `range_m` along the beam is a miss, except
+    /// that cell itself, a hit when `hit`. Cells are walked exactly (Amanatides and Woo), each
+    /// once; the ray's part off the grid is passed over.
+    pub fn for_each_ray_cell(
+        &self,
+        reading: &PlacedReading,
+        range_m: f64,
+        hit: bool,
+        mut visit: impl FnMut(usize, CellEvidence),
+    ) {
+        let p = reading.world_from_sensor;
+        let (dx, dy) = (p.theta.cos(), p.theta.sin());
+        let res = self.resolution_m;
+        // Position in cell units.
+        let (x0, y0) = (
+            (p.x - self.origin_m[0]) / res,
+            (p.y - self.origin_m[1]) / res,
+        );
+        let length = range_m / res;
+        if !(x0.is_finite() && y0.is_finite() && length.is_finite()) {
+            return;
+        }
+        let end = (
+            (x0 + length * dx).floor() as i64,
+            (y0 + length * dy).floor() as i64,
+        );
+        let (mut cx, mut cy) = (x0.floor() as i64, y0.floor() as i64);
+        let step = |d: f64| if d > 0.0 { 1 } else { -1 };
+        let (sx, sy) = (step(dx), step(dy));
+        // Distance along the ray (cell units) to the next vertical and horizontal cell edges.
+        let next = |c: i64, s: i64, o: f64, d: f64| {
+            if d == 0.0 {
+                f64::INFINITY
+            } else {
+                ((c + (s > 0) as i64) as f64 - o) / d
+            }
+        };
+        let (mut tx, mut ty) = (next(cx, sx, x0, dx), next(cy, sy, y0, dy));
+        let (ddx, ddy) = (
+            if dx == 0.0 {
+                f64::INFINITY
+            } else {
+                1.0 / dx.abs()
+            },
+            if dy == 0.0 {
+                f64::INFINITY
+            } else {
+                1.0 / dy.abs()
+            },
+        );
+        let inside = |c: i64, r: i64| {
+            (c >= 0 && r >= 0 && (c as usize) < self.width && (r as usize) < self.height)
+                .then(|| r as usize * self.width + c as usize)
+        };
+        // A ray crosses at most this many cells (a guard against rounding at the end cell).
+        let most = (length.abs().ceil() as usize) * 2 + 2;
+        for _ in 0..most {
+            if (cx, cy) == end {
+                break;
+            }
+            if let Some(idx) = inside(cx, cy) {
+                visit(idx, CellEvidence::Miss);
+            }
+            if tx < ty {
+                cx += sx;
+                tx += ddx;
+            } else {
+                cy += sy;
+                ty += ddy;
+            }
+            if tx.min(ty) > length + ddx.min(ddy) {
+                break;
+            }
+        }
+        if let (true, Some(idx)) = (hit, inside(end.0, end.1)) {
+            visit(idx, CellEvidence::Hit);
+        }
+    }
+
     fn cell_index_clamped(&self, x: f64, y: f64) -> Option<(usize, usize)> {
         let cx = ((x - self.origin_m[0]) / self.resolution_m).floor();
         let cy = ((y - self.origin_m[1]) / self.resolution_m).floor();
@@ -374,11 +455,13 @@ pub trait OccupancyGrid {
     }
 }
 
-/// What both grids share: their settings and cells, and the sonar cone they update.
+/// What both grids share: their settings and cells, and the beam they update (a sonar's cone or
+/// a laser's ray).
 #[derive(Debug, Clone)]
 struct ConeCells {
     config: GridConfig,
     geometry: GridGeometry,
+    beam: BeamModel,
     half_cone_rad: f64,
     max_range_m: f64,
 }
@@ -389,8 +472,16 @@ impl ConeCells {
         Ok(Self {
             geometry: GridGeometry::from_config(&config),
             config,
+            beam: BeamModel::Cone,
             half_cone_rad: 0.5 * cone_rad,
             max_range_m,
+        })
+    }
+
+    fn for_layout(config: GridConfig, layout: &SonarLayout) -> Result<Self, GridError> {
+        Ok(Self {
+            beam: layout.beam,
+            ..Self::new(config, layout.cone_rad, layout.max_range_m)?
         })
     }
 
@@ -418,8 +509,13 @@ impl ConeCells {
         hit: bool,
         visit: impl FnMut(usize, CellEvidence),
     ) {
-        self.geometry
-            .for_each_cone_cell(reading, self.half_cone_rad, range, hit, visit);
+        match self.beam {
+            BeamModel::Cone => {
+                self.geometry
+                    .for_each_cone_cell(reading, self.half_cone_rad, range, hit, visit)
+            }
+            BeamModel::Ray => self.geometry.for_each_ray_cell(reading, range, hit, visit),
+        }
     }
 
     /// The map of these cells with each cell's occupancy (`None`: too little evidence).
@@ -438,6 +534,14 @@ impl ConeCells {
     }
 }
 
+/// A laser's hit counts this many times its weight: 5. At 20 cm cells most beams that cross a
+/// wall's cell graze the wall and end further along it, so a wall cell sees more misses than
+/// hits; with hits counted five times, a cell is occupied (above an even split) when more than a
+/// sixth of the beams through it end there (gmapping's counting rule takes a quarter at 5 cm;
+/// Cartographer's hit and miss odds, 0.55 and 0.49, weigh a hit as five misses). On the Radish
+/// logs, 3 gave a recall of 0.86 against the laser reference, 5 gives 0.91-0.98.
+pub const RAY_HIT_WEIGHT: u32 = 5;
+
 /// The paper's simple counting grid.
 #[derive(Debug, Clone)]
 pub struct CountingGrid {
@@ -450,6 +554,17 @@ impl CountingGrid {
     /// An empty grid for sensors with the given beam width and maximum range.
     pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
         let cells = ConeCells::new(config, cone_rad, max_range_m)?;
+        let n = cells.cells();
+        Ok(Self {
+            cells,
+            hits: vec![0; n],
+            misses: vec![0; n],
+        })
+    }
+
+    /// An empty grid for the sensors of `layout` (their beam model, width and range).
+    pub fn for_layout(config: GridConfig, layout: &SonarLayout) -> Result<Self, GridError> {
+        let cells = ConeCells::for_layout(config, layout)?;
         let n = cells.cells();
         Ok(Self {
             cells,
@@ -479,6 +594,10 @@ impl OccupancyGrid for CountingGrid {
         } else {
             (config.far_hit, config.far_miss)
         };
+        let wh = match self.cells.beam {
+            BeamModel::Cone => wh,
+            BeamModel::Ray => wh * RAY_HIT_WEIGHT,
+        };
         let (hits, misses) = (&mut self.hits, &mut self.misses);
         self.cells.visit(reading, range, hit, |idx, e| match e {
             CellEvidence::Hit => hits[idx] += wh,
@@ -491,7 +610,17 @@ impl OccupancyGrid for CountingGrid {
             .hits
             .iter()
             .zip(&self.misses)
-            .map(|(&h, &m)| self.cells.enough(h + m).then(|| h as f64 / (h + m) as f64))
+            .map(|(&h, &m)| {
+                // A laser's evidence is its beams (a hit weighs more in the share, not in the
+                // count): one return with five beams by is no wall yet.
+                let evidence = match self.cells.beam {
+                    BeamModel::Cone => h + m,
+                    BeamModel::Ray => h / RAY_HIT_WEIGHT + m,
+                };
+                self.cells
+                    .enough(evidence)
+                    .then(|| h as f64 / (h + m) as f64)
+            })
             .collect();
         self.cells.map(occupancy)
     }
@@ -516,6 +645,19 @@ impl LogOddsGrid {
     /// An empty grid.
     pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
         let cells = ConeCells::new(config, cone_rad, max_range_m)?;
+        let n = cells.cells();
+        Ok(Self {
+            cells,
+            log_odds: vec![0.0; n],
+            seen: vec![0; n],
+        })
+    }
+}
+
+impl LogOddsGrid {
+    /// An empty grid for the sensors of `layout` (their beam model, width and range).
+    pub fn for_layout(config: GridConfig, layout: &SonarLayout) -> Result<Self, GridError> {
+        let cells = ConeCells::for_layout(config, layout)?;
         let n = cells.cells();
         Ok(Self {
             cells,

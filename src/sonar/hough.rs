@@ -183,12 +183,14 @@ impl Accumulator {
     /// Votes along the arc of one reading.
     pub fn vote(&mut self, reading: &PlacedReading, half_cone_rad: f64, arc_sample_m: f64) {
         let Some(range) = reading.range_m else { return };
-        if !(range.is_finite() && range > 0.0) {
+        if !(range.is_finite() && range >= 0.0) {
             return;
         }
         let p = reading.world_from_sensor;
         let n = ((2.0 * half_cone_rad * range / arc_sample_m).ceil() as usize).max(1);
-        for k in 0..=n {
+        // A laser return (range zero, [`crate::sonar::point_echoes`]) is one point: one vote.
+        let last = if range > 0.0 { n } else { 0 };
+        for k in 0..=last {
             let a = p.theta - half_cone_rad + 2.0 * half_cone_rad * k as f64 / n as f64;
             let (s, c) = a.sin_cos();
             let (x, y) = (p.x + range * c, p.y + range * s);

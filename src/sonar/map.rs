@@ -143,13 +143,13 @@ pub fn map_trajectory(
     // The log-odds grid, the two Hough passes and the walls read the same placed readings and
     // counting grid and nothing of each other: the online Hough pass (the longest) runs on one
     // core, the rest on the other. Each stage's time is its own, taken while the others run.
-    let half = 0.5 * layout.cone_rad;
+    let (line_echoes, half) = layout.echoes_for_lines(&readings);
     let ((online, online_times), rest) = rayon::join(
         || {
             let mut times = BTreeMap::new();
             let online = timed("hough_online", &mut times, || {
                 let mut online =
-                    features_online(&readings, trajectory, half, &counting, &config.hough);
+                    features_online(&line_echoes, trajectory, half, &counting, &config.hough);
                 classify_features(&mut online, &counting);
                 online
             });
@@ -158,19 +158,18 @@ pub fn map_trajectory(
         || -> Result<_, GridError> {
             let mut times = BTreeMap::new();
             let log_odds = timed("grid_log_odds", &mut times, || {
-                let mut grid =
-                    LogOddsGrid::new(config.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+                let mut grid = LogOddsGrid::for_layout(config.grid.clone(), layout)?;
                 grid.insert_all(&readings);
                 Ok::<_, GridError>(grid.map())
             })?;
             let (offline, accumulator) = timed("hough_offline", &mut times, || {
                 let (mut offline, accumulator) =
-                    features_offline(&readings, half, &counting, &config.hough);
+                    features_offline(&line_echoes, half, &counting, &config.hough);
                 classify_features(&mut offline, &counting);
                 (offline, accumulator)
             });
             let walls = timed("walls", &mut times, || {
-                map_walls(&readings, half, layout.max_range_m, &counting)
+                map_walls(&line_echoes, half, layout.max_range_m, &counting)
             });
             Ok((log_odds, offline, accumulator, walls, times))
         },
@@ -211,7 +210,18 @@ pub fn counting_map(
     readings: &[PlacedReading],
     mapping: &MappingConfig,
 ) -> Result<OccupancyMap, GridError> {
-    let mut grid = CountingGrid::new(mapping.grid.clone(), layout.cone_rad, layout.max_range_m)?;
+    let mut grid = CountingGrid::for_layout(mapping.grid.clone(), layout)?;
     grid.insert_all(readings);
     Ok(grid.map())
+}
+
+/// The straight walls of placed readings of sensors of `layout` on `map` (their counting grid):
+/// [`map_walls`] with the layout's beam model ([`SonarLayout::echoes_for_lines`]).
+pub fn layout_walls(
+    layout: &SonarLayout,
+    readings: &[PlacedReading],
+    map: &OccupancyMap,
+) -> Vec<WallSegment> {
+    let (echoes, half) = layout.echoes_for_lines(readings);
+    map_walls(&echoes, half, layout.max_range_m, map)
 }

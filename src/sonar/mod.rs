@@ -8,7 +8,6 @@ pub mod corners;
 pub mod grid;
 pub mod hough;
 pub mod map;
-pub mod rays;
 pub mod tangent;
 pub mod walls;
 
@@ -39,12 +38,42 @@ impl SonarSensor {
     }
 }
 
-/// A robot's sonar ring.
+/// How a range sensor's beam meets the world.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum BeamModel {
+    /// A sonar's cone: the echo comes from somewhere on the arc at the range, from a surface
+    /// facing the sensor (the foot of the perpendicular); the cone before the arc is free.
+    #[default]
+    Cone,
+    /// A laser's (or a time-of-flight ranger's) thin ray: the return is the point at the range
+    /// along the axis, off a surface at any incidence; the cells the ray crosses before it are
+    /// free.
+    Ray,
+}
+
+impl BeamModel {
+    /// Whether this is the sonar cone (the default, left out of `run.yaml`).
+    pub fn is_cone(&self) -> bool {
+        *self == BeamModel::Cone
+    }
+}
+
+/// A laser return seen as a surface point: a surface through it faces the ray within this angle
+/// (grazing returns beyond it are too rare and too noisy to vote for a wall): 80 degrees.
+pub const RAY_INCIDENCE_RAD: f64 = 80.0 * std::f64::consts::PI / 180.0;
+
+/// A robot's sonar ring (or, with [`BeamModel::Ray`], the beams of a laser).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SonarLayout {
     /// A name for the layout.
     pub name: String,
+    /// The beam model: `cone` (sonar, the default) or `ray` (a laser's beams).
+    #[serde(default, skip_serializing_if = "BeamModel::is_cone")]
+    pub beam: BeamModel,
     /// Full beam width, radians.
     #[serde(default = "default_cone")]
     pub cone_rad: f64,
@@ -87,6 +116,7 @@ impl SonarLayout {
             .collect();
         Self {
             name: "frontal5".into(),
+            beam: BeamModel::Cone,
             cone_rad: PAPER_CONE_RAD,
             max_range_m: PAPER_MAX_RANGE_M,
             sensors,
@@ -125,9 +155,24 @@ impl SonarLayout {
             .collect();
         Self {
             name: "pioneer16".into(),
+            beam: BeamModel::Cone,
             cone_rad: PAPER_CONE_RAD,
             max_range_m: 5.0,
             sensors,
+        }
+    }
+
+    /// The readings the Hough transforms and the wall fit vote with, and the half-width of the
+    /// directions each votes for: a sonar's placed readings and half its cone; for a laser
+    /// ([`BeamModel::Ray`]) each return as a surface point (see [`point_echoes`]) and
+    /// [`RAY_INCIDENCE_RAD`].
+    pub fn echoes_for_lines(&self, placed: &[PlacedReading]) -> (Vec<PlacedReading>, f64) {
+        match self.beam {
+            BeamModel::Cone => (placed.to_vec(), 0.5 * self.cone_rad),
+            BeamModel::Ray => (
+                point_echoes(&keyframe_beams(placed, self.cone_rad), self.max_range_m),
+                RAY_INCIDENCE_RAD,
+            ),
         }
     }
 
@@ -195,6 +240,65 @@ pub fn place_readings(
                 t_s: r.t_s,
                 world_from_sensor: robot.compose(&sensor.robot_from_sensor()),
                 range_m: r.range_m,
+            })
+        })
+        .collect()
+}
+
+/// The line transforms take a laser's scans this far apart (or [`RAY_KEYFRAME_RAD`] turned):
+/// 0.3 m. A laser sends hundreds of returns a scan, tens of scans a second; what the walls and
+/// corners need is every wall seen from a few places.
+pub const RAY_KEYFRAME_M: f64 = 0.3;
+/// ... or this much turned: 10 degrees.
+pub const RAY_KEYFRAME_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// ... and of each scan the beams this far apart: 1 degree (the line accumulators' angle cell).
+pub const RAY_BEAM_SPACING_RAD: f64 = std::f64::consts::PI / 180.0;
+
+/// The placed beams of a laser's keyframe scans ([`RAY_KEYFRAME_M`], [`RAY_KEYFRAME_RAD`]), one
+/// beam in every [`RAY_BEAM_SPACING_RAD`]. A scan is the run of readings with one time, in beam
+/// order (as [`place_readings`] leaves them); its first beam's pose stands for the scan's.
+pub fn keyframe_beams(placed: &[PlacedReading], beam_step_rad: f64) -> Vec<PlacedReading> {
+    let stride = (RAY_BEAM_SPACING_RAD / beam_step_rad.abs().max(1e-9))
+        .round()
+        .max(1.0) as usize;
+    let mut out = Vec::new();
+    let mut last: Option<Pose2> = None;
+    for scan in placed.chunk_by(|a, b| a.t_s == b.t_s) {
+        let p = scan[0].world_from_sensor;
+        let moved = last.is_none_or(|q| {
+            (p.x - q.x).hypot(p.y - q.y) >= RAY_KEYFRAME_M
+                || crate::geometry::wrap_angle(p.theta - q.theta).abs() >= RAY_KEYFRAME_RAD
+        });
+        if moved {
+            last = Some(p);
+            out.extend(scan.iter().step_by(stride).copied());
+        }
+    }
+    out
+}
+
+/// A laser's returns as the line transforms see them: each return below `max_range_m` becomes a
+/// reading at the return itself, looking along its ray, with range zero. A sonar echo votes for
+/// the lines tangent to its arc for each direction in its cone; at range zero those are the lines
+/// through the point, one per direction, which is exactly what a laser return says (a surface
+/// through this point, facing the ray within [`RAY_INCIDENCE_RAD`]). The tangent-line Hough
+/// transforms, the point Hough transform and the wall fit then need no other change.
+pub fn point_echoes(placed: &[PlacedReading], max_range_m: f64) -> Vec<PlacedReading> {
+    placed
+        .iter()
+        .filter_map(|r| {
+            let range = r
+                .range_m
+                .filter(|x| x.is_finite() && *x >= 0.0 && *x < max_range_m)?;
+            let p = r.world_from_sensor;
+            Some(PlacedReading {
+                t_s: r.t_s,
+                world_from_sensor: Pose2::new(
+                    p.x + range * p.theta.cos(),
+                    p.y + range * p.theta.sin(),
+                    p.theta,
+                ),
+                range_m: Some(0.0),
             })
         })
         .collect()

@@ -152,7 +152,7 @@ pub fn map_walls(
         .filter_map(|r| {
             let range = r
                 .range_m
-                .filter(|&x| x.is_finite() && x > 0.0 && x < max_range_m - 1e-6)?;
+                .filter(|&x| x.is_finite() && x >= 0.0 && x < max_range_m - 1e-6)?;
             let p = r.world_from_sensor;
             (p.x.is_finite() && p.y.is_finite() && p.theta.is_finite()).then_some(Echo {
                 s: [p.x, p.y],

@@ -10,6 +10,7 @@ use crate::geometry::{pose_at, Pose2, StampedPose};
 use crate::sonar::grid::OccupancyMap;
 use crate::sonar::grid::{CountingGrid, OccupancyGrid};
 use crate::sonar::hough::{Accumulator, Feature};
+use crate::sonar::BeamModel;
 use nalgebra::Matrix3;
 use rerun::blueprint::components::PlayState;
 use std::collections::BTreeMap;
@@ -432,6 +433,9 @@ fn log_map_landmarks(
     Ok(())
 }
 
+/// A laser's beams are drawn one every 10 degrees of its fan (all of them would hide the map).
+const LASER_BEAM_DRAWN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
 /// The online grid (readings placed with the online poses) as it grows, with the sonar cones.
 fn log_growing_grid(
     rec: &rerun::RecordingStream,
@@ -440,11 +444,7 @@ fn log_growing_grid(
 ) -> Result<(), VizError> {
     let layout = &scene.run.meta.robot.sonar;
     let readings = scene.run.placed_readings(&scene.survey.online.trajectory);
-    let Ok(mut grid) = CountingGrid::new(
-        scene.mapping.grid.clone(),
-        layout.cone_rad,
-        layout.max_range_m,
-    ) else {
+    let Ok(mut grid) = CountingGrid::for_layout(scene.mapping.grid.clone(), layout) else {
         return Ok(());
     };
     let log_grid = |grid: &CountingGrid, t_s: f64| -> Result<(), VizError> {
@@ -456,10 +456,18 @@ fn log_growing_grid(
     };
     let mut beams = StripBatches::new(rec, "world/sonar/beams");
     let mut next_snapshot = f64::NEG_INFINITY;
-    for r in &readings {
+    // A laser's beams are drawn as lines, one in every [`LASER_BEAM_DRAWN_RAD`] of its fan.
+    let stride = match layout.beam {
+        BeamModel::Cone => 1,
+        BeamModel::Ray => (LASER_BEAM_DRAWN_RAD / layout.cone_rad).round().max(1.0) as usize,
+    };
+    for (k, r) in readings.iter().enumerate() {
         grid.insert(r);
-        if let Some(range) = r.range_m {
-            let cone = cone_outline(&r.world_from_sensor, range, layout.cone_rad);
+        if let (Some(range), true) = (r.range_m, k % stride == 0) {
+            let cone = match layout.beam {
+                BeamModel::Cone => cone_outline(&r.world_from_sensor, range, layout.cone_rad),
+                BeamModel::Ray => cone_outline(&r.world_from_sensor, range, 0.0)[..2].to_vec(),
+            };
             beams.push(r.t_s, cone, palette::SONAR_BEAM)?;
         }
         if r.t_s >= next_snapshot {

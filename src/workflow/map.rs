@@ -100,6 +100,12 @@ pub fn map_and_score(
     metrics.insert("echoes".into(), map.echoes as f64);
     metrics.insert("echoes.off_grid".into(), map.echoes_off_grid as f64);
     metrics.insert("readings.unplaced".into(), map.readings_unplaced as f64);
+    metrics.insert("walls".into(), map.walls.len() as f64);
+    metrics.insert("features".into(), map.features_offline.len() as f64);
+    metrics.insert(
+        "ranging.lidar".into(),
+        (run.ranging() == crate::dataset::RangeSensor::Lidar) as u8 as f64,
+    );
     let duration =
         run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
     metrics.insert("run.duration_s".into(), duration);

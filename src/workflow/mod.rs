@@ -110,9 +110,35 @@ impl Error {
 pub type Result<T> = std::result::Result<T, Error>;
 
 /// Loads a run directory and warns about each odometry jump in it (a reset or glitch in a log:
-/// everything after it is placed with it), naming the line of `odometry.csv`.
+/// everything after it is placed with it), naming the line of `odometry.csv`. A run whose range
+/// sensor is its lidar ([`RunDataset::ranging`]) comes with the laser's beams in place of the
+/// sonar ([`RunDataset::with_lidar_as_ranges`]), saying so.
 pub fn load_run(run_dir: &Path) -> Result<RunDataset> {
     let run = crate::io::load_run(run_dir)?;
+    let sonar_unused = !run.sonar.is_empty() && run.meta.robot.ranging.is_none();
+    let (run, beyond) = run.with_lidar_as_ranges();
+    if let (Some(lidar), crate::dataset::RangeSensor::Lidar) =
+        (&run.meta.robot.lidar, run.ranging())
+    {
+        let returns = run.sonar.iter().filter(|r| r.range_m.is_some()).count() + beyond;
+        tracing::info!(
+            "ranges from the lidar: {} scans of {} beams{}",
+            run.lidar.len(),
+            lidar.beams,
+            if sonar_unused {
+                " (the run's sonar is not used: set robot.ranging: sonar in run.yaml to map with it)"
+            } else {
+                ""
+            }
+        );
+        if beyond > 0 {
+            tracing::warn!(
+                "{beyond} of {returns} lidar returns ({:.0}%) lie beyond mapped_range_m ({} m) and are not used (robot.lidar.mapped_range_m in run.yaml)",
+                100.0 * beyond as f64 / returns.max(1) as f64,
+                lidar.mapped_range_m
+            );
+        }
+    }
     let jumps = odometry_jumps(&run.odometry);
     if jumps.is_empty() {
         return Ok(run);

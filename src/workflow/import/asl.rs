@@ -253,6 +253,8 @@ pub fn import_asl(
             format: RUN_FORMAT.into(),
             robot: RobotDescription {
                 sonar: layout,
+                lidar: None,
+                ranging: None,
                 rig: Some("rig.yaml".into()),
                 robot_from_left: None,
             },
@@ -271,6 +273,7 @@ pub fn import_asl(
         sonar: Vec::new(),
         stereo,
         ground_truth,
+        lidar: Vec::new(),
     };
     io::save_run(&dir.path(""), &run)?;
     io::save_rig(&dir.path("rig.yaml"), &rig)?;

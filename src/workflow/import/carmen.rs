@@ -1,7 +1,7 @@
-//! CARMEN logs (Radish and the classic 2D SLAM data sets) as runs, their laser turned into
-//! sonar-like readings so the paper's method runs on real buildings.
+//! CARMEN logs (Radish and the classic 2D SLAM data sets) as runs: their laser as the run's
+//! lidar, or turned into sonar-like readings so the paper's method runs on real buildings.
 
-use super::{sonar_readings, time_ordered};
+use super::{lidar_of, sonar_readings, time_ordered, LidarImport};
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, RUN_FORMAT};
 use crate::geometry::StampedPose;
 use crate::io::carmen::{read_carmen, LaserScan};
@@ -21,8 +21,8 @@ pub struct CarmenRequest<'a> {
     pub carmen: &'a Path,
     /// The run directory to write.
     pub out: &'a Path,
-    /// The sonar ring the laser is turned into.
-    pub as_sonar: SonarLayout,
+    /// The sonar ring the laser is turned into; `None` keeps it a laser (the run's lidar).
+    pub as_sonar: Option<SonarLayout>,
     /// Replace the output directory if it exists.
     pub force: bool,
 }
@@ -52,6 +52,8 @@ pub struct CarmenSummary {
     pub echoes: usize,
     /// Sensors of the layout the laser does not see (their cones outside its field of view).
     pub sensors_unseen: Vec<usize>,
+    /// The laser as the run's lidar (without `--as-sonar`).
+    pub lidar: Option<LidarImport>,
     /// Whether the scans' poses were written as the ground truth (a `*-corrected` log).
     pub ground_truth: bool,
     /// The grid fitted to the run: lower-left corner (m) and size (cells).
@@ -61,10 +63,11 @@ pub struct CarmenSummary {
 }
 
 /// Imports a CARMEN log as a run: odometry from the `ODOM` lines (the scans' odometry fields
-/// when there are none), each laser scan as one reading per sonar of `as_sonar` (the nearest
-/// return in the sonar's cone, none within its range: no echo), the scans' poses as the ground
-/// truth of a `*-corrected` log, and a grid of the paper's 20 cm cells fitted to the run.
-/// Times start at the log's first time stamp.
+/// when there are none), the laser as the run's lidar (the log's largest range taken as the
+/// laser's no-return value: 81.91 m on a SICK, 50 m in aces), or with `as_sonar` each scan as
+/// one reading per sonar of that ring (the nearest return in the sonar's cone, none within its
+/// range: no echo), the scans' poses as the ground truth of a `*-corrected` log, and a grid of
+/// the paper's 20 cm cells fitted to the run. Times start at the log's first time stamp.
 pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenSummary)> {
     let log = read_carmen(request.carmen)?;
     let mut scans = log.scans;
@@ -115,15 +118,50 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
             })
             .collect()
     };
-    let layout = &request.as_sonar;
-    let (sonar, unseen) = sonar_readings(&scans, layout, start_s);
+    let (layout, sonar, unseen, lidar) = match &request.as_sonar {
+        Some(layout) => {
+            let (sonar, unseen) = sonar_readings(&scans, layout, start_s);
+            (layout.clone(), sonar, unseen, None)
+        }
+        None => {
+            let largest = scans
+                .iter()
+                .flat_map(|s| s.ranges_m.iter().copied())
+                .filter(|r| r.is_finite())
+                .fold(0.0, f64::max);
+            let lidar = lidar_of(&scans, 0.0, largest, start_s).ok_or_else(|| {
+                io::IoError::content(
+                    request.carmen,
+                    "no FLASER, RLASER or ROBOTLASER1 lines: no laser to import",
+                )
+            })?;
+            if lidar.2.scans_left_out > 0 {
+                tracing::warn!(
+                    "{}: {} scans of another laser (another mounting, field of view or beam count than the first scan's) left out",
+                    request.carmen.display(),
+                    lidar.2.scans_left_out
+                );
+            }
+            let empty = SonarLayout {
+                name: "none".into(),
+                sensors: Vec::new(),
+                ..SonarLayout::frontal5()
+            };
+            (empty, Vec::new(), Vec::new(), Some(lidar))
+        }
+    };
+    let layout = &layout;
     let corrected = request
         .carmen
         .file_name()
         .is_some_and(|n| n.to_string_lossy().contains("corrected"));
     let ground_truth = corrected.then(|| shift(poses_of(&scans)));
     let odometry = shift(odometry);
-    let grid = GridConfig::fitted(ground_truth.as_deref().unwrap_or(&odometry), layout)
+    let ranging = match &lidar {
+        Some((l, _, _)) => l.beam_layout(),
+        None => layout.clone(),
+    };
+    let grid = GridConfig::fitted(ground_truth.as_deref().unwrap_or(&odometry), &ranging)
         .unwrap_or_else(|| {
             tracing::warn!(
                 "{}: the run spans over 1 km: run.yaml keeps the paper's grid; set mapping.grid",
@@ -143,6 +181,7 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
         readings: sonar.len(),
         echoes: sonar.iter().filter(|r| r.range_m.is_some()).count(),
         sensors_unseen: unseen,
+        lidar: lidar.as_ref().map(|l| l.2.clone()),
         ground_truth: ground_truth.is_some(),
         grid_origin_m: grid.origin_m,
         grid_cells: [grid.width_cells, grid.height_cells],
@@ -152,6 +191,8 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
             format: RUN_FORMAT.into(),
             robot: RobotDescription {
                 sonar: layout.clone(),
+                lidar: lidar.as_ref().map(|l| l.0.clone()),
+                ranging: None,
                 rig: None,
                 robot_from_left: None,
             },
@@ -161,10 +202,12 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
                 ..MappingConfig::default()
             }),
             notes: format!(
-                "imported from {} by stereotag import: each laser scan as the {} sonar ring (the \
-                 nearest return in each cone); times from the log's first time stamp, {start_s} s{}",
+                "imported from {} by stereotag import: {}; times from the log's first time stamp, {start_s} s{}",
                 request.carmen.display(),
-                layout.name,
+                match &request.as_sonar {
+                    Some(l) => format!("each laser scan as the {} sonar ring (the nearest return in each cone)", l.name),
+                    None => "the laser as the run's lidar".into(),
+                },
                 if corrected {
                     "; the ground truth is the corrected log's scan poses"
                 } else {
@@ -176,6 +219,7 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
         sonar,
         stereo: Vec::new(),
         ground_truth,
+        lidar: lidar.map(|l| l.1).unwrap_or_default(),
     };
     let dir = OutputDir::create(request.out, request.force)?;
     io::save_run(&dir.path(""), &run)?;
@@ -187,9 +231,9 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
         summary.odometry_poses,
         summary.scans,
         summary.duration_s,
-        summary.readings,
-        summary.echoes,
-        layout.name,
+        summary.lidar.as_ref().map_or(summary.readings, |l| l.scans * l.beams),
+        summary.lidar.as_ref().map_or(summary.echoes, |l| l.returns),
+        if summary.lidar.is_some() { "the lidar" } else { &layout.name },
         if summary.ground_truth { ", ground truth" } else { "" },
         grid.width_cells,
         grid.height_cells,

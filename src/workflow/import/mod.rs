@@ -232,3 +232,84 @@ mod tests {
             .all(|&k| layout.sensors[k].bearing_rad.cos() < 0.0));
     }
 }
+
+/// What became of a log's laser scans as a run's lidar (`import.json`'s `lidar`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LidarImport {
+    /// Scans written to `lidar.csv`.
+    pub scans: usize,
+    /// Beams per scan.
+    pub beams: usize,
+    /// Ranges with a return.
+    pub returns: usize,
+    /// Ranges with none (at or beyond the laser's largest value, below its least, or invalid).
+    pub no_returns: usize,
+    /// Scans left out: another laser's (another mounting, field of view or beam count than the
+    /// first scan's).
+    pub scans_left_out: usize,
+    /// The laser's largest value, metres: a range at or beyond it is no return.
+    pub range_max_m: f64,
+}
+
+/// Laser scans as a run's lidar: the laser described by the first scan (its mounting, angles and
+/// beam count; `range_min_m` and `range_max_m` as the log gives them), its scans with times from
+/// `start_s`. Ranges outside `[range_min_m, range_max_m)` are no returns. Scans of another
+/// geometry (a rear laser, a second scanner) are left out and counted. `None` without scans.
+pub(crate) fn lidar_of(
+    scans: &[LaserScan],
+    range_min_m: f64,
+    range_max_m: f64,
+    start_s: f64,
+) -> Option<(
+    crate::dataset::LidarDescription,
+    Vec<crate::dataset::LidarScan>,
+    LidarImport,
+)> {
+    let first = scans.first()?;
+    let lidar = crate::dataset::LidarDescription {
+        x_m: first.laser_in_robot.x,
+        y_m: first.laser_in_robot.y,
+        yaw_rad: first.laser_in_robot.theta,
+        angle_min_rad: first.start_rad,
+        angle_increment_rad: first.step_rad,
+        beams: first.ranges_m.len(),
+        range_min_m,
+        range_max_m,
+        mapped_range_m: crate::dataset::LIDAR_MAPPED_RANGE_M,
+    };
+    let same = |s: &LaserScan| {
+        let (a, b) = (s.laser_in_robot, first.laser_in_robot);
+        s.ranges_m.len() == first.ranges_m.len()
+            && (s.start_rad - first.start_rad).abs() < 1e-4
+            && (s.step_rad - first.step_rad).abs() < 1e-6
+            && (a.x - b.x).hypot(a.y - b.y) < 0.01
+            && crate::geometry::wrap_angle(a.theta - b.theta).abs() < 0.01
+    };
+    let mut out = Vec::with_capacity(scans.len());
+    let (mut returns, mut none) = (0, 0);
+    for s in scans.iter().filter(|s| same(s)) {
+        let ranges_m: Vec<Option<f64>> = s
+            .ranges_m
+            .iter()
+            .map(|&r| {
+                (r.is_finite() && r > 0.0 && r >= range_min_m && r < range_max_m).then_some(r)
+            })
+            .collect();
+        let n = ranges_m.iter().filter(|r| r.is_some()).count();
+        returns += n;
+        none += ranges_m.len() - n;
+        out.push(crate::dataset::LidarScan {
+            t_s: s.t_s - start_s,
+            ranges_m,
+        });
+    }
+    let summary = LidarImport {
+        scans: out.len(),
+        beams: lidar.beams,
+        returns,
+        no_returns: none,
+        scans_left_out: scans.len() - out.len(),
+        range_max_m,
+    };
+    Some((lidar, out, summary))
+}

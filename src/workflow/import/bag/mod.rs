@@ -684,6 +684,8 @@ impl Gathered {
                 format: RUN_FORMAT.into(),
                 robot: RobotDescription {
                     sonar: layout,
+                    lidar: None,
+                    ranging: None,
                     rig: rig.as_ref().map(|_| "rig.yaml".to_owned()),
                     robot_from_left: None,
                 },
@@ -702,6 +704,7 @@ impl Gathered {
             sonar,
             stereo,
             ground_truth,
+            lidar: Vec::new(),
         };
         Ok((run, summary, rig))
     }

@@ -100,6 +100,7 @@ impl Gathered {
             let first_sensor = first_sensor.expect("at least one sonar topic");
             let layout = SonarLayout {
                 name: "ros2-bag".into(),
+                beam: crate::sonar::BeamModel::Cone,
                 cone_rad: decimal(first_sensor.field_of_view),
                 max_range_m: decimal(first_sensor.max_range),
                 sensors,
