@@ -240,3 +240,63 @@ fn radish_sonar_maps_agree_with_the_full_laser() {
         assert!(recall >= 0.9, "{log}: recall {recall}");
     }
 }
+
+#[test]
+fn a_broken_lidar_csv_is_an_error_naming_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("small.log");
+    std::fs::write(
+        &log,
+        "ODOM 0 0 0 0 0 0 1.0 host 1.0\nFLASER 3 1.0 2.0 81.91 0 0 0 0 0 0 1.5 host 1.5\n\
+         ODOM 0.1 0 0 0 0 0 2.0 host 2.0\nFLASER 3 1.1 2.1 3.0 0.1 0 0 0.1 0 0 2.5 host 2.5\n",
+    )
+    .unwrap();
+    let run = dir.path().join("run");
+    let (code, err) = stereotag(&[
+        "import",
+        "--carmen",
+        log.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let csv = std::fs::read_to_string(run.join("lidar.csv")).unwrap();
+    // The log's largest range (81.91 here) is the laser's no-return value.
+    assert_eq!(
+        csv,
+        "t_s,r0,r1,r2\n0.5000,1.000,2.000,\n1.5000,1.100,2.100,3.000\n"
+    );
+    let yaml = std::fs::read_to_string(run.join("run.yaml")).unwrap();
+    assert!(
+        yaml.contains("lidar:") && yaml.contains("beams: 3"),
+        "{yaml}"
+    );
+    for (bad, expect) in [
+        (
+            "t_s,r0,r1\n",
+            "lidar.csv:1: expected the header `t_s,r0,...,r2`",
+        ),
+        (
+            "t_s,r0,r1,r2\n0.5,1.0,2.0\n",
+            "lidar.csv:2: expected 4 fields",
+        ),
+        ("t_s,r0,r1,r2\n0.5,1.0,-2.0,\n", "lidar.csv:2: r1 is -2"),
+        (
+            "t_s,r0,r1,r2\n0.5,1.0,x,\n",
+            "lidar.csv:2: r1 `x` is not a number",
+        ),
+    ] {
+        std::fs::write(run.join("lidar.csv"), bad).unwrap();
+        let out = dir.path().join("map");
+        let (code, err) = stereotag(&[
+            "map",
+            "--run",
+            run.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(expect), "{err}");
+        assert!(!out.exists());
+    }
+}

@@ -306,6 +306,55 @@ fn compressed_images_other_names_and_a_laser_import_too() {
         .unwrap()
         .contains("tf (between"));
 
+    // The laser came in as the run's lidar too, and maps: the simulated office's walls, from
+    // thin rays on the true poses.
+    let lidar = json(&sonar.join("import.json"))["lidar"].clone();
+    assert!(lidar["scans"].as_u64().unwrap() > 1000, "{lidar}");
+    assert!(text(&sonar.join("run.yaml")).contains("lidar:"));
+    let map = dir.path().join("lidar_map");
+    ok(&[
+        "-q",
+        "map",
+        "--run",
+        s(&sonar),
+        "--out",
+        s(&map),
+        "--poses",
+        "ground-truth",
+        "--world",
+        "samples/office/world.yaml",
+    ]);
+    let m = json(&map.join("report.json"))["metrics"].clone();
+    eprintln!("office lidar map on the true poses: {m}");
+    assert_eq!(m["ranging.lidar"].as_f64(), Some(1.0));
+    assert!(m["map.occupied_precision"].as_f64().unwrap() >= 0.9, "{m}");
+    assert!(m["map.occupied_recall"].as_f64().unwrap() >= 0.9, "{m}");
+    // The office's walls are found; of its corners the point Hough transform finds half (on
+    // laser returns it peaks all along the walls: docs/RESULTS.md).
+    assert!(m["walls"].as_f64().unwrap() >= 6.0, "{m}");
+    assert!(m["features.recall"].as_f64().unwrap() >= 0.5, "{m}");
+    // Surveyed, then localised on the laser alone (the pictures taken out): the surveyed walls
+    // hold the robot to centimetres where the odometry drifts decimetres.
+    let survey = dir.path().join("lidar_survey");
+    ok(&["-q", "survey", "--run", s(&sonar), "--out", s(&survey)]);
+    std::fs::write(sonar.join("stereo.csv"), "t_s,left,right\n").unwrap();
+    let localized = dir.path().join("lidar_localize");
+    ok(&[
+        "-q",
+        "localize",
+        "--run",
+        s(&sonar),
+        "--survey",
+        s(&survey),
+        "--out",
+        s(&localized),
+    ]);
+    let m = json(&localized.join("report.json"))["metrics"].clone();
+    eprintln!("office localised on the laser alone: {m}");
+    assert!(m["ranges.fused"].as_f64().unwrap() > 500.0, "{m}");
+    assert!(m["ate_m.localized"].as_f64().unwrap() < 0.03, "{m}");
+    assert!(m["ate_m.odometry"].as_f64().unwrap() > 0.1, "{m}");
+
     // The laser as the paper's five sonars: one reading per sonar and scan, and near the
     // simulated sonar's echoes where both have one.
     let laser = dir.path().join("laser");

@@ -8,7 +8,7 @@ use crate::fusion::measurement::sighting_measurement;
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
-use crate::sonar::{SonarLayout, SonarReading};
+use crate::sonar::{BeamModel, SonarLayout, SonarReading};
 use crate::visual::sightings::TagSighting;
 use crate::visual::tags::TagId;
 use crate::visual::vo::VisualTurn;
@@ -98,6 +98,12 @@ pub const WALL_CONE_MARGIN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
 /// ... and the foot of the perpendicular this far inside the face's ends: 5 cm.
 pub const WALL_INSET_M: f64 = 0.05;
 
+/// A laser's range is matched with a wall face it meets this close to the face's normal: 60
+/// degrees (further off, a small heading error moves the return far along the wall).
+pub const RAY_MATCH_RAD: f64 = 60.0 * std::f64::consts::PI / 180.0;
+/// A laser's beams used against the walls are this far apart: 10 degrees.
+pub const RAY_BEAM_SPACING_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
 /// A sonar range matched with a surveyed wall face.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WallMatch {
@@ -126,17 +132,22 @@ pub fn wall_in_beam(
     }
     let at = world_from_robot.compose(&sensor.robot_from_sensor());
     let half = 0.5 * sonar.layout.cone_rad - WALL_CONE_MARGIN_RAD;
+    let ray = sonar.layout.beam == BeamModel::Ray;
     sonar
         .walls
         .iter()
         .enumerate()
         .filter_map(|(i, w)| {
-            w.expected_range([at.x, at.y], at.theta, half, WALL_INSET_M)
-                .map(|expected_m| WallMatch {
-                    wall: i,
-                    range_m: range,
-                    expected_m,
-                })
+            let expected = if ray {
+                w.expected_ray_range([at.x, at.y], at.theta, RAY_MATCH_RAD, WALL_INSET_M)
+            } else {
+                w.expected_range([at.x, at.y], at.theta, half, WALL_INSET_M)
+            };
+            expected.map(|expected_m| WallMatch {
+                wall: i,
+                range_m: range,
+                expected_m,
+            })
         })
         .min_by(|a, b| a.expected_m.total_cmp(&b.expected_m))
         .filter(|m| m.expected_m < sonar.layout.max_range_m)
@@ -157,13 +168,23 @@ fn fuse_range(
     let wall = sonar.walls.get(m.wall)?;
     let sensor = sonar.layout.sensors.get(reading.sensor)?;
     // range = n . (p + R(theta) o) - offset.
+    // A laser's ray meets the face at `phi` off its normal: range = d / cos(phi), with d as
+    // above and phi = theta + bearing - normal - pi (a sonar's echo: phi = 0).
     let n = wall.normal();
     let (st, ct) = pose.theta.sin_cos();
     let (ox, oy) = (sensor.x_m, sensor.y_m);
+    let phi = match sonar.layout.beam {
+        BeamModel::Cone => 0.0,
+        BeamModel::Ray => crate::geometry::wrap_angle(
+            pose.theta + sensor.bearing_rad - wall.normal_rad - std::f64::consts::PI,
+        ),
+    };
+    let (sp, cp) = phi.sin_cos();
+    let d = expected * cp;
     let h = Vector3::new(
-        n[0],
-        n[1],
-        n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy),
+        n[0] / cp,
+        n[1] / cp,
+        (n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy)) / cp + d * sp / (cp * cp),
     );
     let known = (h.transpose() * ekf.p.fixed_view::<3, 3>(0, 0) * h)[0];
     if known < config.wall_sigma_m.powi(2) || known > config.sonar_max_range_sigma_m.powi(2) {
@@ -367,8 +388,18 @@ impl<'a> Localizer<'a> {
         true
     }
 
-    /// Reading `i` of the run, matched against the surveyed walls.
+    /// Reading `i` of the run, matched against the surveyed walls. Of a laser's beams, one in
+    /// every [`RAY_BEAM_SPACING_RAD`] is used (neighbouring beams see the same wall with the
+    /// same pose error: fusing them all would count one error hundreds of times).
     fn range(&mut self, i: usize, reading: &SonarReading, sonar: &SonarInput<'_>) {
+        if sonar.layout.beam == BeamModel::Ray {
+            let stride = (RAY_BEAM_SPACING_RAD / sonar.layout.cone_rad.max(1e-9))
+                .round()
+                .max(1.0) as usize;
+            if !reading.sensor.is_multiple_of(stride) {
+                return;
+            }
+        }
         if let Some(fused) = fuse_range(&mut self.ekf, reading, sonar, self.config) {
             self.out.range_outcomes.push((i, fused));
         }

@@ -102,6 +102,34 @@ impl WallSegment {
     }
 }
 
+impl WallSegment {
+    /// The range a laser at `sensor` measures along `beam_rad` off this face: where the ray
+    /// meets the face's line, when it looks against the face within `max_incidence_rad` of its
+    /// normal and meets it `inset_m` inside its ends; `None` otherwise.
+    pub fn expected_ray_range(
+        &self,
+        sensor: [f64; 2],
+        beam_rad: f64,
+        max_incidence_rad: f64,
+        inset_m: f64,
+    ) -> Option<f64> {
+        let n = self.normal();
+        let d = n[0] * sensor[0] + n[1] * sensor[1] - self.offset_m;
+        let phi = crate::geometry::wrap_angle(beam_rad - self.normal_rad - std::f64::consts::PI);
+        if d <= 0.0 || phi.abs() > max_incidence_rad {
+            return None;
+        }
+        let range = d / phi.cos();
+        let hit = [
+            sensor[0] + range * beam_rad.cos(),
+            sensor[1] + range * beam_rad.sin(),
+        ];
+        let u = self.along(hit);
+        let (a, b) = (self.along(self.from_m), self.along(self.to_m));
+        (u >= a.min(b) + inset_m && u <= a.max(b) - inset_m).then_some(range)
+    }
+}
+
 /// A reading reduced to what the fit needs: sensor position, beam direction, range.
 #[derive(Debug, Clone, Copy)]
 struct Echo {
@@ -421,6 +449,65 @@ mod tests {
         let mut grid = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 2.1).unwrap();
         grid.insert_all(readings);
         grid.map()
+    }
+
+    #[test]
+    fn a_laser_ray_meets_a_face_where_its_line_crosses_it() {
+        // The face y = 2 seen from below: normal -y, offset -2, from x = -5 to 5.
+        let w = WallSegment {
+            normal_rad: 1.5 * std::f64::consts::PI,
+            offset_m: -2.0,
+            from_m: [-5.0, 2.0],
+            to_m: [5.0, 2.0],
+            readings: 20,
+            rms_m: 0.01,
+        };
+        let up = std::f64::consts::FRAC_PI_2;
+        let r = w.expected_ray_range([0.0, 0.0], up, 1.0, 0.05).unwrap();
+        assert!((r - 2.0).abs() < 1e-12);
+        // 30 degrees off the normal: 2 / cos 30, meeting the face at x = -2 tan 30.
+        let slant = up + 30f64.to_radians();
+        let r = w.expected_ray_range([0.0, 0.0], slant, 1.0, 0.05).unwrap();
+        assert!((r - 2.0 / 30f64.to_radians().cos()).abs() < 1e-12);
+        // Beyond the largest incidence, past the face's end, from behind, or looking away: none.
+        assert_eq!(w.expected_ray_range([0.0, 0.0], slant, 0.5, 0.05), None);
+        assert_eq!(w.expected_ray_range([4.5, 0.0], up - 0.5, 1.0, 0.05), None);
+        assert_eq!(w.expected_ray_range([0.0, 3.0], -up, 1.0, 0.05), None);
+        assert_eq!(w.expected_ray_range([0.0, 0.0], -up, 1.0, 0.05), None);
+    }
+
+    #[test]
+    fn laser_returns_vote_for_the_walls_through_them() {
+        // A laser 1.5 m from the wall y = 2, sweeping its beams across it as it drives along.
+        let mut placed = Vec::new();
+        for step in 0..40 {
+            let x = -2.0 + 0.1 * step as f64;
+            for k in -30..=30 {
+                let beam = std::f64::consts::FRAC_PI_2 + (k as f64).to_radians();
+                placed.push(PlacedReading {
+                    t_s: step as f64,
+                    world_from_sensor: Pose2::new(x, 0.5, beam),
+                    range_m: Some(1.5 / (k as f64).to_radians().cos()),
+                });
+            }
+        }
+        let layout = crate::sonar::SonarLayout {
+            beam: crate::sonar::BeamModel::Ray,
+            cone_rad: 1f64.to_radians(),
+            max_range_m: 10.0,
+            ..crate::sonar::SonarLayout::frontal5()
+        };
+        let mut grid =
+            crate::sonar::grid::CountingGrid::for_layout(GridConfig::default(), &layout).unwrap();
+        grid.insert_all(&placed);
+        let walls = crate::sonar::map::layout_walls(&layout, &placed, &grid.map());
+        assert!(!walls.is_empty());
+        let w = &walls[0];
+        assert!(
+            (w.normal_rad - 1.5 * std::f64::consts::PI).abs() < 0.01,
+            "{w:?}"
+        );
+        assert!((w.offset_m + 2.0).abs() < 0.01, "{w:?}");
     }
 
     #[test]

@@ -463,7 +463,7 @@ fn log_growing_grid(
     };
     for (k, r) in readings.iter().enumerate() {
         grid.insert(r);
-        if let (Some(range), true) = (r.range_m, k % stride == 0) {
+        if let (Some(range), true) = (r.range_m, k.is_multiple_of(stride)) {
             let cone = match layout.beam {
                 BeamModel::Cone => cone_outline(&r.world_from_sensor, range, layout.cone_rad),
                 BeamModel::Ray => cone_outline(&r.world_from_sensor, range, 0.0)[..2].to_vec(),

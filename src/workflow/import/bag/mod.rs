@@ -141,8 +141,10 @@ pub struct BagSummary {
     pub too_close: usize,
     /// Range messages left out: `NaN`, or a finite range below the minimum.
     pub ranges_left_out: usize,
-    /// Laser scans turned into sonar readings.
+    /// Laser scans read (turned into sonar readings with `--as-sonar`).
     pub scans: usize,
+    /// The laser as the run's lidar (without `--as-sonar`).
+    pub lidar: Option<crate::workflow::import::LidarImport>,
     /// Whether a ground truth was written.
     pub ground_truth: bool,
     /// The grid fitted to the run: lower-left corner (m).
@@ -615,6 +617,16 @@ impl Gathered {
         );
 
         let (layout, sonar, too_close, left_out) = self.sonar(bag, roles, request, &seconds)?;
+        let lidar = self.lidar(request, &seconds)?;
+        if let Some((_, _, l)) = &lidar {
+            if l.scans_left_out > 0 {
+                tracing::warn!(
+                    "{}: {} laser scans of another field of view, beam count or mounting than the first left out",
+                    request.bag.display(),
+                    l.scans_left_out
+                );
+            }
+        }
 
         // The rig.
         let (rig, rig_from, image_size) = if roles.left.is_some() && !self.stereo.is_empty() {
@@ -639,7 +651,11 @@ impl Gathered {
             .collect();
         stereo.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
         let ground_truth = (!truth.is_empty()).then_some(truth);
-        let grid = GridConfig::fitted(ground_truth.as_deref().unwrap_or(&trajectory), &layout)
+        let ranging = match &lidar {
+            Some((l, _, _)) => l.beam_layout(),
+            None => layout.clone(),
+        };
+        let grid = GridConfig::fitted(ground_truth.as_deref().unwrap_or(&trajectory), &ranging)
             .unwrap_or_else(|| {
                 tracing::warn!(
                     "{}: the run spans over 1 km: run.yaml keeps the paper's grid; set mapping.grid",
@@ -668,6 +684,7 @@ impl Gathered {
             too_close,
             ranges_left_out: left_out,
             scans: self.scans.len(),
+            lidar: lidar.as_ref().map(|l| l.2.clone()),
             ground_truth: ground_truth.is_some(),
             grid_origin_m: grid.origin_m,
             grid_cells: [grid.width_cells, grid.height_cells],
@@ -684,7 +701,7 @@ impl Gathered {
                 format: RUN_FORMAT.into(),
                 robot: RobotDescription {
                     sonar: layout,
-                    lidar: None,
+                    lidar: lidar.as_ref().map(|l| l.0.clone()),
                     ranging: None,
                     rig: rig.as_ref().map(|_| "rig.yaml".to_owned()),
                     robot_from_left: None,
@@ -704,7 +721,7 @@ impl Gathered {
             sonar,
             stereo,
             ground_truth,
-            lidar: Vec::new(),
+            lidar: lidar.map(|l| l.1).unwrap_or_default(),
         };
         Ok((run, summary, rig))
     }

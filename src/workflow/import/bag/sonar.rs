@@ -2,15 +2,72 @@
 //! turned into a sonar ring's readings.
 
 use super::{decimal, mount, topic_error, BagRequest, Gathered, RangeSensor, Roles};
+use crate::dataset::{LidarDescription, LidarScan};
 use crate::geometry::Pose2;
 use crate::io::carmen::LaserScan;
 use crate::io::rosbag::Bag;
 use crate::sonar::{SonarLayout, SonarReading, SonarSensor};
-use crate::workflow::import::{flat, sonar_readings};
+use crate::workflow::import::{flat, lidar_of, sonar_readings, LidarImport};
 use crate::workflow::Result;
 use std::collections::BTreeMap;
 
 impl Gathered {
+    /// The laser's scans in the robot frame (the laser placed by tf; a laser mounted upside down
+    /// sweeps its angles the other way). Invalid ranges (outside the message's limits, inf, NaN)
+    /// become 0, no return.
+    pub(super) fn laser_scans(
+        &self,
+        request: &BagRequest<'_>,
+        seconds: &dyn Fn(i64) -> f64,
+    ) -> Result<Vec<LaserScan>> {
+        let (path, base) = (request.bag, request.base_frame.as_str());
+        let mut scans = Vec::with_capacity(self.scans.len());
+        let mut laser_in_robot: BTreeMap<String, (Pose2, bool)> = BTreeMap::new();
+        for (t, frame, s) in &self.scans {
+            if !laser_in_robot.contains_key(frame) {
+                let m = mount(&self.tf, path, base, frame, "the laser")?;
+                let flipped = m.rotation.to_rotation_matrix()[(2, 2)] < 0.0;
+                laser_in_robot.insert(frame.clone(), (flat(&m), flipped));
+            }
+            let (mounting, flipped) = laser_in_robot[frame];
+            let sign = if flipped { -1.0 } else { 1.0 };
+            let valid = |r: f32| r.is_finite() && r >= s.range_min && r <= s.range_max && r > 0.0;
+            scans.push(LaserScan {
+                t_s: seconds(*t),
+                start_rad: sign * s.angle_min as f64,
+                step_rad: sign * s.angle_increment as f64,
+                ranges_m: s
+                    .ranges
+                    .iter()
+                    .map(|&r| if valid(r) { decimal(r) } else { 0.0 })
+                    .collect(),
+                pose: Pose2::new(0.0, 0.0, 0.0),
+                laser_in_robot: mounting,
+                line: 0,
+            });
+        }
+        Ok(scans)
+    }
+
+    /// The laser as the run's lidar, when the bag has one and it is not turned into sonar: the
+    /// limits from its first message.
+    pub(super) fn lidar(
+        &self,
+        request: &BagRequest<'_>,
+        seconds: &dyn Fn(i64) -> f64,
+    ) -> Result<Option<(LidarDescription, Vec<LidarScan>, LidarImport)>> {
+        if request.as_sonar.is_some() {
+            return Ok(None);
+        }
+        let Some((_, _, first)) = self.scans.first() else {
+            return Ok(None);
+        };
+        let scans = self.laser_scans(request, seconds)?;
+        // A range at range_max is no return (as for a Range message before REP 117).
+        let (min, max) = (decimal(first.range_min).max(0.0), decimal(first.range_max));
+        Ok(lidar_of(&scans, min, max, 0.0))
+    }
+
     /// The sonar layout and readings (from the `Range` topics, or the laser turned into the
     /// ring asked for), and the readings nearer than their minimum and left out.
     pub(super) fn sonar(
@@ -23,33 +80,7 @@ impl Gathered {
         let path = request.bag;
         let base = request.base_frame.as_str();
         if let Some(layout) = &request.as_sonar {
-            let mut scans = Vec::with_capacity(self.scans.len());
-            let mut laser_in_robot: BTreeMap<String, (Pose2, bool)> = BTreeMap::new();
-            for (t, frame, s) in &self.scans {
-                if !laser_in_robot.contains_key(frame) {
-                    let m = mount(&self.tf, path, base, frame, "the laser")?;
-                    // A laser mounted upside down sweeps its angles the other way.
-                    let flipped = m.rotation.to_rotation_matrix()[(2, 2)] < 0.0;
-                    laser_in_robot.insert(frame.clone(), (flat(&m), flipped));
-                }
-                let (mounting, flipped) = laser_in_robot[frame];
-                let sign = if flipped { -1.0 } else { 1.0 };
-                let valid =
-                    |r: f32| r.is_finite() && r >= s.range_min && r <= s.range_max && r > 0.0;
-                scans.push(LaserScan {
-                    t_s: seconds(*t),
-                    start_rad: sign * s.angle_min as f64,
-                    step_rad: sign * s.angle_increment as f64,
-                    ranges_m: s
-                        .ranges
-                        .iter()
-                        .map(|&r| if valid(r) { r as f64 } else { 0.0 })
-                        .collect(),
-                    pose: Pose2::new(0.0, 0.0, 0.0),
-                    laser_in_robot: mounting,
-                    line: 0,
-                });
-            }
+            let scans = self.laser_scans(request, seconds)?;
             let (readings, unseen) = sonar_readings(&scans, layout, 0.0);
             if !unseen.is_empty() {
                 tracing::warn!(
@@ -97,7 +128,15 @@ impl Gathered {
                     Some(_) => {}
                 }
             }
-            let first_sensor = first_sensor.expect("at least one sonar topic");
+            let Some(first_sensor) = first_sensor else {
+                // No sonar: the laser is the run's range sensor.
+                let layout = SonarLayout {
+                    name: "none".into(),
+                    sensors: Vec::new(),
+                    ..SonarLayout::frontal5()
+                };
+                return Ok((layout, Vec::new(), 0, 0));
+            };
             let layout = SonarLayout {
                 name: "ros2-bag".into(),
                 beam: crate::sonar::BeamModel::Cone,

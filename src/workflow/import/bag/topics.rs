@@ -210,35 +210,49 @@ impl Roles {
             }
             found
         };
-        let scan = match (&asked.scan, laser_as_sonar) {
-            (Some(s), _) => Some(named(s, &[LASER_SCAN], "--scan")?),
-            (None, false) => None,
-            (None, true) => match of_type(&[LASER_SCAN]).as_slice() {
-                [one] => Some(one.name.clone()),
-                [] => {
-                    return Err(topic_error(
-                        bag,
-                        format!("--as-sonar needs a laser: no {LASER_SCAN} topic"),
-                    ))
+        let scan =
+            match (&asked.scan, laser_as_sonar) {
+                (Some(s), _) => Some(named(s, &[LASER_SCAN], "--scan")?),
+                (None, false) => {
+                    match of_type(&[LASER_SCAN]).as_slice() {
+                        [one] => Some(one.name.clone()),
+                        [] => None,
+                        several => {
+                            tracing::warn!(
+                        "{}: several laser topics ({}): none is imported; name one with --scan",
+                        bag.path.display(),
+                        several.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+                    );
+                            None
+                        }
+                    }
                 }
-                _ => {
-                    return Err(topic_error(
-                        bag,
-                        "several laser topics: name one with --scan".into(),
-                    ))
-                }
-            },
-        };
+                (None, true) => match of_type(&[LASER_SCAN]).as_slice() {
+                    [one] => Some(one.name.clone()),
+                    [] => {
+                        return Err(topic_error(
+                            bag,
+                            format!("--as-sonar needs a laser: no {LASER_SCAN} topic"),
+                        ))
+                    }
+                    _ => {
+                        return Err(topic_error(
+                            bag,
+                            "several laser topics: name one with --scan".into(),
+                        ))
+                    }
+                },
+            };
         if sonar.is_empty() && scan.is_none() {
             let lasers = of_type(&[LASER_SCAN]);
             return Err(topic_error(
                 bag,
                 if lasers.is_empty() {
-                    format!("no {RANGE} topic: a run needs sonar")
+                    format!("no {RANGE} or {LASER_SCAN} topic: a run needs sonar or a laser")
                 } else {
                     format!(
-                        "no {RANGE} topic: a run needs sonar; to turn the laser {} into sonar-like readings, pass --as-sonar frontal5 (or pioneer16)",
-                        lasers[0].name
+                        "no {RANGE} topic and several lasers: name the laser with --scan (one of {})",
+                        lasers.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
                     )
                 },
             ));
