@@ -86,6 +86,90 @@ fn visual(c: &mut Criterion) {
         });
     }
     group.finish();
+
+    building(c, &rig);
+}
+
+/// A building-size world: freiburg-079 (`../shared/data/radish`) imported as a lidar run, mapped
+/// on its corrected poses, and its map traced into walls, as a user traces a world from their
+/// robot's ROS map. `None` (and the group skipped) without the shared data.
+fn building_world(dir: &Path) -> Option<stereotag::world::World> {
+    let log = Path::new("../shared/data/radish/freiburg-079-corrected.log.gz");
+    if !log.exists() {
+        eprintln!("skipping the building group: {} not found", log.display());
+        return None;
+    }
+    let run = dir.join("run");
+    stereotag::workflow::import::import_carmen(&stereotag::workflow::import::CarmenRequest {
+        carmen: log,
+        out: &run,
+        as_sonar: None,
+        force: false,
+    })
+    .expect("import freiburg-079");
+    let map = dir.join("map");
+    stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
+        run_dir: &run,
+        out: &map,
+        poses: stereotag::dataset::PoseSource::GroundTruth,
+        world: None,
+        config: None,
+        force: false,
+    })
+    .expect("map freiburg-079");
+    let world = dir.join("world.yaml");
+    std::fs::write(
+        &world,
+        "name: freiburg-079\nstart: {x_m: -5.0, y_m: 0.5, theta_rad: 0.0}\n\
+         map: {yaml: map/map.yaml, wall_height_m: 2.5, simplify_m: 0.05, min_blob_cells: 4}\n",
+    )
+    .expect("write the world");
+    Some(
+        stereotag::io::load_world(&world)
+            .expect("trace the map")
+            .world,
+    )
+}
+
+/// Rendering a pair in a building traced from a laser map (thousands of wall segments): the
+/// wall grid against every wall tested (the reference), beside the office.
+fn building(c: &mut Criterion, rig: &stereotag::camera::StereoRig) {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let Some(world) = building_world(dir.path()) else {
+        return;
+    };
+    eprintln!("freiburg-079 traced: {} walls", world.walls.len());
+    let office =
+        stereotag::io::load_world(Path::new("samples/office/world.yaml")).expect("office sample");
+    let mut group = c.benchmark_group("render_building");
+    group.sample_size(10);
+    let pose = Pose2::new(-5.0, 0.5, 0.0);
+    for (name, renderer, world, pose) in [
+        (
+            "freiburg079_pair_640x480_every_wall_tested (reference)",
+            Renderer::new(rig).with_every_wall_tested(),
+            &world,
+            pose,
+        ),
+        ("freiburg079_pair_640x480", Renderer::new(rig), &world, pose),
+        (
+            "office_pair_640x480",
+            Renderer::new(rig),
+            &office.world,
+            Pose2::new(1.0, 6.3, 2.35),
+        ),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                black_box(
+                    renderer
+                        .render(world, pose, &RenderConfig::default())
+                        .unwrap(),
+                )
+            })
+        });
+    }
+    group.finish();
 }
 
 /// The C library's own test photos at its regression settings (decimate 1, no edge

@@ -54,6 +54,9 @@ impl WallSpan {
 pub(super) struct Scene {
     /// The walls that can be in view.
     pub(super) walls: Vec<WallSpan>,
+    /// The walls binned for rays to walk, for worlds of many walls
+    /// ([`super::walls_grid::GRID_FROM_WALLS`]).
+    pub(super) grid: Option<super::walls_grid::WallGrid>,
     pub(super) tags: Vec<TagPaint>,
     /// The tags that can be in view (indices into `tags`).
     pub(super) tags_in_view: Vec<usize>,
@@ -73,6 +76,34 @@ pub(super) enum Surface {
 }
 
 impl Scene {
+    /// A scene of these walls and tags; the walls binned in a grid when there are many.
+    pub(super) fn new(
+        walls: Vec<WallSpan>,
+        tags: Vec<TagPaint>,
+        tags_in_view: Vec<usize>,
+        ceiling_m: f64,
+    ) -> Self {
+        let grid = if walls.len() > super::walls_grid::GRID_FROM_WALLS {
+            super::walls_grid::WallGrid::new(&walls)
+        } else {
+            None
+        };
+        Self {
+            walls,
+            grid,
+            tags,
+            tags_in_view,
+            ceiling_m,
+        }
+    }
+
+    /// The scene without its wall grid: every wall tested for every ray (for comparisons).
+    #[cfg(test)]
+    pub(super) fn without_grid(mut self) -> Self {
+        self.grid = None;
+        self
+    }
+
     /// Distance along a ray to the first surface, and the surface.
     pub(super) fn hit(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> (f64, Surface) {
         let mut best = (Fraction::INFINITE, Surface::Sky);
@@ -89,34 +120,29 @@ impl Scene {
             best = (Fraction { num, den: dir.z }, Surface::Ceiling);
         }
         if dir.x * dir.x + dir.y * dir.y > 1e-24 {
-            // Each wall as origin + t dir (t along the 3D ray) meeting a + u e, u in [0, 1]:
-            // t = tn / d and u = un / d, with the signs folded into the numerators so that d > 0.
-            for (k, w) in self.walls.iter().enumerate() {
-                let (ex, ey) = w.e;
-                let denom = dir.x * ey - dir.y * ex;
-                let (wx, wy) = (w.a.0 - origin.x, w.a.1 - origin.y);
-                let (tn, un) = (wx * ey - wy * ex, wx * dir.y - wy * dir.x);
-                let (tn, un, d) = if denom < 0.0 {
-                    (-tn, -un, -denom)
-                } else {
-                    (tn, un, denom)
-                };
-                // Nearer by more than a part in 10^9: of walls that overlap (traced maps have
-                // them) the first always wins, rather than rounding deciding ray by ray.
-                if d < 1e-12
-                    || tn <= 1e-9 * d
-                    || tn * best.0.den >= best.0.num * d * (1.0 - 1e-9)
-                    || un < 0.0
-                    || un > d
-                {
-                    continue;
+            match &self.grid {
+                None => {
+                    for k in 0..self.walls.len() {
+                        if let Some(t) = self.wall_hit(k, origin, dir, best.0) {
+                            best = (t, Surface::Wall(k));
+                        }
+                    }
                 }
-                // The height met, times d.
-                let z = origin.z * d + dir.z * tn;
-                if z < 0.0 || z > w.height_m * d {
-                    continue;
-                }
-                best = (Fraction { num: tn, den: d }, Surface::Wall(k));
+                // Cell by cell, nearest first: a wall's hit is taken in the cell that holds it
+                // (its parameter before the cell's exit; its walls in increasing index, so
+                // overlapping walls resolve as one by one), and the walk stops at the first cell
+                // that leaves something nearer than its exit.
+                Some(grid) => grid.walk((origin.x, origin.y), (dir.x, dir.y), |cell| {
+                    for &k in grid.walls(cell) {
+                        let k = k as usize;
+                        if let Some(t) = self.wall_hit(k, origin, dir, best.0) {
+                            if t.num <= cell.exit_t * t.den {
+                                best = (t, Surface::Wall(k));
+                            }
+                        }
+                    }
+                    best.0.num > cell.exit_t * best.0.den
+                }),
             }
         }
         for &k in &self.tags_in_view {
@@ -125,6 +151,45 @@ impl Scene {
             }
         }
         (best.0.value(), best.1)
+    }
+
+    /// Where the ray meets wall `k` (its segment, between the floor and its height) when that is
+    /// nearer than `best` by more than a part in 10^9: of walls that overlap (traced maps have
+    /// them) the first tested always wins, rather than rounding deciding ray by ray.
+    #[inline]
+    fn wall_hit(
+        &self,
+        k: usize,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        best: Fraction,
+    ) -> Option<Fraction> {
+        // The wall as origin + t dir (t along the 3D ray) meeting a + u e, u in [0, 1]:
+        // t = tn / d and u = un / d, with the signs folded into the numerators so that d > 0.
+        let w = &self.walls[k];
+        let (ex, ey) = w.e;
+        let denom = dir.x * ey - dir.y * ex;
+        let (wx, wy) = (w.a.0 - origin.x, w.a.1 - origin.y);
+        let (tn, un) = (wx * ey - wy * ex, wx * dir.y - wy * dir.x);
+        let (tn, un, d) = if denom < 0.0 {
+            (-tn, -un, -denom)
+        } else {
+            (tn, un, denom)
+        };
+        if d < 1e-12
+            || tn <= 1e-9 * d
+            || tn * best.den >= best.num * d * (1.0 - 1e-9)
+            || un < 0.0
+            || un > d
+        {
+            return None;
+        }
+        // The height met, times d.
+        let z = origin.z * d + dir.z * tn;
+        if z < 0.0 || z > w.height_m * d {
+            return None;
+        }
+        Some(Fraction { num: tn, den: d })
     }
 
     /// Albedo of a surface at a point on it.

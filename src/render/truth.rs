@@ -17,12 +17,12 @@ pub(super) fn truths(
 ) -> Vec<TagTruth> {
     let wr = wl * rig.left_from_right();
     // Every wall, for what may hide a corner (the ceiling far above: only walls occlude).
-    let occluders = Scene {
-        walls: world.walls.iter().map(WallSpan::new).collect(),
-        tags: Vec::new(),
-        tags_in_view: Vec::new(),
-        ceiling_m: config.ceiling_m + 100.0,
-    };
+    let occluders = Scene::new(
+        world.walls.iter().map(WallSpan::new).collect(),
+        Vec::new(),
+        Vec::new(),
+        config.ceiling_m + 100.0,
+    );
     let mut truth = Vec::new();
     for (tag, paint) in world.tags.iter().zip(paints) {
         let corners = paint.corners(tag.size_m);
