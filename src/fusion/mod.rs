@@ -46,6 +46,6 @@ pub use localize::{
     RELOCALISE_AFTER, RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, WALL_CONE_MARGIN_RAD, WALL_INSET_M,
 };
 pub use observations::Observations;
-pub use offline::{run_offline, OdometryCalibration, OfflineResult};
+pub use offline::{run_offline, OdometryCalibration, OfflineKept, OfflineResult};
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use survey::{survey, Survey, SurveySettings};

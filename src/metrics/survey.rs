@@ -219,6 +219,22 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
         "offline.converged".into(),
         f64::from(u8::from(survey.offline.converged)),
     );
+    let o = &survey.offline;
+    m.insert(
+        "offline.kept_solution".into(),
+        f64::from(u8::from(o.kept == crate::fusion::OfflineKept::Solution)),
+    );
+    m.insert("offline.cost_start".into(), o.cost[0]);
+    m.insert("offline.cost".into(), o.cost[1]);
+    m.insert("offline.sightings".into(), o.sightings as f64);
+    m.insert(
+        "offline.sightings_consistent_start".into(),
+        o.sightings_consistent[0] as f64,
+    );
+    m.insert(
+        "offline.sightings_consistent".into(),
+        o.sightings_consistent[1] as f64,
+    );
     m
 }
 

@@ -14,6 +14,9 @@ use crate::visual::vo::VisualTurn;
 use std::collections::{BTreeMap, HashMap};
 use tiny_solver::na as sna;
 
+/// A variable's value, as the solver holds it.
+pub(super) type Vector = sna::DVector<f64>;
+
 /// Name of the odometry calibration variable.
 pub(super) const CALIBRATION: &str = "odometry_calibration";
 /// Prior sigmas of the odometry calibration `[a, c, s]`: 5% turn scale, 0.02 rad/m heading drift,
@@ -43,6 +46,36 @@ pub(super) struct Graph {
     pub(super) problem: tiny_solver::Problem,
     pub(super) init: HashMap<String, sna::DVector<f64>>,
     pub(super) factors: usize,
+    /// The sighting factors again, with their variables, to judge a solution by
+    /// ([`Graph::sightings_consistent`]).
+    pub(super) sightings: Vec<(String, String, TagFactor)>,
+}
+
+/// A sighting is consistent with a solution when its whitened residual's squared norm is below
+/// this: 11.34, the chi-square 99% point with 3 degrees of freedom.
+pub(super) const SIGHTING_CHI2_99: f64 = 11.34;
+
+impl Graph {
+    /// The sightings consistent with `values` ([`SIGHTING_CHI2_99`]) and their summed squared
+    /// whitened residuals.
+    pub(super) fn sightings_consistent(
+        &self,
+        values: &HashMap<String, sna::DVector<f64>>,
+    ) -> (usize, f64) {
+        use tiny_solver::factors::Factor;
+        let mut consistent = 0;
+        let mut chi2 = 0.0;
+        for (pose, landmark, factor) in &self.sightings {
+            let (Some(p), Some(l)) = (values.get(pose), values.get(landmark)) else {
+                continue;
+            };
+            let r: sna::DVector<f64> = factor.residual_func(&[p.clone(), l.clone()]);
+            let d2 = r.norm_squared();
+            chi2 += d2;
+            consistent += (d2 <= SIGHTING_CHI2_99) as usize;
+        }
+        (consistent, chi2)
+    }
 }
 
 impl Graph {
@@ -80,6 +113,7 @@ pub(super) fn build(
         problem: tiny_solver::Problem::new(),
         init: HashMap::new(),
         factors: 0,
+        sightings: Vec::new(),
     };
     for (i, kf) in keyframes.frames.iter().enumerate() {
         graph.init.insert(
@@ -216,6 +250,14 @@ fn add_sightings(
             sqrt_info: sqrt_information(&r),
         };
         let vars = [pose_name(kf), landmark_name(l)];
+        graph.sightings.push((
+            vars[0].clone(),
+            vars[1].clone(),
+            TagFactor {
+                measured: factor.measured,
+                sqrt_info: factor.sqrt_info,
+            },
+        ));
         graph.add(3, &[&vars[0], &vars[1]], Box::new(factor), true, config);
     }
 }

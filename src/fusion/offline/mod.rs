@@ -23,10 +23,40 @@ pub struct OfflineResult {
     pub keyframes: usize,
     /// Factors of the graph.
     pub factors: usize,
-    /// Whether the solver returned a solution (else the online estimate is kept).
+    /// Whether the solver converged: it stopped on its own criteria (not at the iteration
+    /// limit: one more iteration changes the cost by less than a part in 10^6) and its solution
+    /// was kept.
     pub converged: bool,
+    /// Which estimate the pass returns: the solver's, or where it started (the online estimate)
+    /// when the solver failed or its solution explains fewer sightings.
+    pub kept: OfflineKept,
+    /// The graph's cost where the solver started and where it ended.
+    pub cost: [f64; 2],
+    /// Sightings consistent (chi-square 99%) with the start and with the solution, of all.
+    pub sightings_consistent: [usize; 2],
+    /// Sightings in the graph.
+    pub sightings: usize,
     /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
+}
+
+/// The estimate the offline pass returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OfflineKept {
+    /// The solver's solution.
+    Solution,
+    /// The online estimate the solver started from.
+    Start,
+}
+
+impl OfflineKept {
+    /// `solution` or `start`.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            OfflineKept::Solution => "solution",
+            OfflineKept::Start => "start",
+        }
+    }
 }
 
 /// Systematic odometry errors as the offline pass estimates them: an odometry increment of
@@ -99,6 +129,10 @@ pub fn run_offline(
             keyframes: 0,
             factors: 0,
             converged: false,
+            kept: OfflineKept::Start,
+            cost: [0.0; 2],
+            sightings_consistent: [0; 2],
+            sightings: 0,
             odometry_calibration: None,
         };
     };
@@ -122,8 +156,55 @@ pub fn run_offline(
         &graph.init,
         Some(options),
     );
-    let converged = solution.is_some();
-    let values = solution.unwrap_or(graph.init);
+    // Never worse without saying so: the solution is kept when it explains at least as many
+    // sightings as the start (the solver lowers the cost, but a wrong loop can lower it by
+    // bending the trajectory away from the sightings it cannot explain); converged means the
+    // solver stopped on its own, not at its iteration limit.
+    let cost_of = |values: &std::collections::HashMap<String, graph::Vector>| {
+        graph
+            .problem
+            .compute_cost(&graph.problem.initialize_parameter_blocks(values))
+    };
+    let start_cost = cost_of(&graph.init);
+    let start_consistent = graph.sightings_consistent(&graph.init).0;
+    let (kept, values, end_cost, end_consistent, converged) = match solution {
+        Some(values) => {
+            let end_cost = cost_of(&values);
+            let end_consistent = graph.sightings_consistent(&values).0;
+            if end_consistent >= start_consistent && end_cost.is_finite() {
+                let once_more = tiny_solver::LevenbergMarquardtOptimizer::default().optimize(
+                    &graph.problem,
+                    &values,
+                    Some(tiny_solver::OptimizerOptions {
+                        max_iteration: 1,
+                        ..Default::default()
+                    }),
+                );
+                let settled = once_more
+                    .map(|v| cost_of(&v))
+                    .is_some_and(|c| (end_cost - c).abs() <= 1e-6 * end_cost.max(1e-12));
+                (
+                    OfflineKept::Solution,
+                    values,
+                    end_cost,
+                    end_consistent,
+                    settled,
+                )
+            } else {
+                tracing::warn!(
+                    "the offline pass keeps the online estimate: its solution explains {end_consistent} of {} sightings, the online estimate {start_consistent} (graph cost {start_cost:.1} -> {end_cost:.1})",
+                    graph.sightings.len()
+                );
+                let init = graph.init.clone();
+                (OfflineKept::Start, init, end_cost, end_consistent, false)
+            }
+        }
+        None => {
+            tracing::warn!("the offline solver failed (NaN cost): the online estimate is kept");
+            let init = graph.init.clone();
+            (OfflineKept::Start, init, f64::NAN, 0, false)
+        }
+    };
     let solved: Vec<Pose2> = (0..keyframes.frames.len())
         .map(|i| {
             values
@@ -153,9 +234,13 @@ pub fn run_offline(
         keyframes: keyframes.frames.len(),
         factors: graph.factors,
         converged,
+        kept,
+        cost: [start_cost, end_cost],
+        sightings_consistent: [start_consistent, end_consistent],
+        sightings: graph.sightings.len(),
         odometry_calibration: values
             .get(graph::CALIBRATION)
-            .filter(|_| converged && config.calibrate_odometry)
+            .filter(|_| kept == OfflineKept::Solution && config.calibrate_odometry)
             .map(|v| OdometryCalibration {
                 turn_scale_error: v[0],
                 heading_drift_rad_per_m: v[1],
@@ -244,6 +329,10 @@ mod tests {
         let ate_online = ate_m(&online.trajectory, &truth).unwrap();
         let ate_offline = ate_m(&offline.trajectory, &truth).unwrap();
         assert!(offline.converged);
+        assert_eq!(offline.kept, OfflineKept::Solution);
+        assert!(offline.cost[1] < offline.cost[0], "{:?}", offline.cost);
+        assert!(offline.sightings > 0);
+        assert!(offline.sightings_consistent[1] >= offline.sightings_consistent[0]);
         assert!(ate_odom > 0.2, "odometry ATE {ate_odom}");
         assert!(
             ate_online < 0.5 * ate_odom,
@@ -265,5 +354,37 @@ mod tests {
             online.conflicts,
             online.rejected.len()
         );
+    }
+
+    /// Stopped at its iteration limit the solver's solution is kept, but it is not converged.
+    #[test]
+    fn a_solver_stopped_at_its_limit_is_not_converged() {
+        let (odom, _, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig {
+            max_iterations: 1,
+            ..FuseConfig::default()
+        };
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let offline = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
+        assert!(!offline.converged);
+    }
+
+    /// A solution that explains fewer sightings than where the solver started is not returned:
+    /// an earlier survey's odometry calibration, wildly wrong (50% scale errors), bends the
+    /// solution away from the sightings (21 of them consistent at the start, 2 after).
+    #[test]
+    fn the_start_is_kept_when_the_solution_explains_fewer_sightings() {
+        let (odom, _, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig::default();
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let wrong = OdometryCalibration {
+            turn_scale_error: 0.5,
+            heading_drift_rad_per_m: 0.2,
+            distance_scale_error: 0.5,
+        };
+        let offline = run_offline(&obs(&odom, &sightings, &[]), &online, &config, Some(&wrong));
+        assert_eq!(offline.kept, OfflineKept::Start);
+        assert!(!offline.converged);
+        assert_eq!(offline.trajectory.len(), online.trajectory.len());
     }
 }
