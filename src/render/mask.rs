@@ -80,6 +80,16 @@ impl View<'_> {
     /// Calls `f` with image points of the world segment `p`-`q`, at most [`EDGE_STEP_PX`]
     /// apart, along the part of it the camera can see.
     pub(super) fn trace(&self, p: &Vector3<f64>, q: &Vector3<f64>, f: &mut dyn FnMut(f64, f64)) {
+        self.trace_points(p, q, &mut |x, y, _| f(x, y));
+    }
+
+    /// [`View::trace`], with each image point's point of the segment in the camera's frame.
+    pub(super) fn trace_points(
+        &self,
+        p: &Vector3<f64>,
+        q: &Vector3<f64>,
+        f: &mut dyn FnMut(f64, f64, &Vector3<f64>),
+    ) {
         let c0 = self
             .camera_from_world
             .transform_point(&Point3::from(*p))
@@ -106,7 +116,7 @@ impl View<'_> {
             return;
         };
         self.subdivide(&a, &b, pa, pb, 0, f);
-        f(pb.x, pb.y);
+        f(pb.x, pb.y, &b);
     }
 
     /// Emits `pa` and the points between `a` and `b` (not `pb`), halving until they are at
@@ -119,7 +129,7 @@ impl View<'_> {
         pa: Point2<f64>,
         pb: Point2<f64>,
         depth: u32,
-        f: &mut dyn FnMut(f64, f64),
+        f: &mut dyn FnMut(f64, f64, &Vector3<f64>),
     ) {
         const MIN_DEPTH: u32 = 3;
         const MAX_DEPTH: u32 = 18;
@@ -142,6 +152,6 @@ impl View<'_> {
                 return;
             }
         }
-        f(pa.x, pa.y);
+        f(pa.x, pa.y, a);
     }
 }

@@ -185,7 +185,7 @@ impl Renderer {
     /// Tests every wall for every ray. By default a world of more than 64 walls (a building
     /// traced from a map) has its walls binned in a uniform grid that each ray walks nearest cell
     /// first, stopping at the first hit; the pictures are the same to the byte. This is the
-    /// reference the grid is measured against (`cargo bench --bench render`).
+    /// reference the grid is measured against (`cargo bench --bench visual -- render_building`).
     pub fn with_every_wall_tested(mut self) -> Self {
         self.wall_grid = false;
         self
@@ -284,9 +284,7 @@ impl Renderer {
             })
             .collect();
         let mut scene = Scene::new(walls, tags, tags_in_view, config.ceiling_m);
-        if !self.wall_grid {
-            scene.grid = None;
-        }
+        scene.walk_grid = self.wall_grid;
         Ok(Staged {
             scene,
             left: exposure,
@@ -450,20 +448,31 @@ mod tests {
             other => other,
         };
         let (mut pixels, mut masked) = (0usize, 0usize);
-        let spots: [(&str, &[(f64, f64)]); 3] = [
+        let spots: [(&str, &[(f64, f64)]); 4] = [
             ("office", &[(1.0, 6.3), (0.4, 7.1), (3.3, 3.7), (6.5, 0.6)]),
             ("museum", &[(5.0, 4.0), (9.0, 7.0), (15.5, 0.5), (0.5, 0.5)]),
             // Walls traced from a real building map: many short walls and wall ends, some
             // overlapping (which, traced ray by ray, once let rounding pick the wall).
             ("willow", &[(5.0, 7.0)]),
+            // The same with its walls in the grid and the edges they hide left out of the mask,
+            // as a building's are.
+            ("willow+occlusion", &[(5.0, 7.0), (3.0, 9.0), (9.0, 4.5)]),
         ];
         for (name, spots) in spots {
-            let path = root.join(format!("samples/{name}/world.yaml"));
+            let (file, occluded) = match name.strip_suffix("+occlusion") {
+                Some(file) => (file, true),
+                None => (name, false),
+            };
+            let path = root.join(format!("samples/{file}/world.yaml"));
             let world = crate::io::load_world(&path).unwrap().world;
             for &(x, y) in spots {
                 for k in 0..12 {
                     let pose = Pose2::new(x, y, (k as f64 * 30.0).to_radians());
-                    let staged = renderer.stage(&world, pose, &config, true).unwrap();
+                    let mut staged = renderer.stage(&world, pose, &config, true).unwrap();
+                    if occluded {
+                        staged.scene.grid = walls_grid::WallGrid::new(&staged.scene.walls);
+                        staged.scene.occlusion_mask = true;
+                    }
                     for (camera, table, at) in [
                         (&rig.left, &renderer.left, &staged.left[0]),
                         (&rig.right, &renderer.right, &staged.right[0]),

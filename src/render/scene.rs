@@ -1,6 +1,7 @@
 //! The scene a ray meets: floor, ceiling, walls up to their height and tags, the nearest
 //! surface shaded with its texture and light.
 
+use super::walls_grid::Occlusion;
 use super::*;
 use crate::camera::Camera;
 use nalgebra::{Isometry3, Vector3};
@@ -57,6 +58,11 @@ pub(super) struct Scene {
     /// The walls binned for rays to walk, for worlds of many walls
     /// ([`super::walls_grid::GRID_FROM_WALLS`]).
     pub(super) grid: Option<super::walls_grid::WallGrid>,
+    /// Rays walk the grid (else they test every wall: the reference it is measured against).
+    pub(super) walk_grid: bool,
+    /// Leave out of the detail mask the wall edges that walls reaching the ceiling hide (with
+    /// the grid, for worlds of many walls: most of their walls are behind others).
+    pub(super) occlusion_mask: bool,
     pub(super) tags: Vec<TagPaint>,
     /// The tags that can be in view (indices into `tags`).
     pub(super) tags_in_view: Vec<usize>,
@@ -90,6 +96,8 @@ impl Scene {
         };
         Self {
             walls,
+            occlusion_mask: grid.is_some(),
+            walk_grid: true,
             grid,
             tags,
             tags_in_view,
@@ -100,7 +108,7 @@ impl Scene {
     /// The scene without its wall grid: every wall tested for every ray (for comparisons).
     #[cfg(test)]
     pub(super) fn without_grid(mut self) -> Self {
-        self.grid = None;
+        self.walk_grid = false;
         self
     }
 
@@ -120,10 +128,10 @@ impl Scene {
             best = (Fraction { num, den: dir.z }, Surface::Ceiling);
         }
         if dir.x * dir.x + dir.y * dir.y > 1e-24 {
-            match &self.grid {
+            match self.grid.as_ref().filter(|_| self.walk_grid) {
                 None => {
-                    for k in 0..self.walls.len() {
-                        if let Some(t) = self.wall_hit(k, origin, dir, best.0) {
+                    for (k, w) in self.walls.iter().enumerate() {
+                        if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
                             best = (t, Surface::Wall(k));
                         }
                     }
@@ -133,11 +141,10 @@ impl Scene {
                 // overlapping walls resolve as one by one), and the walk stops at the first cell
                 // that leaves something nearer than its exit.
                 Some(grid) => grid.walk((origin.x, origin.y), (dir.x, dir.y), |cell| {
-                    for &k in grid.walls(cell) {
-                        let k = k as usize;
-                        if let Some(t) = self.wall_hit(k, origin, dir, best.0) {
+                    for w in grid.walls(cell) {
+                        if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
                             if t.num <= cell.exit_t * t.den {
-                                best = (t, Surface::Wall(k));
+                                best = (t, Surface::Wall(w.k as usize));
                             }
                         }
                     }
@@ -151,45 +158,6 @@ impl Scene {
             }
         }
         (best.0.value(), best.1)
-    }
-
-    /// Where the ray meets wall `k` (its segment, between the floor and its height) when that is
-    /// nearer than `best` by more than a part in 10^9: of walls that overlap (traced maps have
-    /// them) the first tested always wins, rather than rounding deciding ray by ray.
-    #[inline]
-    fn wall_hit(
-        &self,
-        k: usize,
-        origin: &Vector3<f64>,
-        dir: &Vector3<f64>,
-        best: Fraction,
-    ) -> Option<Fraction> {
-        // The wall as origin + t dir (t along the 3D ray) meeting a + u e, u in [0, 1]:
-        // t = tn / d and u = un / d, with the signs folded into the numerators so that d > 0.
-        let w = &self.walls[k];
-        let (ex, ey) = w.e;
-        let denom = dir.x * ey - dir.y * ex;
-        let (wx, wy) = (w.a.0 - origin.x, w.a.1 - origin.y);
-        let (tn, un) = (wx * ey - wy * ex, wx * dir.y - wy * dir.x);
-        let (tn, un, d) = if denom < 0.0 {
-            (-tn, -un, -denom)
-        } else {
-            (tn, un, denom)
-        };
-        if d < 1e-12
-            || tn <= 1e-9 * d
-            || tn * best.den >= best.num * d * (1.0 - 1e-9)
-            || un < 0.0
-            || un > d
-        {
-            return None;
-        }
-        // The height met, times d.
-        let z = origin.z * d + dir.z * tn;
-        if z < 0.0 || z > w.height_m * d {
-            return None;
-        }
-        Some(Fraction { num: tn, den: d })
     }
 
     /// Albedo of a surface at a point on it.
@@ -283,13 +251,35 @@ impl PixelTracer for Scene {
             tan_reach: reach.tan(),
         };
         let mut mask = Mask::new(camera);
-        // Each wall's foot, top (or where it meets the ceiling) and ends.
+        // Each wall's foot, top (or where it meets the ceiling) and ends; in a large world, not
+        // where the walls that reach the ceiling hide them.
+        let eye = world_from_camera.translation.vector;
+        let mut occlusion = self
+            .grid
+            .as_ref()
+            .filter(|_| self.occlusion_mask)
+            .map(|g| Occlusion::new(g, self.ceiling_m, (eye.x, eye.y)));
         for wall in &self.walls {
+            let far = (wall.a.0 + wall.e.0, wall.a.1 + wall.e.1);
+            if occlusion
+                .as_ref()
+                .is_some_and(|o| o.hides_segment(wall.a, far))
+            {
+                continue;
+            }
             let a = Vector3::new(wall.a.0, wall.a.1, 0.0);
             let b = a + Vector3::new(wall.e.0, wall.e.1, 0.0);
             let up = Vector3::new(0.0, 0.0, wall.height_m.min(self.ceiling_m));
             for (p, q) in [(a, b), (a + up, b + up), (a, a + up), (b, b + up)] {
-                view.trace(&p, &q, &mut |x, y| mask.mark_around(x, y));
+                match occlusion.as_mut() {
+                    None => view.trace(&p, &q, &mut |x, y| mask.mark_around(x, y)),
+                    Some(occlusion) => view.trace_points(&p, &q, &mut |x, y, c| {
+                        let w = world_from_camera.transform_point(&nalgebra::Point3::from(*c));
+                        if !occlusion.hidden((w.x, w.y)) {
+                            mask.mark_around(x, y);
+                        }
+                    }),
+                }
             }
         }
         // Tags: every pixel they cover (their cells are edges too).
@@ -344,4 +334,41 @@ impl PixelTracer for Scene {
         }
         Some(mask.on)
     }
+}
+
+/// Where the ray meets a wall (its floor segment `a + u e`, between the floor and its height)
+/// when that is nearer than `best` by more than a part in 10^9: of walls that overlap (traced
+/// maps have them) the first tested always wins, rather than rounding deciding ray by ray.
+#[inline]
+fn wall_hit(
+    (a, e, height_m): ((f64, f64), (f64, f64), f64),
+    origin: &Vector3<f64>,
+    dir: &Vector3<f64>,
+    best: Fraction,
+) -> Option<Fraction> {
+    // The wall as origin + t dir (t along the 3D ray) meeting a + u e, u in [0, 1]:
+    // t = tn / d and u = un / d, with the signs folded into the numerators so that d > 0.
+    let (ex, ey) = e;
+    let denom = dir.x * ey - dir.y * ex;
+    let (wx, wy) = (a.0 - origin.x, a.1 - origin.y);
+    let (tn, un) = (wx * ey - wy * ex, wx * dir.y - wy * dir.x);
+    let (tn, un, d) = if denom < 0.0 {
+        (-tn, -un, -denom)
+    } else {
+        (tn, un, denom)
+    };
+    if d < 1e-12
+        || tn <= 1e-9 * d
+        || tn * best.den >= best.num * d * (1.0 - 1e-9)
+        || un < 0.0
+        || un > d
+    {
+        return None;
+    }
+    // The height met, times d.
+    let z = origin.z * d + dir.z * tn;
+    if z < 0.0 || z > height_m * d {
+        return None;
+    }
+    Some(Fraction { num: tn, den: d })
 }

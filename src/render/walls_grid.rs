@@ -24,7 +24,20 @@ pub(super) struct WallGrid {
     rows: usize,
     /// Cell `i`'s walls are `items[starts[i]..starts[i + 1]]`, in increasing index.
     starts: Vec<u32>,
-    items: Vec<u32>,
+    items: Vec<CellWall>,
+}
+
+/// A wall as a cell lists it: its index and a copy of what a ray tests (so that a cell's walls
+/// lie together in memory).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct CellWall {
+    /// The wall's index in the scene.
+    pub(super) k: u32,
+    /// Its floor segment `a + u e`.
+    pub(super) a: (f64, f64),
+    pub(super) e: (f64, f64),
+    /// Its height.
+    pub(super) height_m: f64,
 }
 
 /// One cell a ray crosses and the ray parameter where it leaves it.
@@ -57,7 +70,7 @@ impl WallGrid {
         let cell_m = (extent / MAX_SIDE_CELLS as f64).max(MIN_CELL_M);
         let cols = ((hi.0 + margin - origin.0) / cell_m).ceil().max(1.0) as usize;
         let rows = ((hi.1 + margin - origin.1) / cell_m).ceil().max(1.0) as usize;
-        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); cols * rows];
+        let mut lists: Vec<Vec<CellWall>> = vec![Vec::new(); cols * rows];
         for (k, w) in walls.iter().enumerate() {
             let b = (w.a.0 + w.e.0, w.a.1 + w.e.1);
             let cell = |x: f64, y: f64| {
@@ -80,7 +93,12 @@ impl WallGrid {
                     let y0 = origin.1 + r as f64 * cell_m - LIST_MARGIN_M;
                     let side = cell_m + 2.0 * LIST_MARGIN_M;
                     if segment_meets_box(w.a, b, (x0, y0), (x0 + side, y0 + side)) {
-                        lists[r * cols + c].push(k as u32);
+                        lists[r * cols + c].push(CellWall {
+                            k: k as u32,
+                            a: w.a,
+                            e: w.e,
+                            height_m: w.height_m,
+                        });
                     }
                 }
             }
@@ -103,7 +121,7 @@ impl WallGrid {
     }
 
     /// The walls of a visited cell, in increasing index.
-    pub(super) fn walls(&self, visit: &CellVisit) -> &[u32] {
+    pub(super) fn walls(&self, visit: &CellVisit) -> &[CellWall] {
         &self.items[visit.start..visit.end]
     }
 
@@ -187,6 +205,114 @@ impl WallGrid {
     }
 }
 
+/// Azimuth step of [`Occlusion`]'s table of nearest walls: 0.05 degrees.
+const OCCLUSION_STEP_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
+/// A point is hidden only when it lies this much beyond the wall in front of it, metres.
+const OCCLUSION_MARGIN_M: f64 = 0.01;
+
+/// What a camera cannot see behind the walls that reach the ceiling, seen from above: a point
+/// is hidden when the rays at both ends of its azimuth step (of [`OCCLUSION_STEP_RAD`]) meet the
+/// same such wall nearer than it. A straight wall met by two rays from one eye is met by every
+/// ray between them, no further than the further of the two, so nothing visible is called
+/// hidden; a floor-to-ceiling wall hides every height.
+pub(super) struct Occlusion<'a> {
+    grid: &'a WallGrid,
+    full_height_m: f64,
+    eye: (f64, f64),
+    /// Per azimuth step edge, once walked: the nearest full-height wall and its distance.
+    nearest: Vec<Option<Option<(usize, f64)>>>,
+}
+
+impl<'a> Occlusion<'a> {
+    /// The occlusion seen from `eye` by walls at least `full_height_m` high.
+    pub(super) fn new(grid: &'a WallGrid, full_height_m: f64, eye: (f64, f64)) -> Self {
+        let steps = (std::f64::consts::TAU / OCCLUSION_STEP_RAD).ceil() as usize + 1;
+        Self {
+            grid,
+            full_height_m,
+            eye,
+            nearest: vec![None; steps],
+        }
+    }
+
+    /// Whether the point `p` (seen from above) is hidden from the eye.
+    pub(super) fn hidden(&mut self, p: (f64, f64)) -> bool {
+        let d = (p.0 - self.eye.0).hypot(p.1 - self.eye.1);
+        if d.is_nan() || d <= OCCLUSION_MARGIN_M {
+            return false;
+        }
+        let azimuth = (p.1 - self.eye.1)
+            .atan2(p.0 - self.eye.0)
+            .rem_euclid(std::f64::consts::TAU);
+        let i = ((azimuth / OCCLUSION_STEP_RAD) as usize).min(self.nearest.len() - 2);
+        match (self.edge(i), self.edge(i + 1)) {
+            (Some((k0, d0)), Some((k1, d1))) => k0 == k1 && d > d0.max(d1) + OCCLUSION_MARGIN_M,
+            _ => false,
+        }
+    }
+
+    /// Whether the whole segment `a`-`b` (seen from above) is hidden: the rays to both its ends
+    /// meet the same full-height wall nearer than it. Two straight segments, one behind the
+    /// other at both ends of an angle from the eye, do not cross within it, so the wall hides
+    /// the whole of it.
+    pub(super) fn hides_segment(&self, a: (f64, f64), b: (f64, f64)) -> bool {
+        let behind = |p: (f64, f64)| {
+            let d = (p.0 - self.eye.0).hypot(p.1 - self.eye.1);
+            if d.is_nan() || d <= OCCLUSION_MARGIN_M {
+                return None;
+            }
+            let dir = ((p.0 - self.eye.0) / d, (p.1 - self.eye.1) / d);
+            self.nearest_along(dir)
+                .filter(|&(_, t)| d > t + OCCLUSION_MARGIN_M)
+                .map(|(k, _)| k)
+        };
+        matches!((behind(a), behind(b)), (Some(k0), Some(k1)) if k0 == k1)
+    }
+
+    /// The nearest full-height wall along the ray at azimuth step edge `i`.
+    fn edge(&mut self, i: usize) -> Option<(usize, f64)> {
+        if let Some(known) = self.nearest[i] {
+            return known;
+        }
+        let (s, c) = (i as f64 * OCCLUSION_STEP_RAD).sin_cos();
+        let best = self.nearest_along((c, s));
+        self.nearest[i] = Some(best);
+        best
+    }
+
+    /// The nearest full-height wall along the unit direction `(c, s)` from the eye, and its
+    /// distance.
+    fn nearest_along(&self, (c, s): (f64, f64)) -> Option<(usize, f64)> {
+        let mut best: Option<(usize, f64)> = None;
+        let (full, eye) = (self.full_height_m, self.eye);
+        self.grid.walk(eye, (c, s), |cell| {
+            for w in self.grid.walls(cell) {
+                let k = w.k;
+                if w.height_m < full {
+                    continue;
+                }
+                // eye + t (c, s) = a + u e.
+                let denom = c * w.e.1 - s * w.e.0;
+                if denom.abs() < 1e-12 {
+                    continue;
+                }
+                let (wx, wy) = (w.a.0 - eye.0, w.a.1 - eye.1);
+                let t = (wx * w.e.1 - wy * w.e.0) / denom;
+                let u = (wx * s - wy * c) / denom;
+                if t > 0.0
+                    && (0.0..=1.0).contains(&u)
+                    && t <= cell.exit_t
+                    && best.is_none_or(|(_, b)| t < b)
+                {
+                    best = Some((k as usize, t));
+                }
+            }
+            best.is_none_or(|(_, b)| b > cell.exit_t)
+        });
+        best
+    }
+}
+
 /// Whether the segment `a`-`b` meets the box `lo`-`hi` (Liang-Barsky clipping).
 fn segment_meets_box(a: (f64, f64), b: (f64, f64), lo: (f64, f64), hi: (f64, f64)) -> bool {
     let d = (b.0 - a.0, b.1 - a.1);
@@ -240,7 +366,7 @@ mod tests {
         grid.walk((1.0, 1.0), (1.0, -0.1), |cell| {
             assert!(cell.exit_t >= last_t);
             last_t = cell.exit_t;
-            seen.extend_from_slice(grid.walls(cell));
+            seen.extend(grid.walls(cell).iter().map(|w| w.k));
             cell.exit_t < 10.0
         });
         // The ray from (1, 1) down at a tenth meets y = 0 at t = 10 (x = 11): walked up to
@@ -249,7 +375,7 @@ mod tests {
         // Along the x axis it passes the vertical wall's cells.
         let mut seen = Vec::new();
         grid.walk((1.0, 0.5), (1.0, 0.0), |cell| {
-            seen.extend_from_slice(grid.walls(cell));
+            seen.extend(grid.walls(cell).iter().map(|w| w.k));
             true
         });
         assert!(seen.contains(&1));
