@@ -94,9 +94,11 @@ impl Scene {
         } else {
             None
         };
+        let occlusion_mask =
+            grid.is_some() && walls.len() > super::walls_grid::OCCLUSION_FROM_WALLS;
         Self {
             walls,
-            occlusion_mask: grid.is_some(),
+            occlusion_mask,
             walk_grid: true,
             grid,
             tags,
