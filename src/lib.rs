@@ -57,6 +57,7 @@
 //!             default_mounting: false,
 //!         }),
 //!         force: false,
+//!         along: None,
 //!     },
 //!     &Silent,
 //! )?;

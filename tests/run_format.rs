@@ -44,6 +44,7 @@ fn simulate_takes_stereo_pictures_when_tags_are_in_view() {
                 default_mounting: false,
             }),
             force: false,
+            along: None,
         },
         &stereotag::progress::Silent,
     )

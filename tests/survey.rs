@@ -82,6 +82,7 @@ fn simulate(world: &Path, out: &Path, settings: SimSettings, no_stereo: bool) {
                 default_mounting: false,
             }),
             force: false,
+            along: None,
         },
         &Silent,
     )

@@ -45,6 +45,12 @@ pub struct Simulate {
     /// up, instead of stopping.
     #[arg(long, conflicts_with = "no_stereo")]
     default_mounting: bool,
+    /// Follow this path instead of exploring: a pose CSV (`t_s,x_m,y_m,theta_rad`), e.g. a real
+    /// log's ground_truth.csv (`stereotag import`) or a path drawn on a floor plan. The sonar,
+    /// the odometry (with its wheel errors) and the pictures are simulated along it; the run
+    /// lasts as long as the path.
+    #[arg(long, value_name = "POSES.csv", conflicts_with_all = ["duration_s", "paper_exploration"])]
+    along: Option<PathBuf>,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -84,6 +90,7 @@ impl Simulate {
                     default_mounting: self.default_mounting,
                 }),
                 force: self.force,
+                along: self.along.as_deref(),
             },
             &Bars::new(quiet),
         )?;

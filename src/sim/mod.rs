@@ -259,7 +259,111 @@ pub fn simulate(
     }
     on_progress(t);
     let end_reason = explorer.end_reason(end_reason);
-    let run = RunDataset {
+    let run = simulated_run(
+        layout,
+        config.seed,
+        &end_reason,
+        log.odometry,
+        log.sonar,
+        log.ground_truth,
+    );
+    Ok(SimOutput {
+        run,
+        online_map: log.grid.map(),
+        end_reason,
+        targets: explorer.targets,
+    })
+}
+
+/// Simulates a run along a given path instead of exploring: the robot is at each of its poses
+/// in turn (interpolated every [`ExplorationConfig::step_s`]; times from the path's first), its
+/// wheels read with the configured errors, its sonar sampled as in [`simulate`]. The path may be
+/// a real log's ground truth or one drawn on a floor plan; it is not checked against the walls.
+/// `on_progress(t_s)` is called about once per simulated second.
+pub fn simulate_along(
+    world: &World,
+    config: &SimConfig,
+    path: &[StampedPose],
+    mut on_progress: impl FnMut(f64),
+) -> Result<SimOutput, SimError> {
+    config.validate()?;
+    let (Some(first), Some(last)) = (path.first(), path.last()) else {
+        return Err(SimError::Invalid {
+            key: "along",
+            reason: "the path has no poses",
+        });
+    };
+    if last.t_s.is_nan() || last.t_s <= first.t_s {
+        return Err(SimError::Invalid {
+            key: "along",
+            reason: "the path must span some time (at least two poses, times increasing)",
+        });
+    }
+    let e = &config.exploration;
+    let layout = &config.sonar_layout;
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut wheels = Wheels::new(first.pose, e, &config.odometry)?;
+    let mut log = Log {
+        world,
+        config,
+        odometry: Vec::new(),
+        ground_truth: Vec::new(),
+        sonar: Vec::new(),
+        grid: CountingGrid::for_layout(config.grid.clone(), layout)?,
+    };
+    let duration = last.t_s - first.t_s;
+    let (mut t, mut since_travel, mut since_turn) = (0.0, 0.0, 0.0);
+    let mut next_progress = 1.0;
+    log.sample(t, wheels.truth, wheels.odom, &mut rng);
+    while t < duration {
+        t = (t + e.step_s).min(duration);
+        let Some(next) = crate::geometry::pose_at(path, first.t_s + t) else {
+            break;
+        };
+        let step = wheels.follow(next, &mut rng);
+        since_travel += step.ds.abs();
+        since_turn += step.dth.abs();
+        if since_travel >= e.sample_travel_m || since_turn >= e.sample_turn_deg.to_radians() {
+            since_travel = 0.0;
+            since_turn = 0.0;
+            log.sample(t, wheels.truth, wheels.odom, &mut rng);
+        }
+        if t >= next_progress {
+            on_progress(t);
+            next_progress += 1.0;
+        }
+    }
+    // The run lasts as long as the path: its last pose is logged too.
+    if log.ground_truth.last().is_some_and(|p| p.t_s < t) {
+        log.sample(t, wheels.truth, wheels.odom, &mut rng);
+    }
+    on_progress(t);
+    let end_reason = format!("followed the given path of {} poses", path.len());
+    Ok(SimOutput {
+        run: simulated_run(
+            layout,
+            config.seed,
+            &end_reason,
+            log.odometry,
+            log.sonar,
+            log.ground_truth,
+        ),
+        online_map: log.grid.map(),
+        end_reason,
+        targets: Vec::new(),
+    })
+}
+
+/// A simulated run's dataset.
+fn simulated_run(
+    layout: &SonarLayout,
+    seed: u64,
+    end_reason: &str,
+    odometry: Vec<StampedPose>,
+    sonar: Vec<SonarReading>,
+    ground_truth: Vec<StampedPose>,
+) -> RunDataset {
+    RunDataset {
         meta: RunMeta {
             format: RUN_FORMAT.into(),
             robot: RobotDescription {
@@ -271,28 +375,64 @@ pub fn simulate(
             },
             world: None,
             mapping: None,
-            notes: format!(
-                "simulated by stereotag, seed {}; {}",
-                config.seed, end_reason
-            ),
+            notes: format!("simulated by stereotag, seed {seed}; {end_reason}"),
         },
-        odometry: log.odometry,
-        sonar: log.sonar,
+        odometry,
+        sonar,
         stereo: Vec::new(),
-        ground_truth: Some(log.ground_truth),
+        ground_truth: Some(ground_truth),
         lidar: Vec::new(),
-    };
-    Ok(SimOutput {
-        run,
-        online_map: log.grid.map(),
-        end_reason,
-        targets: explorer.targets,
-    })
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_along_a_path_follows_it_and_its_odometry_drifts() {
+        let w = crate::world::rectangle_world(12.0, 6.0, Pose2::new(2.0, 3.0, 0.0));
+        // Along the long side and back: 8 m out at 0.4 m/s, a half turn, 8 m back.
+        let mut path = Vec::new();
+        for k in 0..=200 {
+            let t = k as f64 * 0.1;
+            path.push(StampedPose {
+                t_s: t,
+                pose: Pose2::new(2.0 + 0.4 * t, 3.0, 0.0),
+            });
+        }
+        for k in 1..=40 {
+            path.push(StampedPose {
+                t_s: 20.0 + k as f64 * 0.1,
+                pose: Pose2::new(10.0, 3.0, std::f64::consts::PI * k as f64 / 40.0),
+            });
+        }
+        for k in 1..=200 {
+            let t = k as f64 * 0.1;
+            path.push(StampedPose {
+                t_s: 24.0 + t,
+                pose: Pose2::new(10.0 - 0.4 * t, 3.0, std::f64::consts::PI),
+            });
+        }
+        let c = SimConfig::default();
+        let out = simulate_along(&w, &c, &path, |_| {}).unwrap();
+        let run = &out.run;
+        let truth = run.ground_truth.as_ref().unwrap();
+        // The truth is the path, sampled every few centimetres.
+        for p in truth {
+            let q = crate::geometry::pose_at(&path, p.t_s).unwrap();
+            assert!((p.pose.x - q.x).hypot(p.pose.y - q.y) < 1e-9, "{p:?} {q:?}");
+        }
+        assert!((truth.last().unwrap().t_s - 44.0).abs() < 1e-9);
+        assert!(truth.len() > 100 && run.sonar.len() == 5 * truth.len());
+        // The odometry drifts from it (1% wheel base: the half turn comes out 1% short).
+        let end = run.odometry.last().unwrap().pose;
+        assert!((end.theta - std::f64::consts::PI).abs() > 0.01, "{end:?}");
+        assert!((end.x - 2.0).hypot(end.y - 3.0) > 0.05, "{end:?}");
+        assert!((end.x - 2.0).hypot(end.y - 3.0) < 1.0, "{end:?}");
+        // A path that spans no time is refused.
+        assert!(simulate_along(&w, &c, &path[..1], |_| {}).is_err());
+    }
 
     #[test]
     fn same_seed_same_run() {

@@ -110,6 +110,24 @@ impl Wheels {
         let dl = (v - 0.5 * w * base_true) * dt;
         let dr = (v + 0.5 * w * base_true) * dt;
         self.truth = integrate(self.truth, 0.5 * (dl + dr), (dr - dl) / base_true);
+        self.read_encoders(dl, dr, rng)
+    }
+
+    /// Moves the robot to `next` (a pose of a given path: its forward motion and turn are what
+    /// the wheels do, any sideways motion no wheel sees), then reads the encoders (two random
+    /// draws from `rng`).
+    pub(super) fn follow(&mut self, next: Pose2, rng: &mut ChaCha8Rng) -> Step {
+        let d = self.truth.between(&next);
+        let (ds, dth) = (d.x, crate::geometry::wrap_angle(d.theta));
+        let dl = ds - 0.5 * dth * self.base_true;
+        let dr = ds + 0.5 * dth * self.base_true;
+        self.truth = next;
+        self.read_encoders(dl, dr, rng)
+    }
+
+    /// The odometry's step from the wheels' true travels `dl` and `dr`: each read with its scale
+    /// error and random error, turned into motion with the nominal wheel base.
+    fn read_encoders(&mut self, dl: f64, dr: f64, rng: &mut ChaCha8Rng) -> Step {
         let noise = self.noise.random_m_per_sqrt_m;
         let ml = dl * (1.0 + self.noise.left_scale_error)
             + noise * dl.abs().sqrt() * self.unit.sample(rng);

@@ -57,6 +57,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
                 default_mounting: false,
             }),
             force: false,
+            along: None,
         },
         progress,
     )?;

@@ -72,6 +72,9 @@ pub struct SimulateRequest<'a> {
     pub settings: SimSettings,
     /// Stereo pictures to take, if any (none in a world without tags).
     pub pictures: Option<Pictures<'a>>,
+    /// Follow this path (a pose CSV, `t_s,x_m,y_m,theta_rad`: a log's `ground_truth.csv`, a
+    /// path drawn on a floor plan) instead of exploring.
+    pub along: Option<&'a Path>,
     /// Replace the output directory if it exists.
     pub force: bool,
 }
@@ -120,14 +123,20 @@ fn simulate_into(
 ) -> Result<Simulated> {
     let mut config = loaded.simulation.clone();
     request.settings.apply(&mut config);
-    progress.start("simulate s", config.exploration.duration_s.ceil() as u64);
-    let mut output =
-        sim::simulate(&loaded.world, &config, |t| progress.set(t as u64)).map_err(|cause| {
-            Error::Sim {
-                world: request.world.to_path_buf(),
-                cause,
-            }
-        })?;
+    let path = request.along.map(io::read_poses).transpose()?;
+    let span = match &path {
+        Some(p) => p.last().map_or(0.0, |l| l.t_s) - p.first().map_or(0.0, |f| f.t_s),
+        None => config.exploration.duration_s,
+    };
+    progress.start("simulate s", span.max(0.0).ceil() as u64);
+    let simulated = match &path {
+        Some(path) => sim::simulate_along(&loaded.world, &config, path, |t| progress.set(t as u64)),
+        None => sim::simulate(&loaded.world, &config, |t| progress.set(t as u64)),
+    };
+    let mut output = simulated.map_err(|cause| Error::Sim {
+        world: request.world.to_path_buf(),
+        cause,
+    })?;
     progress.finish();
     output.run.meta.world = Some(
         relative_path(request.world, request.out)
