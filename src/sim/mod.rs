@@ -169,7 +169,19 @@ struct Log<'a> {
     grid: CountingGrid,
 }
 
-impl Log<'_> {
+impl<'a> Log<'a> {
+    /// An empty log, its grid by the configuration's.
+    fn new(world: &'a World, config: &'a SimConfig) -> Result<Self, SimError> {
+        Ok(Self {
+            world,
+            config,
+            odometry: Vec::new(),
+            ground_truth: Vec::new(),
+            sonar: Vec::new(),
+            grid: CountingGrid::for_layout(config.grid.clone(), &config.sonar_layout)?,
+        })
+    }
+
     /// Logs the poses at `t` and one reading of every sonar (random draws from `rng`).
     fn sample(&mut self, t: f64, truth: Pose2, odom: Pose2, rng: &mut ChaCha8Rng) {
         self.odometry.push(StampedPose { t_s: t, pose: odom });
@@ -221,14 +233,7 @@ pub fn simulate(
         });
     }
     let mut wheels = Wheels::new(world.start, e, &config.odometry)?;
-    let mut log = Log {
-        world,
-        config,
-        odometry: Vec::new(),
-        ground_truth: Vec::new(),
-        sonar: Vec::new(),
-        grid: CountingGrid::for_layout(config.grid.clone(), layout)?,
-    };
+    let mut log = Log::new(world, config)?;
     let mut explorer = Explorer::new(e);
     let mut t = 0.0;
     let (mut since_travel, mut since_turn) = (0.0, 0.0);
@@ -303,14 +308,7 @@ pub fn simulate_along(
     let layout = &config.sonar_layout;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut wheels = Wheels::new(first.pose, e, &config.odometry)?;
-    let mut log = Log {
-        world,
-        config,
-        odometry: Vec::new(),
-        ground_truth: Vec::new(),
-        sonar: Vec::new(),
-        grid: CountingGrid::for_layout(config.grid.clone(), layout)?,
-    };
+    let mut log = Log::new(world, config)?;
     let duration = last.t_s - first.t_s;
     let (mut t, mut since_travel, mut since_turn) = (0.0, 0.0, 0.0);
     let mut next_progress = 1.0;
