@@ -52,6 +52,7 @@ fn euroc_pair_calibrates_from_its_images() {
             fix_intrinsics: Some(Path::new("calibration/rigs/euroc_official.yaml")),
             out: &out,
             force: false,
+            force_write: false,
             rectify_pair: None,
             recording: RecordingRequest::none(),
         },

@@ -37,6 +37,7 @@ fn calibrate_corners(
             fix_intrinsics: fix_intrinsics.map(Path::new),
             out,
             force: false,
+            force_write: false,
             rectify_pair,
             recording: RecordingRequest::none(),
         },
@@ -81,18 +82,50 @@ fn euroc_baseline_with_official_intrinsics() {
     }
 }
 
+/// Free intrinsics from these corners are not determined (fx came out 2.5 times the official
+/// 458 px, the principal point 1400 px right on a 752 px image): the calibration fails loudly,
+/// nothing written; `--force-write` writes it marked as failed.
 #[test]
-fn euroc_free_calibration_warns_about_unobserved_intrinsics() {
+fn euroc_free_calibration_fails_loudly_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let r = calibrate_corners(None, Some((752, 480)), None, &dir.path().join("free"));
-    let warnings: Vec<String> = r["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap().to_string())
-        .collect();
+    let data = Path::new("../shared/data/euroc_aprilgrid/calib/cam_april");
+    let (left, right) = (data.join("cam0"), data.join("cam1"));
+    let request = |out, force_write| CalibrateRequest {
+        target: Path::new("calibration/targets/aprilgrid_6x6.yaml"),
+        input: CalibrationInput::Corners {
+            left: &left,
+            right: &right,
+        },
+        resolution: Some((752, 480)),
+        model: LensModel::Radtan,
+        fix_intrinsics: None,
+        out,
+        force: false,
+        force_write,
+        rectify_pair: None,
+        recording: RecordingRequest::none(),
+    };
+    let out = dir.path().join("free");
+    let err = calibrate(&request(&out, false), &Silent).unwrap_err();
+    assert!(err.is_bad_input());
+    let message = err.to_string();
     assert!(
-        warnings.iter().any(|w| w.contains("poorly observed")),
-        "{warnings:?}"
+        message.contains("principal point") && message.contains("outside the 752x480 image"),
+        "{message}"
+    );
+    assert!(message.contains("--force-write"), "{message}");
+    assert!(!out.exists());
+    // Forced: written, and marked in the camchain and the report.
+    let forced = dir.path().join("forced");
+    calibrate(&request(&forced, true), &Silent).unwrap();
+    let camchain = std::fs::read_to_string(forced.join("camchain.yaml")).unwrap();
+    assert!(camchain.starts_with("# FAILED CALIBRATION"), "{camchain}");
+    stereotag::io::load_rig(&forced.join("camchain.yaml")).unwrap();
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(forced.join("report.json")).unwrap())
+            .unwrap();
+    assert!(
+        !report["failures"].as_array().unwrap().is_empty(),
+        "{report}"
     );
 }

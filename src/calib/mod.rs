@@ -417,6 +417,78 @@ fn count_cells(cells: &mut [u32], corners: &[Corner], resolution: (u32, u32)) {
     }
 }
 
+/// A focal length whose sigma exceeds this share of it is not determined by the views: 10%
+/// (a failure; from 1% it is a warning).
+pub const UNOBSERVED_SHARE: f64 = 0.10;
+/// The two cameras' focal lengths may differ by this factor at most before the calibration is
+/// taken to have failed: 1.5 (the cameras of a stereo rig are nearly always alike; two truly
+/// different ones need `--force-write`).
+pub const FOCAL_RATIO_LIMIT: f64 = 1.5;
+/// More than this share of the corners left out as outliers is a failure: 20% (a good
+/// calibration leaves out a few percent; a wrong one rejects what it cannot explain).
+pub const OUTLIER_SHARE_LIMIT: f64 = 0.2;
+
+/// Why a calibration cannot be trusted, each with what was found: a principal point outside its
+/// image, a focal length its views do not determine (sigma over [`UNOBSERVED_SHARE`]) or that
+/// disagrees between the cameras (over [`FOCAL_RATIO_LIMIT`]), too many outliers
+/// ([`OUTLIER_SHARE_LIMIT`]), or a camera with every corner rejected. Empty when none. With fixed
+/// intrinsics only the corners are judged.
+pub fn failures(calib: &Calibration, fixed_intrinsics: bool) -> Vec<String> {
+    let mut out = Vec::new();
+    let rig = &calib.rig;
+    if !fixed_intrinsics {
+        for (name, cam) in [("left", &rig.left), ("right", &rig.right)] {
+            let (w, h) = (cam.width as f64, cam.height as f64);
+            if !(cam.cx >= 0.0 && cam.cx <= w && cam.cy >= 0.0 && cam.cy <= h) {
+                out.push(format!(
+                    "the {name} principal point ({:.1}, {:.1}) px lies outside the {}x{} image: these views do not determine the intrinsics",
+                    cam.cx, cam.cy, cam.width, cam.height
+                ));
+            }
+            for (key, value) in [("fx", cam.fx), ("fy", cam.fy)] {
+                let k = format!("{name}.{key}");
+                if let Some(s) = calib.sigmas.get(&k) {
+                    if s.is_nan() || *s > UNOBSERVED_SHARE * value.abs() {
+                        out.push(format!(
+                            "{k} = {value:.1} px is not determined by the views (sigma {s:.1} px, over {:.0}%)",
+                            100.0 * UNOBSERVED_SHARE
+                        ));
+                    }
+                }
+            }
+        }
+        let ratio = rig.left.fx.abs().max(rig.right.fx.abs())
+            / rig.left.fx.abs().min(rig.right.fx.abs()).max(1e-9);
+        if ratio.is_nan() || ratio > FOCAL_RATIO_LIMIT {
+            out.push(format!(
+                "the focal lengths disagree: left fx {:.1} px, right fx {:.1} px (a factor {ratio:.2}, over {FOCAL_RATIO_LIMIT})",
+                rig.left.fx, rig.right.fx
+            ));
+        }
+    }
+    let kept = |side: fn(&UsedView) -> usize| calib.used.iter().map(side).sum::<usize>();
+    let (kept_left, kept_right) = (kept(|v| v.left.len()), kept(|v| v.right.len()));
+    for (name, n) in [("left", kept_left), ("right", kept_right)] {
+        let rejected = calib.outliers.iter().filter(|o| o.camera == name).count();
+        if n == 0 && rejected > 0 {
+            out.push(format!(
+                "every {name} corner ({rejected}) was rejected as an outlier: the {name} camera's pose is not determined"
+            ));
+        }
+    }
+    let total = kept_left + kept_right + calib.outliers.len();
+    let share = calib.outliers.len() as f64 / total.max(1) as f64;
+    if share > OUTLIER_SHARE_LIMIT {
+        out.push(format!(
+            "{} of {total} corners ({:.0}%) were rejected as outliers (over {:.0}%): the model does not explain the views",
+            calib.outliers.len(),
+            100.0 * share,
+            100.0 * OUTLIER_SHARE_LIMIT
+        ));
+    }
+    out
+}
+
 /// What the user should know about the calibration, with what to do.
 fn warnings(
     rig: &StereoRig,

@@ -39,6 +39,11 @@ pub struct Calibrate {
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
+    /// Write the rig even when the calibration fails its checks (a principal point outside the
+    /// image, an undetermined or disagreeing focal length, over 20% outliers, a camera with every
+    /// corner rejected); camchain.yaml then says so in its first lines.
+    #[arg(long)]
+    force_write: bool,
     /// A raw stereo pair (LEFT RIGHT) to rectify with the result: writes rectified.png, the pair
     /// side by side with epipolar lines every 32 rows.
     #[arg(long, num_args = 2, value_names = ["LEFT", "RIGHT"])]
@@ -96,6 +101,7 @@ impl Calibrate {
                 fix_intrinsics: self.fix_intrinsics.as_deref(),
                 out: &self.out,
                 force: self.force,
+                force_write: self.force_write,
                 rectify_pair: match self.rectify_pair.as_slice() {
                     [l, r] => Some((l.as_path(), r.as_path())),
                     _ => None,

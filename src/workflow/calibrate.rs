@@ -52,6 +52,9 @@ pub struct CalibrateRequest<'a> {
     pub out: &'a Path,
     /// Replace the output directory if it exists.
     pub force: bool,
+    /// Write the rig even when the calibration fails its checks ([`crate::calib::failures`]),
+    /// marked as failed in `camchain.yaml` and `report.json`.
+    pub force_write: bool,
     /// A raw pair (left, right) to rectify with the result into `rectified.png`.
     pub rectify_pair: Option<(&'a Path, &'a Path)>,
     /// Where the recording goes (default: `calibration.rrd` in the output).
@@ -112,6 +115,7 @@ pub struct CalibrationViews {
 ///         fix_intrinsics: None,
 ///         out: Path::new("calib/my-rig"),
 ///         force: false,
+///         force_write: false,
 ///         rectify_pair: None,
 ///         recording: RecordingRequest::none(),
 ///     },
@@ -173,14 +177,38 @@ pub fn calibrate(
             }
         })?;
     let solve_s = started.elapsed().as_secs_f64() - detect_s;
+    let failures = crate::calib::failures(&calib, request.fix_intrinsics.is_some());
+    if !failures.is_empty() && !request.force_write {
+        return Err(Error::Request(format!(
+            "the calibration failed its checks, nothing was written:\n  - {}\n(--force-write writes it anyway, marked as failed)",
+            failures.join("\n  - ")
+        )));
+    }
     let dir = OutputDir::create(request.out, request.force)?;
     io::save_rig_exports(&dir.path(""), &calib.rig)?;
-    let report = report(
+    if !failures.is_empty() {
+        // Marked where a reader of the rig will see it (YAML comments: Kalibr reads on).
+        let camchain = dir.path("camchain.yaml");
+        let text =
+            std::fs::read_to_string(&camchain).map_err(|e| io::IoError::file(&camchain, e))?;
+        let mut marked =
+            String::from("# FAILED CALIBRATION, written with --force-write. Its checks found:\n");
+        for f in &failures {
+            marked.push_str(&format!("#   - {f}\n"));
+        }
+        marked.push_str(&text);
+        io::write_file(&camchain, marked.as_bytes())?;
+        for f in &failures {
+            tracing::warn!("written despite: {f}");
+        }
+    }
+    let mut report = report(
         &calib,
         &target,
         request.fix_intrinsics.is_some(),
         [detect_s, solve_s, started.elapsed().as_secs_f64()],
     )?;
+    report["failures"] = serde_json::json!(failures);
     io::save_json(&dir.path("report.json"), &report)?;
     let rectified = match request.rectify_pair {
         Some((l, r)) => {
