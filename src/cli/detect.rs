@@ -24,9 +24,14 @@ pub struct Detect {
     /// Tag family: tag36h11, tag25h9, tag16h5 or tagStandard41h12 (repeat for several).
     #[arg(long, default_value = "tag36h11")]
     family: Vec<String>,
-    /// Decimation before quad detection (1 = full resolution).
-    #[arg(long, default_value_t = 2.0)]
-    decimate: f32,
+    /// Decimation before quad detection (1 = full resolution; default: the survey's, 1.5 with
+    /// the C library and 1 with kornia).
+    #[arg(long)]
+    decimate: Option<f32>,
+    /// Bit errors corrected (default: each family's safe number: 2 for tag36h11 and
+    /// tagStandard41h12, 1 for tag25h9, 0 for tag16h5).
+    #[arg(long)]
+    max_hamming: Option<usize>,
     /// Turn edge refinement off.
     #[arg(long)]
     no_refine_edges: bool,
@@ -46,7 +51,12 @@ pub struct Detect {
 impl Detect {
     pub fn run(&self) -> anyhow::Result<()> {
         let families = super::families(&self.family)?;
-        super::check_decimate(self.decimate)?;
+        let decimate = self
+            .decimate
+            .unwrap_or(stereotag::workflow::sightings::survey_decimate(
+                self.backend.into(),
+            ));
+        super::check_decimate(decimate)?;
         let output = detect(&DetectRequest {
             images: &self.images,
             rig: self.rig.as_deref(),
@@ -55,12 +65,12 @@ impl Detect {
             backend: self.backend.into(),
             config: DetectorConfig {
                 families,
-                decimate: self.decimate,
+                decimate,
+                max_hamming: self.max_hamming,
                 refine_edges: !self.no_refine_edges,
                 sharpening: self.sharpening,
                 subpixel: !self.no_subpixel,
                 min_contrast: self.min_contrast,
-                ..DetectorConfig::default()
             },
         })?;
         let json = match output {

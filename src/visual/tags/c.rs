@@ -50,7 +50,7 @@ impl CDetector {
                 apriltag_sys::apriltag_detector_add_family_bits(
                     raw,
                     family,
-                    config.max_hamming as i32,
+                    config.hamming_for(*f) as i32,
                 );
                 owned.push((*f, family));
             }

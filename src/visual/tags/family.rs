@@ -62,6 +62,17 @@ pub const DETECTABLE_FAMILIES: [TagFamily; 4] = [
 ];
 
 impl TagFamily {
+    /// Bit errors corrected by default: 2 for tag36h11 and tagStandard41h12 (minimum Hamming
+    /// distance 11 and 12: the C library's own default), 1 for tag25h9 (9), 0 for tag16h5 (5: on
+    /// the EuRoC pair and the AprilGrid frames every corrected 16h5 code is texture).
+    pub fn default_max_hamming(&self) -> usize {
+        match self {
+            TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 | TagFamily::TagStandard41h12 => 2,
+            TagFamily::Tag25h9 => 1,
+            TagFamily::Tag16h5 => 0,
+        }
+    }
+
     /// The name the AprilTag library uses.
     pub fn name(&self) -> &'static str {
         match self {

@@ -34,7 +34,7 @@ impl KorniaDetector {
             .map(|f| {
                 let mut family = kornia_apriltag::family::TagFamily::try_from(f.kornia())
                     .map_err(|e| TagError::Kornia(e.to_string()))?;
-                let hamming = (config.max_hamming.min(3) as u8).min(family.max_safe_hamming());
+                let hamming = (config.hamming_for(*f).min(3) as u8).min(family.max_safe_hamming());
                 family
                     .set_max_hamming(hamming)
                     .map_err(|e| TagError::Kornia(e.to_string()))?;

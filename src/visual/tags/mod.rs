@@ -71,8 +71,10 @@ pub struct DetectorConfig {
     pub refine_edges: bool,
     /// Sharpening of the decoded bits (default 0.25, both libraries').
     pub sharpening: f64,
-    /// Largest number of bit errors corrected (C backend; default 2).
-    pub max_hamming: usize,
+    /// Largest number of bit errors corrected; `None` (the default): each family's safe number
+    /// ([`TagFamily::default_max_hamming`]: 2 for tag36h11 and tagStandard41h12, 1 for tag25h9,
+    /// 0 for tag16h5, whose codes lie so close that corrected bits turn texture into tags).
+    pub max_hamming: Option<usize>,
     /// Apply our shared sub-pixel corner refinement ([`refine_corners`]) after either backend
     /// (default: on). On 200 rendered office pairs (C backend, decimate 1) it takes the corner
     /// error from 0.086 / 0.217 px (median / 95th percentile) to 0.066 / 0.150 px.
@@ -85,6 +87,14 @@ pub struct DetectorConfig {
     pub min_contrast: u8,
 }
 
+impl DetectorConfig {
+    /// The bit errors corrected for `family`: the setting, else the family's safe default.
+    pub fn hamming_for(&self, family: TagFamily) -> usize {
+        self.max_hamming
+            .unwrap_or_else(|| family.default_max_hamming())
+    }
+}
+
 impl Default for DetectorConfig {
     fn default() -> Self {
         Self {
@@ -92,7 +102,7 @@ impl Default for DetectorConfig {
             decimate: 2.0,
             refine_edges: true,
             sharpening: 0.25,
-            max_hamming: 2,
+            max_hamming: None,
             subpixel: true,
             min_contrast: 5,
         }
