@@ -291,6 +291,13 @@ fn parse_rig_mounting(
 
 /// Writes a stereo rig as a Kalibr camchain YAML file.
 pub fn save_rig(path: &Path, rig: &StereoRig) -> Result<(), IoError> {
+    save_rig_noted(path, rig, &[])
+}
+
+/// [`save_rig`] with `notes` as YAML comment lines at the top of the file (Kalibr and
+/// [`load_rig`] read past them): what a reader of the rig must know, such as a calibration
+/// written despite failing its checks.
+pub fn save_rig_noted(path: &Path, rig: &StereoRig, notes: &[String]) -> Result<(), IoError> {
     let chain = Camchain {
         cam0: kalibr_from(&rig.left, None),
         cam1: kalibr_from(&rig.right, Some(rows_from(&rig.right_from_left))),
@@ -298,7 +305,9 @@ pub fn save_rig(path: &Path, rig: &StereoRig) -> Result<(), IoError> {
             robot_from_left: Some(rows_from(&rig.robot_from_left)),
         }),
     };
-    write_file(path, to_yaml(path, &chain)?.as_bytes())
+    let mut text: String = notes.iter().map(|n| format!("# {n}\n")).collect();
+    text.push_str(&to_yaml(path, &chain)?);
+    write_file(path, text.as_bytes())
 }
 
 /// Fixed-point numbers (12 decimals, trailing zeros dropped): YAML 1.1 readers such as PyYAML,
@@ -421,8 +430,17 @@ pub fn save_camera_info(
 /// and ROS camera_info (`left.yaml`, `right.yaml`, Bouguet-rectified) into `dir`; returns the
 /// rectification.
 pub fn save_rig_exports(dir: &Path, rig: &StereoRig) -> Result<Rectification, IoError> {
+    save_rig_exports_noted(dir, rig, &[])
+}
+
+/// [`save_rig_exports`] with `notes` at the top of `camchain.yaml` ([`save_rig_noted`]).
+pub fn save_rig_exports_noted(
+    dir: &Path,
+    rig: &StereoRig,
+    notes: &[String],
+) -> Result<Rectification, IoError> {
     let rect = rig.rectify();
-    save_rig(&dir.join("camchain.yaml"), rig)?;
+    save_rig_noted(&dir.join("camchain.yaml"), rig, notes)?;
     save_opencv_stereo(&dir.join("opencv_stereo.yaml"), rig, &rect)?;
     save_camera_info(
         &dir.join("left.yaml"),

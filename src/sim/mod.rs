@@ -167,6 +167,8 @@ struct Log<'a> {
     ground_truth: Vec<StampedPose>,
     sonar: Vec<SonarReading>,
     grid: CountingGrid,
+    /// Travel and turn since the last sample.
+    since: (f64, f64),
 }
 
 impl<'a> Log<'a> {
@@ -179,7 +181,20 @@ impl<'a> Log<'a> {
             ground_truth: Vec::new(),
             sonar: Vec::new(),
             grid: CountingGrid::for_layout(config.grid.clone(), &config.sonar_layout)?,
+            since: (0.0, 0.0),
         })
+    }
+
+    /// Notes one step of the wheels at `t`; a sample (as [`Log::sample`]) once the robot has
+    /// travelled [`ExplorationConfig::sample_travel_m`] or turned
+    /// [`ExplorationConfig::sample_turn_deg`] since the last.
+    fn moved(&mut self, t: f64, step: &odometry::Step, wheels: &Wheels, rng: &mut ChaCha8Rng) {
+        let e = &self.config.exploration;
+        self.since = (self.since.0 + step.ds.abs(), self.since.1 + step.dth.abs());
+        if self.since.0 >= e.sample_travel_m || self.since.1 >= e.sample_turn_deg.to_radians() {
+            self.since = (0.0, 0.0);
+            self.sample(t, wheels.truth, wheels.odom, rng);
+        }
     }
 
     /// Logs the poses at `t` and one reading of every sonar (random draws from `rng`).
@@ -236,7 +251,6 @@ pub fn simulate(
     let mut log = Log::new(world, config)?;
     let mut explorer = Explorer::new(e);
     let mut t = 0.0;
-    let (mut since_travel, mut since_turn) = (0.0, 0.0);
     let mut end_reason = String::from("time budget ended");
     let mut next_progress = 1.0;
     log.sample(t, wheels.truth, wheels.odom, &mut rng);
@@ -249,14 +263,8 @@ pub fn simulate(
         let command = explorer.command(world, (wheels.truth, wheels.odom), e);
         let step = wheels.drive(command, e.step_s, world, e.robot_radius_m, &mut rng);
         t += e.step_s;
-        since_travel += step.ds.abs();
-        since_turn += step.dth.abs();
         explorer.moved(step.ds, step.dth, wheels.odom);
-        if since_travel >= e.sample_travel_m || since_turn >= e.sample_turn_deg.to_radians() {
-            since_travel = 0.0;
-            since_turn = 0.0;
-            log.sample(t, wheels.truth, wheels.odom, &mut rng);
-        }
+        log.moved(t, &step, &wheels, &mut rng);
         if t >= next_progress {
             on_progress(t);
             next_progress += 1.0;
@@ -310,7 +318,7 @@ pub fn simulate_along(
     let mut wheels = Wheels::new(first.pose, e, &config.odometry)?;
     let mut log = Log::new(world, config)?;
     let duration = last.t_s - first.t_s;
-    let (mut t, mut since_travel, mut since_turn) = (0.0, 0.0, 0.0);
+    let mut t = 0.0;
     let mut next_progress = 1.0;
     log.sample(t, wheels.truth, wheels.odom, &mut rng);
     while t < duration {
@@ -319,13 +327,7 @@ pub fn simulate_along(
             break;
         };
         let step = wheels.follow(next, &mut rng);
-        since_travel += step.ds.abs();
-        since_turn += step.dth.abs();
-        if since_travel >= e.sample_travel_m || since_turn >= e.sample_turn_deg.to_radians() {
-            since_travel = 0.0;
-            since_turn = 0.0;
-            log.sample(t, wheels.truth, wheels.odom, &mut rng);
-        }
+        log.moved(t, &step, &wheels, &mut rng);
         if t >= next_progress {
             on_progress(t);
             next_progress += 1.0;

@@ -553,24 +553,21 @@ pub struct CountingGrid {
 impl CountingGrid {
     /// An empty grid for sensors with the given beam width and maximum range.
     pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
-        let cells = ConeCells::new(config, cone_rad, max_range_m)?;
+        Ok(Self::over(ConeCells::new(config, cone_rad, max_range_m)?))
+    }
+
+    fn over(cells: ConeCells) -> Self {
         let n = cells.cells();
-        Ok(Self {
+        Self {
             cells,
             hits: vec![0; n],
             misses: vec![0; n],
-        })
+        }
     }
 
     /// An empty grid for the sensors of `layout` (their beam model, width and range).
     pub fn for_layout(config: GridConfig, layout: &SonarLayout) -> Result<Self, GridError> {
-        let cells = ConeCells::for_layout(config, layout)?;
-        let n = cells.cells();
-        Ok(Self {
-            cells,
-            hits: vec![0; n],
-            misses: vec![0; n],
-        })
+        Ok(Self::over(ConeCells::for_layout(config, layout)?))
     }
 
     /// Hit and miss tallies of a cell.
@@ -644,26 +641,23 @@ pub struct LogOddsGrid {
 impl LogOddsGrid {
     /// An empty grid.
     pub fn new(config: GridConfig, cone_rad: f64, max_range_m: f64) -> Result<Self, GridError> {
-        let cells = ConeCells::new(config, cone_rad, max_range_m)?;
+        Ok(Self::over(ConeCells::new(config, cone_rad, max_range_m)?))
+    }
+
+    fn over(cells: ConeCells) -> Self {
         let n = cells.cells();
-        Ok(Self {
+        Self {
             cells,
             log_odds: vec![0.0; n],
             seen: vec![0; n],
-        })
+        }
     }
 }
 
 impl LogOddsGrid {
     /// An empty grid for the sensors of `layout` (their beam model, width and range).
     pub fn for_layout(config: GridConfig, layout: &SonarLayout) -> Result<Self, GridError> {
-        let cells = ConeCells::for_layout(config, layout)?;
-        let n = cells.cells();
-        Ok(Self {
-            cells,
-            log_odds: vec![0.0; n],
-            seen: vec![0; n],
-        })
+        Ok(Self::over(ConeCells::for_layout(config, layout)?))
     }
 }
 

@@ -185,22 +185,17 @@ pub fn calibrate(
         )));
     }
     let dir = OutputDir::create(request.out, request.force)?;
-    io::save_rig_exports(&dir.path(""), &calib.rig)?;
-    if !failures.is_empty() {
-        // Marked where a reader of the rig will see it (YAML comments: Kalibr reads on).
-        let camchain = dir.path("camchain.yaml");
-        let text =
-            std::fs::read_to_string(&camchain).map_err(|e| io::IoError::file(&camchain, e))?;
-        let mut marked =
-            String::from("# FAILED CALIBRATION, written with --force-write. Its checks found:\n");
-        for f in &failures {
-            marked.push_str(&format!("#   - {f}\n"));
-        }
-        marked.push_str(&text);
-        io::write_file(&camchain, marked.as_bytes())?;
-        for f in &failures {
-            tracing::warn!("written despite: {f}");
-        }
+    // A forced rig says so where its reader will see it.
+    let notes: Vec<String> = if failures.is_empty() {
+        Vec::new()
+    } else {
+        std::iter::once("FAILED CALIBRATION, written with --force-write. Its checks found:".into())
+            .chain(failures.iter().map(|f| format!("  - {f}")))
+            .collect()
+    };
+    io::save_rig_exports_noted(&dir.path(""), &calib.rig, &notes)?;
+    for f in &failures {
+        tracing::warn!("written despite: {f}");
     }
     let mut report = report(
         &calib,
