@@ -3,11 +3,9 @@
 //! images with the official intrinsics.
 
 use std::path::Path;
-use stereotag::camera::LensModel;
 use stereotag::io::load_gray;
 use stereotag::progress::Silent;
 use stereotag::visual::tags::{AprilGridMultiScale, TagDetector};
-use stereotag::viz::RecordingRequest;
 use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
 
 fn detect(name: &str) -> Vec<u32> {
@@ -42,19 +40,15 @@ fn euroc_pair_calibrates_from_its_images() {
     let (left, right) = (format!("{data}/cam0_*.png"), format!("{data}/cam1_*.png"));
     calibrate(
         &CalibrateRequest {
-            target: Path::new("calibration/targets/aprilgrid_6x6.yaml"),
-            input: CalibrationInput::Images {
-                left: &left,
-                right: &right,
-            },
-            resolution: None,
-            model: LensModel::Radtan,
             fix_intrinsics: Some(Path::new("calibration/rigs/euroc_official.yaml")),
-            out: &out,
-            force: false,
-            force_write: false,
-            rectify_pair: None,
-            recording: RecordingRequest::none(),
+            ..CalibrateRequest::new(
+                Path::new("calibration/targets/aprilgrid_6x6.yaml"),
+                CalibrationInput::Images {
+                    left: &left,
+                    right: &right,
+                },
+                &out,
+            )
         },
         &Silent,
     )

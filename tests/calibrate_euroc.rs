@@ -5,9 +5,7 @@
 
 use serde_json::Value;
 use std::path::Path;
-use stereotag::camera::LensModel;
 use stereotag::progress::Silent;
-use stereotag::viz::RecordingRequest;
 use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
 
 /// Official EuRoC baseline, metres (|T_c1_c0 translation| of sensor.yaml).
@@ -27,19 +25,17 @@ fn calibrate_corners(
     let (left, right) = (data.join("cam0"), data.join("cam1"));
     calibrate(
         &CalibrateRequest {
-            target: Path::new("calibration/targets/aprilgrid_6x6.yaml"),
-            input: CalibrationInput::Corners {
-                left: &left,
-                right: &right,
-            },
             resolution,
-            model: LensModel::Radtan,
             fix_intrinsics: fix_intrinsics.map(Path::new),
-            out,
-            force: false,
-            force_write: false,
             rectify_pair,
-            recording: RecordingRequest::none(),
+            ..CalibrateRequest::new(
+                Path::new("calibration/targets/aprilgrid_6x6.yaml"),
+                CalibrationInput::Corners {
+                    left: &left,
+                    right: &right,
+                },
+                out,
+            )
         },
         &Silent,
     )
@@ -91,19 +87,16 @@ fn euroc_free_calibration_fails_loudly_and_writes_nothing() {
     let data = Path::new("../shared/data/euroc_aprilgrid/calib/cam_april");
     let (left, right) = (data.join("cam0"), data.join("cam1"));
     let request = |out, force_write| CalibrateRequest {
-        target: Path::new("calibration/targets/aprilgrid_6x6.yaml"),
-        input: CalibrationInput::Corners {
-            left: &left,
-            right: &right,
-        },
         resolution: Some((752, 480)),
-        model: LensModel::Radtan,
-        fix_intrinsics: None,
-        out,
-        force: false,
         force_write,
-        rectify_pair: None,
-        recording: RecordingRequest::none(),
+        ..CalibrateRequest::new(
+            Path::new("calibration/targets/aprilgrid_6x6.yaml"),
+            CalibrationInput::Corners {
+                left: &left,
+                right: &right,
+            },
+            out,
+        )
     };
     let out = dir.path().join("free");
     let err = calibrate(&request(&out, false), &Silent).unwrap_err();

@@ -14,7 +14,6 @@ use std::process::Command;
 use stereotag::camera::Camera;
 use stereotag::camera::LensModel;
 use stereotag::progress::Silent;
-use stereotag::viz::RecordingRequest;
 use stereotag::workflow::calibrate::{
     calibrate, report_markdown, CalibrateRequest, CalibrationInput,
 };
@@ -32,16 +31,12 @@ fn stereotag(args: &[&str]) -> std::process::Output {
 fn calibrate_images(target: &str, left: &str, right: &str, out: &Path, model: LensModel) -> Value {
     calibrate(
         &CalibrateRequest {
-            target: Path::new(target),
-            input: CalibrationInput::Images { left, right },
-            resolution: None,
             model,
-            fix_intrinsics: None,
-            out,
-            force: false,
-            force_write: false,
-            rectify_pair: None,
-            recording: RecordingRequest::none(),
+            ..CalibrateRequest::new(
+                Path::new(target),
+                CalibrationInput::Images { left, right },
+                out,
+            )
         },
         &Silent,
     )
@@ -393,21 +388,14 @@ fn mrpt_calibration_recording_shows_residuals_coverage_and_sigmas() {
     }
     // The report (the print cuts long text, so from the library).
     let calibrated = calibrate(
-        &CalibrateRequest {
-            target: Path::new("calibration/targets/checkerboard_9x6.yaml"),
-            input: CalibrationInput::Images {
+        &CalibrateRequest::new(
+            Path::new("calibration/targets/checkerboard_9x6.yaml"),
+            CalibrationInput::Images {
                 left: &format!("{data}/*_left.jpg"),
                 right: &format!("{data}/*_right.jpg"),
             },
-            resolution: None,
-            model: LensModel::Radtan,
-            fix_intrinsics: None,
-            out: &dir.path().join("again"),
-            force: false,
-            force_write: false,
-            rectify_pair: None,
-            recording: RecordingRequest::none(),
-        },
+            &dir.path().join("again"),
+        ),
         &Silent,
     )
     .unwrap();

@@ -11,12 +11,14 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion
 use std::collections::{BTreeMap, HashMap};
 use tiny_solver::na as sna;
 
-/// What the adjustment changes.
+/// What the adjustment changes. With one camera (`stereo` false) only `left` and the board
+/// poses are adjusted; `right` and `right_from_left` stay as they are.
 pub(super) struct State {
     pub(super) left: Camera,
     pub(super) right: Camera,
     pub(super) right_from_left: Isometry3<f64>,
     pub(super) poses: Vec<Isometry3<f64>>,
+    pub(super) stereo: bool,
 }
 
 /// `[fx, fy, cx, cy, d0, d1, d2, d3]`: radtan k1, k2, p1, p2 or equidistant k1..k4.
@@ -186,14 +188,16 @@ pub(super) fn solve(
         LEFT.into(),
         sna::DVector::from_vec(intrinsics_vec(&state.left)),
     );
-    init.insert(
-        RIGHT.into(),
-        sna::DVector::from_vec(intrinsics_vec(&state.right)),
-    );
-    init.insert(
-        EXTRINSICS.into(),
-        sna::DVector::from_vec(pose_vec(&state.right_from_left)),
-    );
+    if state.stereo {
+        init.insert(
+            RIGHT.into(),
+            sna::DVector::from_vec(intrinsics_vec(&state.right)),
+        );
+        init.insert(
+            EXTRINSICS.into(),
+            sna::DVector::from_vec(pose_vec(&state.right_from_left)),
+        );
+    }
     for (
         i,
         View {
@@ -220,7 +224,7 @@ pub(super) fn solve(
                 ))),
             );
         }
-        for corner in r {
+        for corner in r.iter().filter(|_| state.stereo) {
             problem.add_residual_block(
                 2,
                 &[RIGHT, &name, EXTRINSICS],
@@ -238,7 +242,9 @@ pub(super) fn solve(
     if config.fixed_intrinsics.is_some() {
         for k in 0..8 {
             problem.fix_variable(LEFT, k);
-            problem.fix_variable(RIGHT, k);
+            if state.stereo {
+                problem.fix_variable(RIGHT, k);
+            }
         }
     }
     let options = tiny_solver::OptimizerOptions {
@@ -254,11 +260,11 @@ pub(super) fn solve(
         if let Some(v) = get(LEFT) {
             state.left = camera_from_vec(&v, &state.left);
         }
-        if let Some(v) = get(RIGHT) {
+        if let Some(v) = get(RIGHT).filter(|_| state.stereo) {
             state.right = camera_from_vec(&v, &state.right);
         }
     }
-    if let Some(v) = get(EXTRINSICS) {
+    if let Some(v) = get(EXTRINSICS).filter(|_| state.stereo) {
         state.right_from_left = pose_from_vec(&v);
     }
     for i in 0..views.len() {
@@ -269,22 +275,46 @@ pub(super) fn solve(
     Ok(())
 }
 
-/// Parameter sigmas: `σ² = rms² · diag((JᵀJ)⁻¹)` over intrinsics, extrinsics and board poses,
-/// with `J` by central differences of the reprojections.
-pub(super) fn parameter_sigmas(
+/// The covariance of the calibrated parameters (the intrinsics of each free camera, then
+/// `right_from_left` as a rotation vector and a translation), board poses marginalised out.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Covariance {
+    /// Each row's and column's parameter, named as [`super::Calibration::sigmas`] names them.
+    pub names: Vec<String>,
+    /// The covariance, in the parameters' units (pixels, radians, metres) squared.
+    pub matrix: DMatrix<f64>,
+}
+
+/// Parameter sigmas and covariance: `Σ = rms² (JᵀJ)⁻¹` over intrinsics, extrinsics and board
+/// poses, with `J` by central differences of the reprojections; the sigmas (one per named
+/// parameter, and the baseline's by propagation through its norm) and the covariance of all
+/// but the board poses. Empty when `JᵀJ` is singular (a parameter the views do not touch).
+pub(super) fn parameter_covariance(
     state: &State,
     views: &[View<'_>],
     config: &CalibConfig,
     rms_px: f64,
-) -> BTreeMap<String, f64> {
+) -> (BTreeMap<String, f64>, Covariance) {
     let free_intrinsics = config.fixed_intrinsics.is_none();
+    let names = super::camera_names(state.stereo);
     let mut x: Vec<f64> = Vec::new();
+    let mut param_names: Vec<String> = Vec::new();
     if free_intrinsics {
-        x.extend(intrinsics_vec(&state.left));
-        x.extend(intrinsics_vec(&state.right));
+        for (side, cam) in names.iter().zip([&state.left, &state.right]) {
+            x.extend(intrinsics_vec(cam));
+            param_names.extend(intrinsics_names(cam).iter().map(|n| format!("{side}.{n}")));
+        }
     }
     let base = x.len();
-    x.extend(pose_vec(&state.right_from_left));
+    if state.stereo {
+        x.extend(pose_vec(&state.right_from_left));
+        param_names.extend(
+            ["rx", "ry", "rz", "tx", "ty", "tz"]
+                .iter()
+                .map(|n| format!("right_from_left.{n}")),
+        );
+    }
+    let poses_from = x.len();
     for p in &state.poses {
         x.extend(pose_vec(p));
     }
@@ -292,12 +322,20 @@ pub(super) fn parameter_sigmas(
         let (cl, cr) = if free_intrinsics {
             (
                 camera_from_vec(&x[0..8], &state.left),
-                camera_from_vec(&x[8..16], &state.right),
+                if state.stereo {
+                    camera_from_vec(&x[8..16], &state.right)
+                } else {
+                    state.right
+                },
             )
         } else {
             (state.left, state.right)
         };
-        let rl = pose_from_vec(&x[base..base + 6]);
+        let rl = if state.stereo {
+            pose_from_vec(&x[base..base + 6])
+        } else {
+            state.right_from_left
+        };
         let mut out = Vec::new();
         for (
             i,
@@ -306,7 +344,7 @@ pub(super) fn parameter_sigmas(
             },
         ) in views.iter().enumerate()
         {
-            let o = base + 6 + 6 * i;
+            let o = poses_from + 6 * i;
             let pl = pose_from_vec(&x[o..o + 6]);
             let pr = rl * pl;
             for (cam, pose, corners) in [(&cl, pl, l), (&cr, pr, r)] {
@@ -338,30 +376,26 @@ pub(super) fn parameter_sigmas(
     let info = jac.transpose() * &jac;
     let mut out = BTreeMap::new();
     let Some(cov) = info.try_inverse() else {
-        return out;
+        return (out, Covariance::default());
     };
     let cov: DMatrix<f64> = cov * rms_px * rms_px;
-    if free_intrinsics {
-        for (k, n) in intrinsics_names(&state.left).iter().enumerate() {
-            out.insert(format!("left.{n}"), cov[(k, k)].max(0.0).sqrt());
-        }
-        for (k, n) in intrinsics_names(&state.right).iter().enumerate() {
-            out.insert(format!("right.{n}"), cov[(8 + k, 8 + k)].max(0.0).sqrt());
-        }
+    for (k, n) in param_names.iter().enumerate() {
+        out.insert(n.clone(), cov[(k, k)].max(0.0).sqrt());
     }
-    for (k, n) in ["rx", "ry", "rz", "tx", "ty", "tz"].iter().enumerate() {
+    if state.stereo {
+        // The baseline's sigma by propagation through its norm.
+        let t = state.right_from_left.translation.vector;
+        let g = DVector::from_vec(vec![t.x, t.y, t.z]) / t.norm().max(1e-12);
+        let ct = cov.view((base + 3, base + 3), (3, 3));
         out.insert(
-            format!("right_from_left.{n}"),
-            cov[(base + k, base + k)].max(0.0).sqrt(),
+            "baseline_m".into(),
+            (g.transpose() * ct * &g)[(0, 0)].max(0.0).sqrt(),
         );
     }
-    // The baseline's sigma by propagation through its norm.
-    let t = state.right_from_left.translation.vector;
-    let g = DVector::from_vec(vec![t.x, t.y, t.z]) / t.norm().max(1e-12);
-    let ct = cov.view((base + 3, base + 3), (3, 3));
-    out.insert(
-        "baseline_m".into(),
-        (g.transpose() * ct * &g)[(0, 0)].max(0.0).sqrt(),
-    );
-    out
+    let n = param_names.len();
+    let covariance = Covariance {
+        names: param_names,
+        matrix: cov.view((0, 0), (n, n)).into_owned(),
+    };
+    (out, covariance)
 }

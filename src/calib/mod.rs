@@ -17,7 +17,8 @@ pub use chessboard::{chessboard_board_corners, chessboard_board_point};
 pub use target::{AprilGridTarget, CheckerboardTarget, Target, TargetDetector, TargetView};
 
 use crate::camera::{Camera, LensModel, StereoRig};
-use bundle::{parameter_sigmas, solve, State};
+pub use bundle::Covariance;
+use bundle::{parameter_covariance, solve, State};
 use init::{board_pose, initial_camera, median_relative, reprojection_error};
 use nalgebra::Isometry3;
 use serde::Serialize;
@@ -72,7 +73,7 @@ impl Default for CalibConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum CalibError {
     /// Too few usable views.
-    #[error("too few views with both cameras seeing at least {min_corners} corners: got {got}, need {need}")]
+    #[error("too few views with {} at least {min_corners} corners: got {got}, need {need}", if *stereo { "both cameras seeing" } else { "the camera seeing" })]
     TooFewViews {
         /// Views found.
         got: usize,
@@ -80,6 +81,8 @@ pub enum CalibError {
         need: usize,
         /// Corners per view needed.
         min_corners: usize,
+        /// Whether both cameras of a rig had to see them.
+        stereo: bool,
     },
     /// Zhang's initialisation has no positive-definite solution.
     #[error("the closed-form initialisation failed: the board views are too alike (all square-on to the camera?), so the focal length cannot be told from the distance; tilt the board up to 45 degrees in turn towards each edge")]
@@ -94,7 +97,7 @@ pub enum CalibError {
 pub struct Outlier {
     /// View name.
     pub view: String,
-    /// `left` or `right`.
+    /// `left` or `right` (`camera` for one camera).
     pub camera: &'static str,
     /// Corner id.
     pub id: u32,
@@ -113,9 +116,13 @@ pub struct ViewResidual {
     pub rms_right_px: f64,
 }
 
-/// The calibration.
+/// The calibration of a stereo rig or of one camera.
 #[derive(Debug, Clone)]
 pub struct Calibration {
+    /// Whether a rig was calibrated; else one camera, `rig.left`, whose views are the `left`
+    /// ones: `rig.right` then repeats it, `right_from_left` is the identity, and the right
+    /// fields (RMS, coverage, corners) are empty. [`Calibration::cameras`] names the cameras.
+    pub stereo: bool,
     /// The rig (robot_from_left identity).
     pub rig: StereoRig,
     /// RMS reprojection error over all corners used, pixels.
@@ -128,10 +135,13 @@ pub struct Calibration {
     pub views: Vec<ViewResidual>,
     /// Corners left out.
     pub outliers: Vec<Outlier>,
-    /// Parameter sigmas by name (`left.fx`, ..., `right_from_left.tx`), one sigma.
+    /// Parameter sigmas by name (`left.fx`, ..., `right_from_left.tx`, `baseline_m`; `camera.fx`,
+    /// ... for one camera), one sigma.
     pub sigmas: BTreeMap<String, f64>,
+    /// The covariance of the intrinsics and `right_from_left` (empty when it is singular).
+    pub covariance: Covariance,
     /// RMS row difference of the same corner in the two rectified images (Bouguet rectification
-    /// of the result), pixels.
+    /// of the result), pixels; 0 for one camera.
     pub epipolar_error_px: f64,
     /// Share of each image's 8 x 6 cells holding at least one corner (left, right).
     pub coverage: (f64, f64),
@@ -173,6 +183,27 @@ const HIGH_ERROR_PX: f64 = 0.5;
 /// A focal length or principal point whose sigma exceeds this share of it gets a warning (1%).
 const POORLY_OBSERVED_SHARE: f64 = 0.01;
 
+/// The cameras' names, as sigmas, reports and messages use them: `left` and `right` for a rig,
+/// `camera` for one camera.
+pub(crate) fn camera_names(stereo: bool) -> &'static [&'static str] {
+    if stereo {
+        &["left", "right"]
+    } else {
+        &["camera"]
+    }
+}
+
+impl Calibration {
+    /// The calibrated cameras with their names: `left` and `right`, or `camera` alone.
+    pub fn cameras(&self) -> Vec<(&'static str, &Camera)> {
+        camera_names(self.stereo)
+            .iter()
+            .copied()
+            .zip([&self.rig.left, &self.rig.right])
+            .collect()
+    }
+}
+
 /// One view's corners in both images (corners keyed by id).
 #[derive(Debug, Clone)]
 pub(crate) struct View<'a> {
@@ -201,23 +232,51 @@ pub fn calibrate_stereo(
     resolution: (u32, u32),
     config: &CalibConfig,
 ) -> Result<Calibration, CalibError> {
-    let views = usable_views(left, right, config)?;
-    let mut state = initial_state(&views, resolution, config)?;
+    adjust(usable_views(left, Some(right), config)?, resolution, config)
+}
+
+/// Calibrates one camera from its views' corners, as [`calibrate_stereo`] does a rig (the
+/// result's `stereo` is false). `config.fixed_intrinsics` must be `None`: one camera with fixed
+/// intrinsics leaves nothing to calibrate.
+pub fn calibrate_camera(
+    views: &ViewCorners,
+    resolution: (u32, u32),
+    config: &CalibConfig,
+) -> Result<Calibration, CalibError> {
+    let config = CalibConfig {
+        fixed_intrinsics: None,
+        ..config.clone()
+    };
+    adjust(usable_views(views, None, &config)?, resolution, &config)
+}
+
+/// The adjustment of one camera's views (their `right` corners empty) or a rig's.
+fn adjust(
+    views: Vec<View<'_>>,
+    resolution: (u32, u32),
+    config: &CalibConfig,
+) -> Result<Calibration, CalibError> {
+    let stereo = views.iter().any(|v| !v.right.is_empty());
+    let mut state = initial_state(&views, resolution, config, stereo)?;
     solve(&mut state, &views, config)?;
     // Outliers: corners far off after the first solve are dropped, listed, and the solve repeated.
     let (views, outliers) = drop_outliers(&state, views, config);
     solve(&mut state, &views, config)?;
     let fit = Fit::of(&state, &views, resolution);
-    let sigmas = parameter_sigmas(&state, &views, config, fit.rms_px);
+    let (sigmas, covariance) = parameter_covariance(&state, &views, config, fit.rms_px);
     let rig = StereoRig {
         left: state.left,
         right: state.right,
         right_from_left: state.right_from_left,
         robot_from_left: Isometry3::identity(),
     };
-    let epipolar_error_px = epipolar_rms(&rig, &views);
-    let warnings = warnings(&rig, &fit, &sigmas, epipolar_error_px, views.len(), config);
-    Ok(Calibration {
+    let epipolar_error_px = if stereo {
+        epipolar_rms(&rig, &views)
+    } else {
+        0.0
+    };
+    let mut calib = Calibration {
+        stereo,
         rig,
         epipolar_error_px,
         rms_px: fit.rms_px,
@@ -226,9 +285,10 @@ pub fn calibrate_stereo(
         views: fit.per_view,
         outliers,
         sigmas,
+        covariance,
         coverage: fit.coverage,
         coverage_counts: fit.coverage_counts,
-        warnings,
+        warnings: Vec::new(),
         used: views
             .iter()
             .zip(&state.poses)
@@ -239,20 +299,25 @@ pub fn calibrate_stereo(
                 left_from_board: *pose,
             })
             .collect(),
-    })
+    };
+    calib.warnings = warnings(&calib, config);
+    Ok(calib)
 }
 
-/// The views both cameras see enough corners of, sorted by name; an error when too few.
+/// The views whose corners are enough (in both cameras when `right` is given; then the right
+/// corners are empty), sorted by name; an error when too few.
 fn usable_views<'a>(
     left: &'a ViewCorners,
-    right: &'a ViewCorners,
+    right: Option<&'a ViewCorners>,
     config: &CalibConfig,
 ) -> Result<Vec<View<'a>>, CalibError> {
     let mut names: Vec<&String> = left
         .keys()
         .filter(|k| {
             left[*k].len() >= config.min_corners
-                && right.get(*k).is_some_and(|r| r.len() >= config.min_corners)
+                && right.is_none_or(|right| {
+                    right.get(*k).is_some_and(|r| r.len() >= config.min_corners)
+                })
         })
         .collect();
     names.sort();
@@ -266,6 +331,7 @@ fn usable_views<'a>(
             got: names.len(),
             need,
             min_corners: config.min_corners,
+            stereo: right.is_some(),
         });
     }
     Ok(names
@@ -273,7 +339,7 @@ fn usable_views<'a>(
         .map(|n| View {
             name: n.as_str(),
             left: left[*n].clone(),
-            right: right[*n].clone(),
+            right: right.map(|r| r[*n].clone()).unwrap_or_default(),
         })
         .collect())
 }
@@ -284,14 +350,33 @@ fn initial_state(
     views: &[View<'_>],
     resolution: (u32, u32),
     config: &CalibConfig,
+    stereo: bool,
 ) -> Result<State, CalibError> {
     let (left, right) = match &config.fixed_intrinsics {
         Some((l, r)) => (*l, *r),
-        None => (
-            initial_camera(views.iter().map(|v| &v.left), resolution, config.model)?,
-            initial_camera(views.iter().map(|v| &v.right), resolution, config.model)?,
-        ),
+        None => {
+            let left = initial_camera(views.iter().map(|v| &v.left), resolution, config.model)?;
+            let right = if stereo {
+                initial_camera(views.iter().map(|v| &v.right), resolution, config.model)?
+            } else {
+                left
+            };
+            (left, right)
+        }
     };
+    if !stereo {
+        let poses = views
+            .iter()
+            .map(|v| board_pose(&left, &v.left).ok_or(CalibError::Initialisation))
+            .collect::<Result<Vec<_>, _>>()?;
+        return Ok(State {
+            left,
+            right,
+            right_from_left: Isometry3::identity(),
+            poses,
+            stereo,
+        });
+    }
     let poses = |cam: &Camera, side: for<'v> fn(&'v View<'_>) -> &'v Vec<Corner>| {
         views
             .iter()
@@ -305,6 +390,7 @@ fn initial_state(
         right,
         right_from_left: median_relative(&poses_l, &poses_r),
         poses: poses_l,
+        stereo,
     })
 }
 
@@ -342,7 +428,8 @@ fn drop_outliers<'a>(
                 };
             let pl = state.poses[i];
             let pr = state.right_from_left * state.poses[i];
-            let left = keep("left", v.left, &state.left, pl);
+            let names = camera_names(state.stereo);
+            let left = keep(names[0], v.left, &state.left, pl);
             let right = keep("right", v.right, &state.right, pr);
             View {
                 name: v.name,
@@ -431,13 +518,15 @@ pub const OUTLIER_SHARE_LIMIT: f64 = 0.2;
 /// Why a calibration cannot be trusted, each with what was found: a principal point outside its
 /// image, a focal length its views do not determine (sigma over [`UNOBSERVED_SHARE`]) or that
 /// disagrees between the cameras (over [`FOCAL_RATIO_LIMIT`]), too many outliers
-/// ([`OUTLIER_SHARE_LIMIT`]), or a camera with every corner rejected. Empty when none. With fixed
-/// intrinsics only the corners are judged.
+/// ([`OUTLIER_SHARE_LIMIT`]), a camera with every corner rejected, or a `right_from_left` the
+/// views do not determine (sigmas over [`UNDETERMINED_BASELINE_SHARE`] or
+/// [`UNDETERMINED_ROTATION_RAD`]). Empty when none. With fixed intrinsics the intrinsics are not
+/// judged.
 pub fn failures(calib: &Calibration, fixed_intrinsics: bool) -> Vec<String> {
     let mut out = Vec::new();
     let rig = &calib.rig;
     if !fixed_intrinsics {
-        for (name, cam) in [("left", &rig.left), ("right", &rig.right)] {
+        for (name, cam) in calib.cameras() {
             let (w, h) = (cam.width as f64, cam.height as f64);
             if !(cam.cx >= 0.0 && cam.cx <= w && cam.cy >= 0.0 && cam.cy <= h) {
                 out.push(format!(
@@ -447,28 +536,35 @@ pub fn failures(calib: &Calibration, fixed_intrinsics: bool) -> Vec<String> {
             }
             for (key, value) in [("fx", cam.fx), ("fy", cam.fy)] {
                 let k = format!("{name}.{key}");
-                if let Some(s) = calib.sigmas.get(&k) {
-                    if s.is_nan() || *s > UNOBSERVED_SHARE * value.abs() {
+                match calib.sigmas.get(&k) {
+                    Some(s) if s.is_nan() || *s > UNOBSERVED_SHARE * value.abs() => {
                         out.push(format!(
                             "{k} = {value:.1} px is not determined by the views (sigma {s:.1} px, over {:.0}%)",
                             100.0 * UNOBSERVED_SHARE
                         ));
                     }
+                    None => out.push(format!(
+                        "{k} = {value:.1} px is not determined by the views (no sigma: the views leave some parameter free)"
+                    )),
+                    Some(_) => {}
                 }
             }
         }
         let ratio = rig.left.fx.abs().max(rig.right.fx.abs())
             / rig.left.fx.abs().min(rig.right.fx.abs()).max(1e-9);
-        if ratio.is_nan() || ratio > FOCAL_RATIO_LIMIT {
+        if calib.stereo && (ratio.is_nan() || ratio > FOCAL_RATIO_LIMIT) {
             out.push(format!(
                 "the focal lengths disagree: left fx {:.1} px, right fx {:.1} px (a factor {ratio:.2}, over {FOCAL_RATIO_LIMIT})",
                 rig.left.fx, rig.right.fx
             ));
         }
     }
+    if calib.stereo {
+        out.extend(undetermined_pose(calib));
+    }
     let kept = |side: fn(&UsedView) -> usize| calib.used.iter().map(side).sum::<usize>();
     let (kept_left, kept_right) = (kept(|v| v.left.len()), kept(|v| v.right.len()));
-    for (name, n) in [("left", kept_left), ("right", kept_right)] {
+    for ((name, _), n) in calib.cameras().into_iter().zip([kept_left, kept_right]) {
         let rejected = calib.outliers.iter().filter(|o| o.camera == name).count();
         if n == 0 && rejected > 0 {
             out.push(format!(
@@ -489,55 +585,93 @@ pub fn failures(calib: &Calibration, fixed_intrinsics: bool) -> Vec<String> {
     out
 }
 
+/// A baseline whose sigma exceeds this share of it is not determined by the views: 5%.
+pub const UNDETERMINED_BASELINE_SHARE: f64 = 0.05;
+/// A relative rotation whose sigma (any axis) exceeds this is not determined: 1 degree.
+pub const UNDETERMINED_ROTATION_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
+
+/// Why `right_from_left` is not determined by the views, if it is not: no sigma (a singular
+/// adjustment), a baseline sigma over [`UNDETERMINED_BASELINE_SHARE`] of it, or a rotation sigma
+/// over [`UNDETERMINED_ROTATION_RAD`].
+fn undetermined_pose(calib: &Calibration) -> Option<String> {
+    let baseline = calib.rig.right_from_left.translation.vector.norm();
+    let Some(sb) = calib.sigmas.get("baseline_m").copied() else {
+        return Some(
+            "right_from_left is not determined by the views (no sigma: the adjustment is singular)"
+                .into(),
+        );
+    };
+    let sr = ["rx", "ry", "rz"]
+        .iter()
+        .filter_map(|k| calib.sigmas.get(&format!("right_from_left.{k}")))
+        .fold(0.0f64, |m, s| m.max(*s));
+    if sb.is_nan() || sb > UNDETERMINED_BASELINE_SHARE * baseline {
+        return Some(format!(
+            "the baseline {:.2} mm is not determined by the views (sigma {:.2} mm, over {:.0}%)",
+            1e3 * baseline,
+            1e3 * sb,
+            100.0 * UNDETERMINED_BASELINE_SHARE
+        ));
+    }
+    if sr.is_nan() || sr > UNDETERMINED_ROTATION_RAD {
+        return Some(format!(
+            "the rotation between the cameras is not determined by the views (sigma {:.2} deg, over {:.0} deg)",
+            sr.to_degrees(),
+            UNDETERMINED_ROTATION_RAD.to_degrees()
+        ));
+    }
+    None
+}
+
 /// What the user should know about the calibration, with what to do.
-fn warnings(
-    rig: &StereoRig,
-    fit: &Fit,
-    sigmas: &BTreeMap<String, f64>,
-    epipolar_error_px: f64,
-    views: usize,
-    config: &CalibConfig,
-) -> Vec<String> {
+fn warnings(calib: &Calibration, config: &CalibConfig) -> Vec<String> {
     let mut warnings = Vec::new();
+    let views = calib.used.len();
     if views < FEW_VIEWS {
         warnings.push(format!(
             "only {views} views: take 20 or more, the board tilted in turn towards each edge"
         ));
     }
-    let coverage = fit.coverage;
-    if coverage.0 < LOW_COVERAGE || coverage.1 < LOW_COVERAGE {
+    let coverage = calib.coverage;
+    if !calib.stereo && coverage.0 < LOW_COVERAGE {
+        warnings.push(format!(
+            "corners cover {:.0}% of the image cells: move the board into the corners and edges of the image",
+            100.0 * coverage.0,
+        ));
+    }
+    if calib.stereo && (coverage.0 < LOW_COVERAGE || coverage.1 < LOW_COVERAGE) {
         warnings.push(format!(
             "corners cover {:.0}% / {:.0}% of the left / right image cells: move the board into the corners and edges of each image",
             100.0 * coverage.0,
             100.0 * coverage.1
         ));
     }
-    let rms_px = fit.rms_px;
+    let rms_px = calib.rms_px;
     if rms_px > HIGH_ERROR_PX {
         warnings.push(format!(
             "RMS reprojection error {rms_px:.2} px: check the target file's sizes, blur and the corner detections"
         ));
     }
     if config.fixed_intrinsics.is_none() {
-        for (name, value) in [
-            ("left.fx", rig.left.fx),
-            ("left.cx", rig.left.cx),
-            ("right.fx", rig.right.fx),
-            ("right.cx", rig.right.cx),
-        ] {
-            if let Some(s) = sigmas.get(name) {
-                if *s > POORLY_OBSERVED_SHARE * value.abs() {
-                    warnings.push(format!(
-                        "{name} is poorly observed (sigma {s:.1} px, {:.1}%): add views with more tilt and at different distances, or fix the intrinsics (--fix-intrinsics)",
-                        100.0 * s / value.abs()
-                    ));
+        for (side, cam) in calib.cameras() {
+            for (key, value) in [("fx", cam.fx), ("cx", cam.cx)] {
+                let name = format!("{side}.{key}");
+                if let Some(s) = calib.sigmas.get(&name) {
+                    if *s > POORLY_OBSERVED_SHARE * value.abs() {
+                        warnings.push(format!(
+                            "{name} is poorly observed (sigma {s:.1} px, {:.1}%): add views with more tilt and at different distances{}",
+                            100.0 * s / value.abs(),
+                            if calib.stereo { ", or fix the intrinsics (--fix-intrinsics)" } else { "" }
+                        ));
+                    }
                 }
             }
         }
     }
-    if epipolar_error_px > HIGH_ERROR_PX {
+    if calib.epipolar_error_px > HIGH_ERROR_PX {
         warnings.push(format!(
-            "corresponding corners are {epipolar_error_px:.2} px apart vertically after rectification: stereo matching will suffer; recalibrate with more views"
+            "corresponding corners are {:.2} px apart vertically after rectification: stereo matching will suffer; recalibrate with more views",
+            calib.epipolar_error_px
         ));
     }
     warnings
@@ -598,9 +732,9 @@ mod tests {
         out
     }
 
-    #[test]
-    fn recovers_a_known_rig_from_exact_corners_and_drops_a_blunder() {
-        let cam = |fx: f64, cx: f64, k1: f64| Camera {
+    /// A 640x480 radtan camera with these focal length, cx and k1.
+    fn distorted(fx: f64, cx: f64, k1: f64) -> Camera {
+        Camera {
             fx,
             fy: fx * 1.002,
             cx,
@@ -614,8 +748,32 @@ mod tests {
             },
             width: 640,
             height: 480,
-        };
-        let (l, r) = (cam(460.0, 322.0, -0.08), cam(455.0, 318.0, -0.07));
+        }
+    }
+
+    /// The `k`-th of a set of board poses at 0.45-0.8 m, tilted up to 20 degrees each way.
+    fn tilted_board(k: usize) -> Isometry3<f64> {
+        let a = k as f64;
+        Isometry3::from_parts(
+            Translation3::new(
+                -0.12 + 0.02 * (a % 3.0),
+                -0.08 + 0.02 * (a % 4.0),
+                0.45 + 0.03 * a,
+            ),
+            UnitQuaternion::from_euler_angles(
+                0.35 * (a * 1.3).sin(),
+                0.35 * (a * 0.7).cos(),
+                0.2 * a.sin(),
+            ),
+        )
+    }
+
+    #[test]
+    fn recovers_a_known_rig_from_exact_corners_and_drops_a_blunder() {
+        let (l, r) = (
+            distorted(460.0, 322.0, -0.08),
+            distorted(455.0, 318.0, -0.07),
+        );
         let right_from_left = Isometry3::from_parts(
             Translation3::new(-0.12, 0.001, 0.002),
             UnitQuaternion::from_euler_angles(0.002, -0.004, 0.001),
@@ -623,19 +781,7 @@ mod tests {
         let mut left_views = ViewCorners::new();
         let mut right_views = ViewCorners::new();
         for k in 0..12 {
-            let a = k as f64;
-            let pose = Isometry3::from_parts(
-                Translation3::new(
-                    -0.12 + 0.02 * (a % 3.0),
-                    -0.08 + 0.02 * (a % 4.0),
-                    0.45 + 0.03 * a,
-                ),
-                UnitQuaternion::from_euler_angles(
-                    0.35 * (a * 1.3).sin(),
-                    0.35 * (a * 0.7).cos(),
-                    0.2 * a.sin(),
-                ),
-            );
+            let pose = tilted_board(k);
             left_views.insert(format!("{k:03}"), grid_corners(&l, &pose));
             right_views.insert(
                 format!("{k:03}"),
@@ -669,6 +815,72 @@ mod tests {
         assert!(
             (t.norm() - right_from_left.translation.vector.norm()).abs() < 1e-4,
             "{t}"
+        );
+    }
+
+    #[test]
+    fn one_view_whose_right_corners_are_all_rejected_fails_saying_so() {
+        let cam = Camera {
+            fx: 460.0,
+            fy: 460.0,
+            cx: 320.0,
+            cy: 240.0,
+            distortion: Distortion::None,
+            width: 640,
+            height: 480,
+        };
+        let right_from_left = Isometry3::translation(-0.12, 0.0, 0.0);
+        let pose = Isometry3::from_parts(
+            Translation3::new(-0.1, -0.08, 0.6),
+            UnitQuaternion::from_euler_angles(0.3, -0.2, 0.1),
+        );
+        let left = ViewCorners::from([("0".to_string(), grid_corners(&cam, &pose))]);
+        let mut wrong = grid_corners(&cam, &(right_from_left * pose));
+        // The right camera's corners matched to scrambled board points (not a symmetry of the
+        // board): no pose explains them.
+        let n = wrong.len();
+        let points: Vec<[f64; 3]> = wrong.iter().map(|c| c.board_m).collect();
+        for (k, c) in wrong.iter_mut().enumerate() {
+            c.board_m = points[(k * 7 + 3) % n];
+        }
+        let right = ViewCorners::from([("0".to_string(), wrong)]);
+        let config = CalibConfig {
+            fixed_intrinsics: Some((cam, cam)),
+            ..CalibConfig::default()
+        };
+        let calib = calibrate_stereo(&left, &right, (640, 480), &config).unwrap();
+        let failed = failures(&calib, true).join("\n");
+        assert!(
+            failed.contains("right_from_left is not determined")
+                || failed.contains("not determined by the views"),
+            "{failed}"
+        );
+        assert!(failed.contains("outliers"), "{failed}");
+    }
+
+    #[test]
+    fn one_camera_is_calibrated_alone_and_named_so() {
+        let cam = distorted(460.0, 322.0, -0.08);
+        let mut views = ViewCorners::new();
+        for k in 0..10 {
+            let pose = tilted_board(k);
+            views.insert(format!("{k:03}"), grid_corners(&cam, &pose));
+        }
+        let calib = calibrate_camera(&views, (640, 480), &CalibConfig::default()).unwrap();
+        assert!(!calib.stereo);
+        assert!(
+            (calib.rig.left.fx - 460.0).abs() < 0.01,
+            "{:?}",
+            calib.rig.left
+        );
+        assert_eq!(calib.cameras().len(), 1);
+        assert!(calib.sigmas.contains_key("camera.fx"), "{:?}", calib.sigmas);
+        assert!(!calib.sigmas.keys().any(|k| k.starts_with("right")));
+        assert_eq!(calib.covariance.names.len(), 8);
+        assert!(
+            failures(&calib, false).is_empty(),
+            "{:?}",
+            failures(&calib, false)
         );
     }
 

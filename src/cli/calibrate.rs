@@ -9,6 +9,13 @@ pub struct Calibrate {
     /// Calibration target (Kalibr target YAML), e.g. calibration/targets/aprilgrid_6x6.yaml.
     #[arg(long)]
     target: PathBuf,
+    /// One camera's images, a glob like 'cam0/*.png': calibrates that camera alone (writes
+    /// camchain.yaml with cam0 only, opencv_camera.yaml and camera.yaml).
+    #[arg(long, conflicts_with_all = ["left", "right", "corners_left", "corners_right", "fix_intrinsics", "rectify_pair"])]
+    images: Option<String>,
+    /// One camera's corners already detected (EuRoC / yac CSV, one file per view).
+    #[arg(long, conflicts_with_all = ["left", "right", "corners_left", "corners_right", "fix_intrinsics", "rectify_pair", "images"])]
+    corners: Option<PathBuf>,
     /// Left images, a glob like 'cam0/*.png' (pairs matched in sorted order).
     #[arg(long)]
     left: Option<String>,
@@ -69,6 +76,8 @@ impl Calibrate {
             &self.left,
             &self.right,
         ) {
+            _ if let Some(images) = &self.images => CalibrationInput::CameraImages(images),
+            _ if let Some(dir) = &self.corners => CalibrationInput::CameraCorners(dir),
             (Some(cl), Some(cr), _, _) => CalibrationInput::Corners {
                 left: cl,
                 right: cr,
@@ -79,7 +88,7 @@ impl Calibrate {
             },
             _ => {
                 return Err(UsageError(
-                    "pass --left GLOB --right GLOB (images) or --corners-left DIR --corners-right DIR (EuRoC CSV)".into(),
+                    "pass --left GLOB --right GLOB (a rig's images), --images GLOB (one camera's), or --corners-left DIR --corners-right DIR / --corners DIR (EuRoC CSV)".into(),
                 )
                 .into())
             }
@@ -111,17 +120,36 @@ impl Calibrate {
             &Bars::new(quiet),
         )?;
         let calib = &output.calibration;
-        let t = calib.rig.right_from_left.translation.vector;
-        tracing::info!(
-            "{} views, {} outliers left out; RMS {:.3} px (left {:.3}, right {:.3}); baseline {:.2} mm ± {:.2}",
-            calib.views.len(),
-            calib.outliers.len(),
-            calib.rms_px,
-            calib.rms_left_px,
-            calib.rms_right_px,
-            t.norm() * 1e3,
-            calib.sigmas.get("baseline_m").copied().unwrap_or(f64::NAN) * 1e3
-        );
+        if calib.stereo {
+            let t = calib.rig.right_from_left.translation.vector;
+            tracing::info!(
+                "{} views, {} outliers left out; RMS {:.3} px (left {:.3}, right {:.3}); baseline {:.2} mm ± {:.2}",
+                calib.views.len(),
+                calib.outliers.len(),
+                calib.rms_px,
+                calib.rms_left_px,
+                calib.rms_right_px,
+                t.norm() * 1e3,
+                calib.sigmas.get("baseline_m").copied().unwrap_or(f64::NAN) * 1e3
+            );
+        } else {
+            let c = &calib.rig.left;
+            let sigma = |k: &str| calib.sigmas.get(k).copied().unwrap_or(f64::NAN);
+            tracing::info!(
+                "{} views, {} outliers left out; RMS {:.3} px; fx {:.2} ± {:.2}, fy {:.2} ± {:.2}, cx {:.2} ± {:.2}, cy {:.2} ± {:.2} px",
+                calib.views.len(),
+                calib.outliers.len(),
+                calib.rms_px,
+                c.fx,
+                sigma("camera.fx"),
+                c.fy,
+                sigma("camera.fy"),
+                c.cx,
+                sigma("camera.cx"),
+                c.cy,
+                sigma("camera.cy"),
+            );
+        }
         for o in &calib.outliers {
             tracing::info!(
                 "  outlier: view {} {} corner {}: {:.2} px",

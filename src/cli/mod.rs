@@ -106,9 +106,12 @@ enum Command {
     ///
     /// Example: stereotag plan --map maps/museum --out plan
     Plan(plan::PlanArgs),
-    /// Calibrate a stereo rig from chessboard or AprilGrid images (or corners already detected):
-    /// Zhang initialisation, bundle adjustment of both cameras and right_from_left with outliers
-    /// listed; writes Kalibr, OpenCV and ROS files, a report and a Rerun recording.
+    /// Calibrate a stereo rig, or one camera (--images), from chessboard or AprilGrid images (or
+    /// corners already detected): Zhang initialisation, bundle adjustment of the cameras and
+    /// right_from_left with outliers listed; writes Kalibr, OpenCV and ROS files, a report and a
+    /// Rerun recording.
+    ///
+    /// Example: stereotag calibrate --target calibration/targets/checkerboard_9x6.yaml --images 'cam0/*.png' --out calib-cam0
     ///
     /// Example: stereotag calibrate --target calibration/targets/checkerboard_9x6.yaml --left 'cam0/*.png' --right 'cam1/*.png' --out calib
     ///

@@ -26,8 +26,8 @@ pub use maps::{
 pub use output::{remove_partial_outputs, OutputDir, PartialFile};
 pub use rig::{
     default_mounting, load_mounted_rig, load_rig, parse_rig, robot_from_forward_camera,
-    save_camera_info, save_opencv_stereo, save_rig, save_rig_exports, save_rig_exports_noted,
-    save_rig_noted, Camchain, KalibrCamera, DEFAULT_RIG,
+    save_camera_exports_noted, save_camera_info, save_opencv_stereo, save_rig, save_rig_exports,
+    save_rig_exports_noted, save_rig_noted, Camchain, KalibrCamera, DEFAULT_RIG,
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run, REORDER_TOLERANCE_S};
 pub use survey::{

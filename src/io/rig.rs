@@ -459,6 +459,61 @@ pub fn save_rig_exports_noted(
     Ok(rect)
 }
 
+/// A Kalibr camchain with one camera, as Kalibr writes a single camera's calibration.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+struct CameraChain<'a> {
+    cam0: &'a KalibrCamera,
+}
+
+/// Writes one camera as a one-camera Kalibr camchain (`camchain.yaml`, `notes` at its top),
+/// OpenCV FileStorage (`opencv_camera.yaml`: `camera_matrix` and `distortion_coefficients`, as
+/// OpenCV's calibration sample writes them) and ROS camera_info (`camera.yaml`, the identity
+/// rectification and `P = [K | 0]`) into `dir`.
+pub fn save_camera_exports_noted(
+    dir: &Path,
+    camera: &Camera,
+    notes: &[String],
+) -> Result<(), IoError> {
+    let path = dir.join("camchain.yaml");
+    let mut text: String = notes.iter().map(|n| format!("# {n}\n")).collect();
+    text.push_str(&to_yaml(
+        &path,
+        &CameraChain {
+            cam0: &kalibr_from(camera, None),
+        },
+    )?);
+    write_file(&path, text.as_bytes())?;
+    let (model, d) = distortion_list(camera);
+    let mat = |name: &str, rows: usize, cols: usize, data: &[f64]| {
+        format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n", fmt_list(data))
+    };
+    let mut s = format!(
+        "%YAML:1.0\n---\nimage_width: {}\nimage_height: {}\n# distortion model: {}\n",
+        camera.width,
+        camera.height,
+        if model == "equidistant" {
+            "fisheye (cv::fisheye, k1..k4)"
+        } else {
+            "k1, k2, p1, p2, k3"
+        }
+    );
+    s += &mat("camera_matrix", 3, 3, &camera_matrix(camera));
+    s += &mat("distortion_coefficients", 1, d.len(), &d);
+    write_file(&dir.join("opencv_camera.yaml"), s.as_bytes())?;
+    let k = camera_matrix(camera);
+    save_camera_info(
+        &dir.join("camera.yaml"),
+        "camera",
+        camera,
+        &nalgebra::Rotation3::identity(),
+        &[
+            [k[0], k[1], k[2], 0.0],
+            [k[3], k[4], k[5], 0.0],
+            [k[6], k[7], k[8], 0.0],
+        ],
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,14 +22,15 @@ const RESIDUAL_PLOT_SCALE: f32 = 100.0;
 /// its corners and residuals (and the rectified pair in a tab), the report; below, all residuals
 /// with their scale, the coverage and the per-view RMS.
 fn layout(calib: &Calibration, arrow_scale: f32) -> Layout {
-    let views = row(
-        [
+    let images = if calib.stereo {
+        vec![
             View::spatial_2d("Left", "/views/left").into(),
             View::spatial_2d("Right", "/views/right").into(),
-        ],
-        &[],
-    )
-    .named(&format!(
+        ]
+    } else {
+        vec![View::spatial_2d("Camera", "/views/left").into()]
+    };
+    let views = row(images, &[]).named(&format!(
         "Corners (dots) and residuals (arrows x{arrow_scale})"
     ));
     let boards = View::spatial_3d("Cameras and boards", "/rig");
@@ -37,37 +38,46 @@ fn layout(calib: &Calibration, arrow_scale: f32) -> Layout {
         Some((eye, target)) => boards.eye_up(eye, target, [0.0, -1.0, 0.0]),
         None => boards,
     };
+    let views = if calib.stereo {
+        tabs([
+            views,
+            View::spatial_2d("Rectified pair", "/rectified").into(),
+        ])
+    } else {
+        views
+    };
+    let mut below = vec![View::spatial_2d(
+        if calib.stereo {
+            "All residuals: left blue, right orange (rings in px)"
+        } else {
+            "All residuals (rings in px)"
+        },
+        "/residuals",
+    )
+    .into()];
+    if calib.stereo {
+        below.push(View::spatial_2d("Coverage left (corners per cell)", "/coverage/left").into());
+        below.push(View::spatial_2d("Coverage right (corners per cell)", "/coverage/right").into());
+    } else {
+        below.push(View::spatial_2d("Coverage (corners per cell)", "/coverage/left").into());
+    }
+    below.push(
+        View::time_series("RMS per view, px", "/rms")
+            .whole_run("view")
+            .into(),
+    );
     Layout {
         root: column(
             [
                 row(
                     [
                         boards.into(),
-                        tabs([
-                            views,
-                            View::spatial_2d("Rectified pair", "/rectified").into(),
-                        ]),
+                        views,
                         View::text_document("Report", "/report").into(),
                     ],
                     &[0.27, 0.48, 0.25],
                 ),
-                row(
-                    [
-                        View::spatial_2d(
-                            "All residuals: left blue, right orange (rings in px)",
-                            "/residuals",
-                        )
-                        .into(),
-                        View::spatial_2d("Coverage left (corners per cell)", "/coverage/left")
-                            .into(),
-                        View::spatial_2d("Coverage right (corners per cell)", "/coverage/right")
-                            .into(),
-                        View::time_series("RMS per view, px", "/rms")
-                            .whole_run("view")
-                            .into(),
-                    ],
-                    &[],
-                ),
+                row(below, &[]),
             ],
             &[0.6, 0.4],
         ),
@@ -136,20 +146,20 @@ impl Recorder {
                 &rerun::EncodedImage::from_file_contents(jpeg(img)?),
             )?;
         }
-        log_rig(rec, &calib.rig)?;
-        log_series_styles(
-            rec,
-            &[
-                ("rms/left", "left", palette::LEFT),
-                ("rms/right", "right", palette::RIGHT),
-            ],
-        )?;
+        log_rig(rec, calib)?;
+        let names = calib.cameras();
+        let styles = [
+            ("rms/left", names[0].0, palette::LEFT),
+            ("rms/right", "right", palette::RIGHT),
+        ];
+        log_series_styles(rec, &styles[..names.len()])?;
         log_board_outlines(rec, calib)?;
         log_all_residuals(rec, calib)?;
-        for (side, counts) in [
+        let sides = [
             ("left", &calib.coverage_counts.0),
             ("right", &calib.coverage_counts.1),
-        ] {
+        ];
+        for (side, counts) in &sides[..calib.cameras().len()] {
             log_coverage(rec, side, counts)?;
         }
         for (k, v) in calib.used.iter().enumerate() {
@@ -210,7 +220,8 @@ fn log_board_outlines(rec: &rerun::RecordingStream, calib: &Calibration) -> Resu
 fn log_all_residuals(rec: &rerun::RecordingStream, calib: &Calibration) -> Result<(), VizError> {
     let right_from_left = calib.rig.right_from_left;
     let mut largest = 0.0f64;
-    for (side, color) in [("left", palette::LEFT), ("right", palette::RIGHT)] {
+    let sides = [("left", palette::LEFT), ("right", palette::RIGHT)];
+    for &(side, color) in &sides[..calib.cameras().len()] {
         let mut points = Vec::new();
         for v in &calib.used {
             let (cam, pose, corners) = if side == "left" {
@@ -288,11 +299,15 @@ fn log_all_residuals(rec: &rerun::RecordingStream, calib: &Calibration) -> Resul
     Ok(())
 }
 
-/// The two cameras, the right one placed from the left.
-fn log_rig(rec: &rerun::RecordingStream, rig: &StereoRig) -> Result<(), VizError> {
+/// The cameras, the right one placed from the left.
+fn log_rig(rec: &rerun::RecordingStream, calib: &Calibration) -> Result<(), VizError> {
+    let rig = &calib.rig;
     rec.log_static("rig", &rerun::ViewCoordinates::RDF())?;
-    rec.log_static("rig/right", &transform(&rig.left_from_right()))?;
-    for (path, cam) in [("rig/left", &rig.left), ("rig/right", &rig.right)] {
+    if calib.stereo {
+        rec.log_static("rig/right", &transform(&rig.left_from_right()))?;
+    }
+    let cameras = [("rig/left", &rig.left), ("rig/right", &rig.right)];
+    for (path, cam) in &cameras[..calib.cameras().len()] {
         rec.log_static(
             format!("{path}/image"),
             &rerun::Pinhole::from_focal_length_and_resolution(
@@ -361,14 +376,20 @@ fn log_view(
     )?;
     if let Some((l, r)) = images {
         for (side, jpeg) in [("left", l), ("right", r)] {
+            if jpeg.is_empty() {
+                continue;
+            }
             rec.log(
                 format!("views/{side}/image"),
                 &rerun::EncodedImage::from_file_contents(jpeg.clone()),
             )?;
         }
     }
-    let right_from_board = rig.right_from_left * v.left_from_board;
     log_residuals(rec, "left", &rig.left, &v.left_from_board, &v.left, scale)?;
+    if v.right.is_empty() {
+        return Ok(());
+    }
+    let right_from_board = rig.right_from_left * v.left_from_board;
     log_residuals(rec, "right", &rig.right, &right_from_board, &v.right, scale)
 }
 

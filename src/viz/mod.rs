@@ -32,9 +32,9 @@ mod survey;
 mod off;
 
 #[cfg(not(feature = "rerun"))]
-pub use off::{jpeg_pair, Recorder};
+pub use off::{jpeg_image, jpeg_pair, Recorder};
 #[cfg(feature = "rerun")]
-pub use recorder::{jpeg_pair, Recorder};
+pub use recorder::{jpeg_image, jpeg_pair, Recorder};
 pub use scene::{CalibrationScene, LocalizeScene, PlanScene, SurveyScene};
 
 use std::path::{Path, PathBuf};

@@ -54,3 +54,8 @@ pub fn jpeg_pair(
 ) -> Option<(Vec<u8>, Vec<u8>)> {
     None
 }
+
+/// No images are kept for a recording in this build.
+pub fn jpeg_image(_img: &image::GrayImage) -> Option<Vec<u8>> {
+    None
+}

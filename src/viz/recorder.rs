@@ -97,6 +97,11 @@ pub fn jpeg_pair(left: &image::GrayImage, right: &image::GrayImage) -> Option<(V
     Some((jpeg(left).ok()?, jpeg(right).ok()?))
 }
 
+/// One image compressed for the recording.
+pub fn jpeg_image(img: &image::GrayImage) -> Option<Vec<u8>> {
+    jpeg(img).ok()
+}
+
 /// One image as JPEG at [`IMAGE_JPEG_QUALITY`].
 pub(super) fn jpeg(img: &image::GrayImage) -> Result<Vec<u8>, VizError> {
     let mut bytes = Vec::new();

@@ -60,7 +60,8 @@ pub struct CalibrationScene<'a> {
     pub report_markdown: &'a str,
     /// Both images of a pair rectified side by side, when one was given.
     pub rectified_pair: Option<&'a image::GrayImage>,
-    /// Each view's left and right images as JPEG, keyed by view name.
+    /// Each view's left and right images as JPEG, keyed by view name (the right one empty for
+    /// one camera).
     pub view_images: &'a BTreeMap<String, (Vec<u8>, Vec<u8>)>,
 }
 

@@ -4,8 +4,8 @@
 
 use super::{Error, Result};
 use crate::calib::{
-    calibrate_stereo, CalibConfig, CalibError, Calibration, Target, TargetDetector, TargetView,
-    ViewCorners,
+    calibrate_camera, calibrate_stereo, CalibConfig, CalibError, Calibration, Target,
+    TargetDetector, TargetView, ViewCorners,
 };
 use crate::camera::{LensModel, StereoRig};
 use crate::io::{self, OutputDir};
@@ -33,6 +33,17 @@ pub enum CalibrationInput<'a> {
         /// Right corners.
         right: &'a Path,
     },
+    /// One camera's images, a glob: the camera alone is calibrated.
+    CameraImages(&'a str),
+    /// One camera's corners already detected (EuRoC / yac CSV, one file per view).
+    CameraCorners(&'a Path),
+}
+
+impl CalibrationInput<'_> {
+    /// Whether these are a rig's views (else one camera's).
+    pub fn stereo(&self) -> bool {
+        matches!(self, Self::Images { .. } | Self::Corners { .. })
+    }
 }
 
 /// What to calibrate from, and how.
@@ -46,7 +57,8 @@ pub struct CalibrateRequest<'a> {
     pub resolution: Option<(u32, u32)>,
     /// The lens model of a free calibration.
     pub model: LensModel,
-    /// Keep this rig file's intrinsics and distortion; solve `right_from_left` only.
+    /// Keep this rig file's intrinsics and distortion; solve `right_from_left` only (a rig's
+    /// views only).
     pub fix_intrinsics: Option<&'a Path>,
     /// The output directory.
     pub out: &'a Path,
@@ -59,6 +71,26 @@ pub struct CalibrateRequest<'a> {
     pub rectify_pair: Option<(&'a Path, &'a Path)>,
     /// Where the recording goes (default: `calibration.rrd` in the output).
     pub recording: RecordingRequest,
+}
+
+impl<'a> CalibrateRequest<'a> {
+    /// A request to calibrate `input` against `target` into `out`, with the defaults: the
+    /// images' size, the radtan model, free intrinsics, a new output directory, nothing written
+    /// when the checks fail, no rectified pair, no recording.
+    pub fn new(target: &'a Path, input: CalibrationInput<'a>, out: &'a Path) -> Self {
+        Self {
+            target,
+            input,
+            resolution: None,
+            model: LensModel::Radtan,
+            fix_intrinsics: None,
+            out,
+            force: false,
+            force_write: false,
+            rectify_pair: None,
+            recording: RecordingRequest::none(),
+        }
+    }
 }
 
 /// A calibration and its report.
@@ -94,31 +126,24 @@ pub struct CalibrationViews {
 
 /// Calibrates a rig and writes `camchain.yaml`, `opencv_stereo.yaml`, `left.yaml`,
 /// `right.yaml`, `report.json`, `rectified.png` (when asked) and the recording into a new
-/// directory. Progress: one step per image pair.
+/// directory; or one camera ([`CalibrationInput::CameraImages`]), written as a one-camera
+/// `camchain.yaml`, `opencv_camera.yaml` and `camera.yaml`. Progress: one step per image.
 ///
 /// ```no_run
 /// use std::path::Path;
-/// use stereotag::camera::LensModel;
 /// use stereotag::progress::Silent;
-/// use stereotag::viz::RecordingRequest;
 /// use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
 ///
+/// let input = CalibrationInput::Images {
+///     left: "images/*_left.jpg",
+///     right: "images/*_right.jpg",
+/// };
 /// let out = calibrate(
-///     &CalibrateRequest {
-///         target: Path::new("calibration/targets/checkerboard_9x6.yaml"),
-///         input: CalibrationInput::Images {
-///             left: "images/*_left.jpg",
-///             right: "images/*_right.jpg",
-///         },
-///         resolution: None,
-///         model: LensModel::Radtan,
-///         fix_intrinsics: None,
-///         out: Path::new("calib/my-rig"),
-///         force: false,
-///         force_write: false,
-///         rectify_pair: None,
-///         recording: RecordingRequest::none(),
-///     },
+///     &CalibrateRequest::new(
+///         Path::new("calibration/targets/checkerboard_9x6.yaml"),
+///         input,
+///         Path::new("calib/my-rig"),
+///     ),
 ///     &Silent,
 /// )?;
 /// println!("baseline {:.4} m", out.calibration.rig.baseline_m());
@@ -129,15 +154,34 @@ pub fn calibrate(
     progress: &dyn Progress,
 ) -> Result<CalibrateOutput> {
     let started = std::time::Instant::now();
+    let stereo = request.input.stereo();
+    if !stereo && request.fix_intrinsics.is_some() {
+        return Err(Error::Request(
+            "--fix-intrinsics is for a rig's extrinsics: one camera with fixed intrinsics leaves nothing to calibrate".into(),
+        ));
+    }
+    if !stereo && request.rectify_pair.is_some() {
+        return Err(Error::Request(
+            "--rectify-pair needs a rig: one camera has no pair to rectify".into(),
+        ));
+    }
     let target = io::load_target(request.target)?;
+    let keep_images = !request.recording.off;
     let views = match request.input {
         CalibrationInput::Corners { left, right } => CalibrationViews {
             left: io::load_corner_csvs(left)?,
             right: io::load_corner_csvs(right)?,
             ..CalibrationViews::default()
         },
+        CalibrationInput::CameraCorners(dir) => CalibrationViews {
+            left: io::load_corner_csvs(dir)?,
+            ..CalibrationViews::default()
+        },
         CalibrationInput::Images { left, right } => {
-            detect_views(&target, left, right, !request.recording.off, progress)?
+            detect_views(&target, left, Some(right), keep_images, progress)?
+        }
+        CalibrationInput::CameraImages(images) => {
+            detect_views(&target, images, None, keep_images, progress)?
         }
     };
     let detect_s = started.elapsed().as_secs_f64();
@@ -168,14 +212,18 @@ pub fn calibrate(
             ))
         }
     };
-    let calib =
-        calibrate_stereo(&views.left, &views.right, resolution, &config).inspect_err(|e| {
-            if matches!(e, CalibError::TooFewViews { .. }) {
-                for m in &views.misses {
-                    tracing::warn!("no usable board in {m}");
-                }
+    let calib = if stereo {
+        calibrate_stereo(&views.left, &views.right, resolution, &config)
+    } else {
+        calibrate_camera(&views.left, resolution, &config)
+    }
+    .inspect_err(|e| {
+        if matches!(e, CalibError::TooFewViews { .. }) {
+            for m in &views.misses {
+                tracing::warn!("no usable board in {m}");
             }
-        })?;
+        }
+    })?;
     let solve_s = started.elapsed().as_secs_f64() - detect_s;
     let failures = crate::calib::failures(&calib, request.fix_intrinsics.is_some());
     if !failures.is_empty() && !request.force_write {
@@ -193,7 +241,11 @@ pub fn calibrate(
             .chain(failures.iter().map(|f| format!("  - {f}")))
             .collect()
     };
-    io::save_rig_exports_noted(&dir.path(""), &calib.rig, &notes)?;
+    if stereo {
+        io::save_rig_exports_noted(&dir.path(""), &calib.rig, &notes)?;
+    } else {
+        io::save_camera_exports_noted(&dir.path(""), &calib.rig.left, &notes)?;
+    }
     for f in &failures {
         tracing::warn!("written despite: {f}");
     }
@@ -235,8 +287,10 @@ pub fn calibrate(
     })
 }
 
-/// `report.json`: the metrics, timings (`[detect, solve, total]` seconds), target, intrinsics,
-/// `right_from_left`, sigmas, per-view residuals, outliers, coverage and warnings.
+/// `report.json`: the metrics, timings (`[detect, solve, total]` seconds), target, intrinsics
+/// (distortion by name), `right_from_left`, sigmas, the covariance of the intrinsics and
+/// `right_from_left`, per-view residuals, outliers, coverage and warnings. One camera's report
+/// has `camera` in place of `left` and `right`, and no extrinsics.
 fn report(
     calib: &Calibration,
     target: &Target,
@@ -245,31 +299,67 @@ fn report(
 ) -> Result<serde_json::Value> {
     let t = calib.rig.right_from_left.translation.vector;
     let (roll, pitch, yaw) = calib.rig.right_from_left.rotation.euler_angles();
-    let intr = |c: &crate::camera::Camera| serde_json::json!({"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "distortion": format!("{:?}", c.distortion)});
-    Ok(serde_json::json!({
-        "metrics": {
-            "rms_px": calib.rms_px,
-            "rms_left_px": calib.rms_left_px,
-            "rms_right_px": calib.rms_right_px,
-            "views_used": calib.views.len(),
-            "outliers": calib.outliers.len(),
-            "baseline_m": t.norm(),
-            "epipolar_error_px": calib.epipolar_error_px,
-            "coverage_left": calib.coverage.0,
-            "coverage_right": calib.coverage.1,
-        },
+    let mut metrics = serde_json::json!({
+        "rms_px": calib.rms_px,
+        "views_used": calib.views.len(),
+        "outliers": calib.outliers.len(),
+    });
+    if calib.stereo {
+        metrics["rms_left_px"] = calib.rms_left_px.into();
+        metrics["rms_right_px"] = calib.rms_right_px.into();
+        metrics["baseline_m"] = t.norm().into();
+        metrics["epipolar_error_px"] = calib.epipolar_error_px.into();
+        metrics["coverage_left"] = calib.coverage.0.into();
+        metrics["coverage_right"] = calib.coverage.1.into();
+    } else {
+        metrics["coverage"] = calib.coverage.0.into();
+    }
+    let cov = &calib.covariance;
+    let mut report = serde_json::json!({
+        "metrics": metrics,
         "timings_s": {"read_and_detect": detect_s, "solve": solve_s, "total": total_s},
         "target": serde_json::to_value(target).map_err(|e| Error::Request(e.to_string()))?,
         "intrinsics_fixed": intrinsics_fixed,
-        "left": intr(&calib.rig.left),
-        "right": intr(&calib.rig.right),
-        "right_from_left": {"t_m": [t.x, t.y, t.z], "roll_pitch_yaw_rad": [roll, pitch, yaw]},
         "sigmas": calib.sigmas,
+        "covariance": {
+            "names": cov.names,
+            "matrix": cov.matrix.row_iter().map(|r| r.iter().copied().collect::<Vec<f64>>()).collect::<Vec<_>>(),
+        },
         "per_view": calib.views,
         "outliers": calib.outliers,
-        "coverage_counts": {"cols": 8, "rows": 6, "left": calib.coverage_counts.0, "right": calib.coverage_counts.1},
         "warnings": calib.warnings,
-    }))
+    });
+    for (name, cam) in calib.cameras() {
+        report[name] = intrinsics_json(cam);
+    }
+    if calib.stereo {
+        report["right_from_left"] =
+            serde_json::json!({"t_m": [t.x, t.y, t.z], "roll_pitch_yaw_rad": [roll, pitch, yaw]});
+        report["coverage_counts"] = serde_json::json!({"cols": 8, "rows": 6, "left": calib.coverage_counts.0, "right": calib.coverage_counts.1});
+    } else {
+        report["coverage_counts"] =
+            serde_json::json!({"cols": 8, "rows": 6, "camera": calib.coverage_counts.0});
+    }
+    Ok(report)
+}
+
+/// A camera's intrinsics for the report: `fx`, `fy`, `cx`, `cy`, and the distortion as its
+/// model's Kalibr name with each coefficient by name.
+fn intrinsics_json(c: &crate::camera::Camera) -> serde_json::Value {
+    let mut distortion = serde_json::Map::new();
+    let model = match c.distortion {
+        crate::camera::Distortion::Equidistant { .. } => "equidistant",
+        crate::camera::Distortion::Radtan { .. } => "radtan",
+        crate::camera::Distortion::None => "none",
+    };
+    distortion.insert("model".into(), model.into());
+    for (name, value) in crate::calib::named_intrinsics(c).into_iter().skip(4) {
+        distortion.insert(name.into(), value.into());
+    }
+    if let crate::camera::Distortion::Radtan { k3, .. } = c.distortion {
+        distortion.insert("k3".into(), k3.into());
+    }
+    serde_json::json!({"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "width": c.width, "height": c.height, "distortion": distortion})
 }
 
 /// The report as the recording shows it (Markdown): the warnings first, the fit, then each
@@ -288,44 +378,71 @@ pub fn report_markdown(calib: &Calibration, intrinsics_fixed: bool) -> String {
         None => format!("{v:.digits$}"),
     };
     let t = calib.rig.right_from_left.translation.vector;
+    if calib.stereo {
+        md.push_str(&format!(
+            "\n## Fit\n\n| value | |\n|---:|---|\n\
+             | {:.3} px | RMS reprojection (left {:.3}, right {:.3}) |\n\
+             | {:.3} px | epipolar error |\n\
+             | {} mm | baseline (± 1σ) |\n\
+             | {} | views used |\n| {} | outliers left out |\n\
+             | {:.0}% / {:.0}% | image cells covered, left / right |\n",
+            calib.rms_px,
+            calib.rms_left_px,
+            calib.rms_right_px,
+            calib.epipolar_error_px,
+            pm(1e3 * t.norm(), sigma("baseline_m").map(|s| 1e3 * s), 2),
+            calib.views.len(),
+            calib.outliers.len(),
+            100.0 * calib.coverage.0,
+            100.0 * calib.coverage.1,
+        ));
+    } else {
+        md.push_str(&format!(
+            "\n## Fit\n\n| value | |\n|---:|---|\n\
+             | {:.3} px | RMS reprojection |\n\
+             | {} | views used |\n| {} | outliers left out |\n\
+             | {:.0}% | image cells covered |\n",
+            calib.rms_px,
+            calib.views.len(),
+            calib.outliers.len(),
+            100.0 * calib.coverage.0,
+        ));
+    }
+    let cameras = calib.cameras();
     md.push_str(&format!(
-        "\n## Fit\n\n| value | |\n|---:|---|\n\
-         | {:.3} px | RMS reprojection (left {:.3}, right {:.3}) |\n\
-         | {:.3} px | epipolar error |\n\
-         | {} mm | baseline (± 1σ) |\n\
-         | {} | views used |\n| {} | outliers left out |\n\
-         | {:.0}% / {:.0}% | image cells covered, left / right |\n",
-        calib.rms_px,
-        calib.rms_left_px,
-        calib.rms_right_px,
-        calib.epipolar_error_px,
-        pm(1e3 * t.norm(), sigma("baseline_m").map(|s| 1e3 * s), 2),
-        calib.views.len(),
-        calib.outliers.len(),
-        100.0 * calib.coverage.0,
-        100.0 * calib.coverage.1,
-    ));
-    md.push_str(&format!(
-        "\n## Intrinsics (± 1σ{})\n\n| | left | right |\n|---|---:|---:|\n",
+        "\n## Intrinsics (± 1σ{})\n\n|{}|\n|---|{}\n",
         if intrinsics_fixed {
             "; fixed, as given"
         } else {
             ""
-        }
+        },
+        cameras
+            .iter()
+            .fold(" ".to_string(), |acc, (n, _)| format!("{acc}| {n} ")),
+        "---:|".repeat(cameras.len()),
     ));
-    let left = crate::calib::named_intrinsics(&calib.rig.left);
-    let right = crate::calib::named_intrinsics(&calib.rig.right);
-    for ((name, l), (_, r)) in left.iter().zip(&right) {
+    let named: Vec<_> = cameras
+        .iter()
+        .map(|(side, cam)| (*side, crate::calib::named_intrinsics(cam)))
+        .collect();
+    for k in 0..8 {
+        let name = named[0].1[k].0;
         let digits = if name.starts_with('f') || name.starts_with('c') {
             2
         } else {
             5
         };
-        md.push_str(&format!(
-            "| {name} | {} | {} |\n",
-            pm(*l, sigma(&format!("left.{name}")), digits),
-            pm(*r, sigma(&format!("right.{name}")), digits)
-        ));
+        md.push_str(&format!("| {name} |"));
+        for (side, values) in &named {
+            md.push_str(&format!(
+                " {} |",
+                pm(values[k].1, sigma(&format!("{side}.{name}")), digits)
+            ));
+        }
+        md.push('\n');
+    }
+    if !calib.stereo {
+        return md;
     }
     md.push_str("\n## Right camera from left (± 1σ)\n\n| | value |\n|---|---:|\n");
     let r = calib.rig.right_from_left.rotation.scaled_axis();
@@ -371,117 +488,121 @@ pub fn rectified_pair(
     out
 }
 
-/// What one image pair gave: its view name, image size, what each camera saw, and the JPEGs
-/// for the recording.
-struct PairFound {
+/// What one image gave: its view name (the file stem), size, the target's corners and the
+/// JPEG for the recording.
+struct ImageFound {
     name: String,
     size: (u32, u32),
-    left: TargetView,
-    right: TargetView,
-    jpegs: Option<(Vec<u8>, Vec<u8>)>,
+    view: TargetView,
+    jpeg: Option<Vec<u8>>,
 }
 
-/// Detects the target's corners in every left and right image (globs), pairs in parallel;
-/// `keep_images` keeps them for the recording.
+/// Detects the target's corners in the left images (a glob) and, for a rig, the right ones,
+/// images in parallel; `keep_images` keeps them for the recording. Left and right are paired
+/// in sorted order and named by the left image.
 pub fn detect_views(
     target: &Target,
     left: &str,
-    right: &str,
+    right: Option<&str>,
     keep_images: bool,
     progress: &dyn Progress,
 ) -> Result<CalibrationViews> {
-    let (lf, rf) = (io::glob(left)?, io::glob(right)?);
-    if lf.len() != rf.len() {
+    let lf = io::glob(left)?;
+    let rf = match right {
+        Some(right) => io::glob(right)?,
+        None => Vec::new(),
+    };
+    if right.is_some() && lf.len() != rf.len() {
         return Err(Error::Request(format!(
             "{} left images but {} right images: the pairs must match",
             lf.len(),
             rf.len()
         )));
     }
-    progress.start("detect", lf.len() as u64);
-    // One detector per worker thread (the C detector is not shared).
-    let pairs: Vec<Result<PairFound>> = lf
+    let paths: Vec<&std::path::PathBuf> = lf.iter().chain(&rf).collect();
+    let mut found = detect_images(target, &paths, keep_images, progress)?.into_iter();
+    let lefts: Vec<ImageFound> = found.by_ref().take(lf.len()).collect();
+    let rights: Vec<Option<ImageFound>> = if right.is_some() {
+        found.map(Some).collect()
+    } else {
+        lefts.iter().map(|_| None).collect()
+    };
+    let mut out = CalibrationViews::default();
+    for (i, (l, r)) in lefts.into_iter().zip(rights).enumerate() {
+        if let Some(r) = r.as_ref().filter(|r| r.size != l.size) {
+            return Err(Error::Request(format!(
+                "{} is {}x{} but {} is {}x{}: left and right images must be the same size",
+                lf[i].display(),
+                l.size.0,
+                l.size.1,
+                rf[i].display(),
+                r.size.0,
+                r.size.1
+            )));
+        }
+        if let Some(before) = out.resolution.filter(|s| *s != l.size) {
+            return Err(Error::Request(format!(
+                "{} is {}x{} but the images before it are {}x{}: one camera, one size",
+                lf[i].display(),
+                l.size.0,
+                l.size.1,
+                before.0,
+                before.1
+            )));
+        }
+        out.resolution = Some(l.size);
+        let misses = std::iter::once((&lf[i], &l.view.miss))
+            .chain(r.as_ref().map(|r| (&rf[i], &r.view.miss)));
+        for (path, miss) in misses {
+            if let Some(m) = miss {
+                tracing::info!("{}: {m}", path.display());
+                out.misses.push(format!("{}: {m}", path.display()));
+            }
+        }
+        if let Some(lj) = l.jpeg {
+            let rj = r.as_ref().and_then(|r| r.jpeg.clone()).unwrap_or_default();
+            out.images.insert(l.name.clone(), (lj, rj));
+        }
+        if let Some(r) = r {
+            out.right.insert(l.name.clone(), r.view.corners);
+        }
+        out.left.insert(l.name, l.view.corners);
+    }
+    Ok(out)
+}
+
+/// Finds the target in every image, in parallel, one detector per worker thread (the C
+/// detector is not shared); the results in the order of `paths`.
+fn detect_images(
+    target: &Target,
+    paths: &[&std::path::PathBuf],
+    keep_images: bool,
+    progress: &dyn Progress,
+) -> Result<Vec<ImageFound>> {
+    progress.start("detect", paths.len() as u64);
+    let found: Vec<Result<ImageFound>> = paths
         .par_iter()
-        .zip(&rf)
         .map_init(
             || TargetDetector::new(target),
-            |detector, (l, r)| {
+            |detector, path| {
                 let detector = detector
                     .as_mut()
                     .map_err(|e| Error::Request(e.to_string()))?;
-                let found = detect_pair(detector, l, r, keep_images)?;
+                let img = io::load_gray(path)?;
+                let found = ImageFound {
+                    name: path
+                        .file_stem()
+                        .map(|s| s.to_string_lossy().into_owned())
+                        .unwrap_or_default(),
+                    size: img.dimensions(),
+                    view: detector.detect(&img)?,
+                    jpeg: keep_images.then(|| crate::viz::jpeg_image(&img)).flatten(),
+                };
                 progress.advance(1);
                 Ok(found)
             },
         )
         .collect();
     progress.finish();
-    let mut out = CalibrationViews::default();
-    for ((pair, l), r) in pairs.into_iter().zip(&lf).zip(&rf) {
-        let pair = pair?;
-        if let Some(j) = pair.jpegs {
-            out.images.insert(pair.name.clone(), j);
-        }
-        if let Some(before) = out.resolution.filter(|s| *s != pair.size) {
-            return Err(Error::Request(format!(
-                "{} is {}x{} but the images before it are {}x{}: one camera, one size",
-                l.display(),
-                pair.size.0,
-                pair.size.1,
-                before.0,
-                before.1
-            )));
-        }
-        out.resolution = Some(pair.size);
-        for (path, miss) in [(l, pair.left.miss), (r, pair.right.miss)] {
-            if let Some(m) = miss {
-                tracing::info!("{}: {m}", path.display());
-                out.misses.push(format!("{}: {m}", path.display()));
-            }
-        }
-        tracing::debug!(
-            "{}: {} left, {} right corners",
-            pair.name,
-            pair.left.corners.len(),
-            pair.right.corners.len()
-        );
-        out.left.insert(pair.name.clone(), pair.left.corners);
-        out.right.insert(pair.name, pair.right.corners);
-    }
-    Ok(out)
-}
-
-/// Reads one pair of images and finds the target in both.
-fn detect_pair(
-    detector: &mut TargetDetector,
-    l: &Path,
-    r: &Path,
-    keep_images: bool,
-) -> Result<PairFound> {
-    let (li, ri) = (io::load_gray(l)?, io::load_gray(r)?);
-    if li.dimensions() != ri.dimensions() {
-        return Err(Error::Request(format!(
-            "{} is {}x{} but {} is {}x{}: left and right images must be the same size",
-            l.display(),
-            li.width(),
-            li.height(),
-            r.display(),
-            ri.width(),
-            ri.height()
-        )));
-    }
-    let name = l
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let jpegs = keep_images
-        .then(|| crate::viz::jpeg_pair(&li, &ri))
-        .flatten();
-    Ok(PairFound {
-        name,
-        size: li.dimensions(),
-        left: detector.detect(&li)?,
-        right: detector.detect(&ri)?,
-        jpegs,
-    })
+    found.into_iter().collect()
 }
