@@ -5,7 +5,10 @@
 //!   combined sigmas; the files written are a one-camera Kalibr camchain, OpenCV's and ROS's;
 //! - extrinsics only (`--fix-intrinsics`) from one shared view of the rendered AprilGrid with the
 //!   true intrinsics: baseline within 1%, rotation within 0.3 degree, each within three of its
-//!   reported sigmas, the covariance in the report.
+//!   reported sigmas, the covariance in the report;
+//! - corners and report out: every view's corners as EuRoC CSV (which calibrate again to the same
+//!   result) and mrcal's `corners.vnl`, per-image counts, the full covariance and the projection
+//!   uncertainty over the image.
 
 use serde_json::Value;
 use std::path::Path;
@@ -126,21 +129,27 @@ fn one_camera_rendered_pinhole_and_fisheye_within_half_a_thousandth() {
     assert_eq!(report["camera"]["distortion"]["model"], "equidistant");
 }
 
+/// The MRPT photos calibrated as a rig into `out`; report.json.
+fn mrpt_stereo(out: &Path) -> Value {
+    let data = "../shared/data/mrpt_stereo_calib";
+    run(
+        CalibrationInput::Images {
+            left: &format!("{data}/*_left.jpg"),
+            right: &format!("{data}/*_right.jpg"),
+        },
+        "calibration/targets/checkerboard_9x6.yaml",
+        LensModel::Radtan,
+        None,
+        out,
+    )
+}
+
 #[test]
 fn mrpt_one_camera_at_a_time_agrees_with_the_stereo_calibration() {
     let data = "../shared/data/mrpt_stereo_calib";
     let target = "calibration/targets/checkerboard_9x6.yaml";
     let dir = tempfile::tempdir().unwrap();
-    let stereo = run(
-        CalibrationInput::Images {
-            left: &format!("{data}/*_left.jpg"),
-            right: &format!("{data}/*_right.jpg"),
-        },
-        target,
-        LensModel::Radtan,
-        None,
-        &dir.path().join("stereo"),
-    );
+    let stereo = mrpt_stereo(&dir.path().join("stereo"));
     for side in ["left", "right"] {
         let mono = run(
             CalibrationInput::CameraImages(&format!("{data}/*_{side}.jpg")),
@@ -261,4 +270,76 @@ fn one_camera_refuses_what_needs_a_rig() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));
     assert!(!dir.path().join("cal").exists());
+}
+
+#[test]
+fn mrpt_corners_come_out_and_calibrate_again() {
+    let target = "calibration/targets/checkerboard_9x6.yaml";
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("images");
+    let first = mrpt_stereo(&out);
+    // Per image: 8 images, each with its 54 corners, used, and its outliers counted.
+    let images = first["images"].as_array().unwrap();
+    assert_eq!(images.len(), 8);
+    for i in images {
+        assert_eq!(i["corners"], 54, "{i}");
+        assert_eq!(i["used"], true, "{i}");
+        assert!(i["outliers"].is_u64() && i["miss"].is_null(), "{i}");
+    }
+    // mrcal's corners.vnl: a header and 54 corners of each of the 8 images.
+    let vnl = std::fs::read_to_string(out.join("corners.vnl")).unwrap();
+    assert!(vnl.starts_with("# filename x y level\n"));
+    assert_eq!(vnl.lines().count(), 1 + 8 * 54);
+    assert!(vnl.lines().nth(1).unwrap().ends_with(" 0"));
+    // The full covariance: both cameras' eight intrinsics and the six of right_from_left.
+    let names = first["covariance"]["names"].as_array().unwrap();
+    assert_eq!(names.len(), 22);
+    let m = first["covariance"]["matrix"].as_array().unwrap();
+    for (i, row) in m.iter().enumerate() {
+        for (j, value) in row.as_array().unwrap().iter().enumerate() {
+            let (a, b) = (value.as_f64().unwrap(), m[j][i].as_f64().unwrap());
+            assert!((a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-30));
+        }
+    }
+    // The projection uncertainty over each image, larger towards the edges than at the centre.
+    let u = first["projection_uncertainty"].as_array().unwrap();
+    assert_eq!(u.len(), 2);
+    for cam in u {
+        let (centre, largest) = (
+            cam["centre_px"].as_f64().unwrap(),
+            cam["max_px"].as_f64().unwrap(),
+        );
+        eprintln!(
+            "{}: projection uncertainty {centre:.3} px at the centre, {largest:.3} px at most",
+            cam["camera"]
+        );
+        assert!(centre > 0.0 && largest > centre);
+        assert_eq!(cam["sigma_px"].as_array().unwrap().len(), 16 * 12);
+    }
+    // The corners written calibrate again to the same rig.
+    let (left, right) = (out.join("corners/left"), out.join("corners/right"));
+    let again = calibrate(
+        &CalibrateRequest {
+            resolution: Some((1024, 768)),
+            ..CalibrateRequest::new(
+                Path::new(target),
+                CalibrationInput::Corners {
+                    left: &left,
+                    right: &right,
+                },
+                &dir.path().join("corners"),
+            )
+        },
+        &Silent,
+    )
+    .unwrap();
+    let fx = first["left"]["fx"].as_f64().unwrap();
+    let rig = again.calibration.rig;
+    assert!(
+        (rig.left.fx - fx).abs() < 1e-5 * fx,
+        "{} vs {fx}",
+        rig.left.fx
+    );
+    let baseline = first["metrics"]["baseline_m"].as_f64().unwrap();
+    assert!((rig.baseline_m() - baseline).abs() < 1e-6);
 }

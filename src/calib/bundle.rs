@@ -378,7 +378,8 @@ pub(super) fn parameter_covariance(
     let Some(cov) = info.try_inverse() else {
         return (out, Covariance::default());
     };
-    let cov: DMatrix<f64> = cov * rms_px * rms_px;
+    // Symmetric, as a covariance is (the inverse is only to rounding).
+    let cov: DMatrix<f64> = (&cov + cov.transpose()) * (0.5 * rms_px * rms_px);
     for (k, n) in param_names.iter().enumerate() {
         out.insert(n.clone(), cov[(k, k)].max(0.0).sqrt());
     }

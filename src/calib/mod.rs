@@ -10,11 +10,15 @@ mod bundle;
 pub mod chessboard;
 mod init;
 mod target;
+mod uncertainty;
 mod xcorner;
 
 pub use aprilgrid::{aprilgrid_board_point, aprilgrid_corners};
 pub use chessboard::{chessboard_board_corners, chessboard_board_point};
 pub use target::{AprilGridTarget, CheckerboardTarget, Target, TargetDetector, TargetView};
+pub use uncertainty::{
+    projection_uncertainty, ProjectionUncertainty, UNCERTAINTY_COLS, UNCERTAINTY_ROWS,
+};
 
 use crate::camera::{Camera, LensModel, StereoRig};
 pub use bundle::Covariance;
@@ -708,13 +712,15 @@ fn epipolar_rms(rig: &StereoRig, views: &[View<'_>]) -> f64 {
     (sum / n.max(1) as f64).sqrt()
 }
 
+/// Cameras, board poses and corners for the calibration's tests.
 #[cfg(test)]
-mod tests {
+pub(crate) mod testing {
     use super::*;
     use crate::camera::Distortion;
     use nalgebra::{Point3, Translation3, UnitQuaternion};
 
-    fn grid_corners(cam: &Camera, camera_from_board: &Isometry3<f64>) -> Vec<Corner> {
+    /// The corners of a 9x6 grid of 3 cm squares that `cam` sees from `camera_from_board`.
+    pub(crate) fn grid_corners(cam: &Camera, camera_from_board: &Isometry3<f64>) -> Vec<Corner> {
         let mut out = Vec::new();
         for i in 0..9 {
             for j in 0..6 {
@@ -733,7 +739,7 @@ mod tests {
     }
 
     /// A 640x480 radtan camera with these focal length, cx and k1.
-    fn distorted(fx: f64, cx: f64, k1: f64) -> Camera {
+    pub(crate) fn distorted(fx: f64, cx: f64, k1: f64) -> Camera {
         Camera {
             fx,
             fy: fx * 1.002,
@@ -752,7 +758,7 @@ mod tests {
     }
 
     /// The `k`-th of a set of board poses at 0.45-0.8 m, tilted up to 20 degrees each way.
-    fn tilted_board(k: usize) -> Isometry3<f64> {
+    pub(crate) fn tilted_board(k: usize) -> Isometry3<f64> {
         let a = k as f64;
         Isometry3::from_parts(
             Translation3::new(
@@ -767,6 +773,14 @@ mod tests {
             ),
         )
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::testing::*;
+    use super::*;
+    use crate::camera::Distortion;
+    use nalgebra::{Translation3, UnitQuaternion};
 
     #[test]
     fn recovers_a_known_rig_from_exact_corners_and_drops_a_blunder() {

@@ -1,6 +1,7 @@
-//! Calibration inputs: Kalibr target YAML and corners already detected (the EuRoC / yac CSV).
+//! Calibration inputs and corners: Kalibr target YAML, corners as EuRoC / yac CSV (read and
+//! written) and as mrcal's `corners.vnl` (written).
 
-use super::{parse_yaml, read_text, IoError};
+use super::{parse_yaml, read_text, write_file, IoError};
 use crate::calib::{Corner, Target, ViewCorners};
 use serde::Deserialize;
 use std::path::Path;
@@ -136,4 +137,68 @@ pub fn load_corner_csvs(dir: &Path) -> Result<ViewCorners, IoError> {
         views.insert(name, corners);
     }
     Ok(views)
+}
+
+/// The header line of EuRoC / yac corner files.
+const CORNER_CSV_HEADER: &str =
+    "#ts,tag_rows,tag_cols,tag_size,tag_spacing,kp_x,kp_y,p_x,p_y,p_z,tag_id,corner_idx";
+
+/// Writes each view's corners into `dir` (created) as EuRoC's calibration data and yac write
+/// them, one `<view>.csv` a view, as [`load_corner_csvs`] reads them back. `ts` is the view's
+/// name when it is a number (a time stamp), else its index; corner id `k` is written as tag
+/// `k / 4`, corner `k % 4` (an AprilGrid's own; a chessboard's corner index round-trips). The
+/// target's rows, columns, size and spacing fill their columns (a chessboard: its inner-corner
+/// rows and columns, the square size and 0).
+pub fn save_corner_csvs(dir: &Path, views: &ViewCorners, target: &Target) -> Result<(), IoError> {
+    std::fs::create_dir_all(dir).map_err(|e| IoError::file(dir, e))?;
+    let (rows, cols, size, spacing) = match target {
+        Target::Aprilgrid(g) => (g.tag_rows, g.tag_cols, g.tag_size, g.tag_spacing),
+        Target::Checkerboard(c) => (c.target_rows, c.target_cols, c.col_spacing_m, 0.0),
+    };
+    for (index, (name, corners)) in views.iter().enumerate() {
+        let ts = name
+            .parse::<u64>()
+            .map_or_else(|_| index.to_string(), |t| t.to_string());
+        let mut text = format!("{CORNER_CSV_HEADER}\n");
+        for c in corners {
+            text.push_str(&format!(
+                "{ts},{rows},{cols},{size:.6},{spacing:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+                c.px[0],
+                c.px[1],
+                c.board_m[0],
+                c.board_m[1],
+                c.board_m[2],
+                c.id / 4,
+                c.id % 4
+            ));
+        }
+        write_file(&dir.join(format!("{name}.csv")), text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Writes a chessboard's corners as mrcal's `corners.vnl` (`# filename x y level`): for every
+/// image, its `cols x rows` corners in mrcal's order (across each row, rows in turn), a corner
+/// not found as `- -` and level `-`, found ones at level 0 (full weight); an image without a
+/// board as one line of dashes.
+pub fn save_corners_vnl(
+    path: &Path,
+    images: &[(String, &[Corner])],
+    cols: u32,
+    rows: u32,
+) -> Result<(), IoError> {
+    let mut text = String::from("# filename x y level\n");
+    for (file, corners) in images {
+        if corners.is_empty() {
+            text.push_str(&format!("{file} - - -\n"));
+            continue;
+        }
+        for k in 0..cols * rows {
+            match corners.iter().find(|c| c.id == k) {
+                Some(c) => text.push_str(&format!("{file} {:.6} {:.6} 0\n", c.px[0], c.px[1])),
+                None => text.push_str(&format!("{file} - - -\n")),
+            }
+        }
+    }
+    write_file(path, text.as_bytes())
 }

@@ -55,11 +55,21 @@ fn layout(calib: &Calibration, arrow_scale: f32) -> Layout {
         "/residuals",
     )
     .into()];
-    if calib.stereo {
-        below.push(View::spatial_2d("Coverage left (corners per cell)", "/coverage/left").into());
-        below.push(View::spatial_2d("Coverage right (corners per cell)", "/coverage/right").into());
+    // Each camera's coverage, and in a tab beside it its projection uncertainty.
+    let names: &[(&str, &str)] = if calib.stereo {
+        &[("left", "Left"), ("right", "Right")]
     } else {
-        below.push(View::spatial_2d("Coverage (corners per cell)", "/coverage/left").into());
+        &[("left", "Camera")]
+    };
+    for (side, title) in names {
+        below.push(tabs([
+            View::spatial_2d(&format!("{title}: coverage"), &format!("/coverage/{side}")).into(),
+            View::spatial_2d(
+                &format!("{title}: uncertainty, px"),
+                &format!("/uncertainty/{side}"),
+            )
+            .into(),
+        ]));
     }
     below.push(
         View::time_series("RMS per view, px", "/rms")
@@ -162,6 +172,7 @@ impl Recorder {
         for (side, counts) in &sides[..calib.cameras().len()] {
             log_coverage(rec, side, counts)?;
         }
+        log_uncertainty(rec, calib)?;
         for (k, v) in calib.used.iter().enumerate() {
             rec.set_time_sequence("view", k as i64);
             log_view(rec, &calib.rig, v, scene.view_images.get(&v.name), scale)?;
@@ -325,26 +336,67 @@ fn log_rig(rec: &rerun::RecordingStream, calib: &Calibration) -> Result<(), VizE
 /// it.
 fn log_coverage(rec: &rerun::RecordingStream, side: &str, counts: &[u32]) -> Result<(), VizError> {
     let max = counts.iter().copied().max().unwrap_or(1).max(1) as f32;
-    let pixels: Vec<u8> = counts
+    log_cells(
+        rec,
+        &format!("coverage/{side}"),
+        COVERAGE_CELLS,
+        &counts
+            .iter()
+            .map(|&n| (n > 0).then_some(n as f32 / max))
+            .collect::<Vec<_>>(),
+        counts.iter().map(u32::to_string),
+    )
+}
+
+/// The projection uncertainty of each camera over its image: a heat map of the worst-direction
+/// sigma with each grid point's value in pixels.
+fn log_uncertainty(rec: &rerun::RecordingStream, calib: &Calibration) -> Result<(), VizError> {
+    let paths = ["uncertainty/left", "uncertainty/right"];
+    for (u, path) in crate::calib::projection_uncertainty(calib)
         .iter()
-        .map(|&n| (40.0 + 215.0 * n as f32 / max) as u8 * u8::from(n > 0))
-        .collect();
-    rec.log_static(
-        format!("coverage/{side}"),
-        &rerun::Image::from_l8(pixels, COVERAGE_CELLS),
-    )?;
-    let cols = COVERAGE_CELLS[0] as usize;
-    rec.log_static(
-        format!("coverage/{side}/counts"),
-        &rerun::Points2D::new(
-            (0..counts.len()).map(|i| [(i % cols) as f32 + 0.5, (i / cols) as f32 + 0.5]),
-        )
-        .with_labels(counts.iter().map(u32::to_string))
-        .with_colors(
-            counts
+        .zip(paths)
+    {
+        let max = u.max_px.max(1e-12) as f32;
+        log_cells(
+            rec,
+            path,
+            [u.cols as u32, u.rows as u32],
+            &u.sigma_px
                 .iter()
-                .map(|&n| {
-                    if n == 0 {
+                .map(|&s| s.is_finite().then_some(s as f32 / max))
+                .collect::<Vec<_>>(),
+            u.sigma_px.iter().map(|s| format!("{s:.2}")),
+        )?;
+    }
+    Ok(())
+}
+
+/// A grid of `cells` (across, down) as a grey heat map (each cell's `shade` 0 to 1; `None` black
+/// and its label in the gated-out colour) with a label on every cell.
+fn log_cells(
+    rec: &rerun::RecordingStream,
+    path: &str,
+    cells: [u32; 2],
+    shade: &[Option<f32>],
+    labels: impl Iterator<Item = String>,
+) -> Result<(), VizError> {
+    let pixels: Vec<u8> = shade
+        .iter()
+        .map(|s| s.map_or(0, |s| (40.0 + 215.0 * s.clamp(0.0, 1.0)) as u8))
+        .collect();
+    rec.log_static(path, &rerun::Image::from_l8(pixels, cells))?;
+    let cols = cells[0] as usize;
+    rec.log_static(
+        format!("{path}/values"),
+        &rerun::Points2D::new(
+            (0..shade.len()).map(|i| [(i % cols) as f32 + 0.5, (i / cols) as f32 + 0.5]),
+        )
+        .with_labels(labels)
+        .with_colors(
+            shade
+                .iter()
+                .map(|s| {
+                    if s.is_none() {
                         palette::GATED_OUT
                     } else {
                         palette::DETECTION

@@ -4,7 +4,7 @@
 
 use super::{Error, Result};
 use crate::calib::{
-    calibrate_camera, calibrate_stereo, CalibConfig, CalibError, Calibration, Target,
+    calibrate_camera, calibrate_stereo, CalibConfig, CalibError, Calibration, Corner, Target,
     TargetDetector, TargetView, ViewCorners,
 };
 use crate::camera::{LensModel, StereoRig};
@@ -120,8 +120,49 @@ pub struct CalibrationViews {
     pub resolution: Option<(u32, u32)>,
     /// Images that gave no usable board, with why.
     pub misses: Vec<String>,
+    /// What each image (or corner file) gave, in input order.
+    pub per_image: Vec<ImageRecord>,
     /// Each view's images as JPEG, when kept for the recording.
     pub images: ViewImages,
+}
+
+/// What one image or corner file gave, for the report.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ImageRecord {
+    /// The image (or corner file).
+    pub image: String,
+    /// Its view's name.
+    pub view: String,
+    /// `left`, `right` or `camera`.
+    pub camera: &'static str,
+    /// AprilGrid tags found (0 for a chessboard).
+    pub tags: usize,
+    /// Board corners found.
+    pub corners: usize,
+    /// Why no board was found, when none was.
+    pub miss: Option<String>,
+}
+
+impl ImageRecord {
+    /// The record of a corner file read for `camera`'s `view` (of an AprilGrid, whose corners
+    /// name their tags, when `aprilgrid`).
+    fn of_corner_file(
+        dir: &Path,
+        view: &str,
+        camera: &'static str,
+        corners: &[Corner],
+        aprilgrid: bool,
+    ) -> Self {
+        let tags: std::collections::BTreeSet<u32> = corners.iter().map(|c| c.id / 4).collect();
+        Self {
+            image: dir.join(format!("{view}.csv")).display().to_string(),
+            view: view.to_string(),
+            camera,
+            tags: if aprilgrid { tags.len() } else { 0 },
+            corners: corners.len(),
+            miss: corners.is_empty().then(|| "no corners in the file".into()),
+        }
+    }
 }
 
 /// Calibrates a rig and writes `camchain.yaml`, `opencv_stereo.yaml`, `left.yaml`,
@@ -168,15 +209,10 @@ pub fn calibrate(
     let target = io::load_target(request.target)?;
     let keep_images = !request.recording.off;
     let views = match request.input {
-        CalibrationInput::Corners { left, right } => CalibrationViews {
-            left: io::load_corner_csvs(left)?,
-            right: io::load_corner_csvs(right)?,
-            ..CalibrationViews::default()
-        },
-        CalibrationInput::CameraCorners(dir) => CalibrationViews {
-            left: io::load_corner_csvs(dir)?,
-            ..CalibrationViews::default()
-        },
+        CalibrationInput::Corners { left, right } => {
+            corner_files(&[(left, "left"), (right, "right")], &target)?
+        }
+        CalibrationInput::CameraCorners(dir) => corner_files(&[(dir, "camera")], &target)?,
         CalibrationInput::Images { left, right } => {
             detect_views(&target, left, Some(right), keep_images, progress)?
         }
@@ -249,6 +285,8 @@ pub fn calibrate(
     for f in &failures {
         tracing::warn!("written despite: {f}");
     }
+    save_corners(&dir, &views, &target)?;
+    let uncertainty = crate::calib::projection_uncertainty(&calib);
     let mut report = report(
         &calib,
         &target,
@@ -256,6 +294,8 @@ pub fn calibrate(
         [detect_s, solve_s, started.elapsed().as_secs_f64()],
     )?;
     report["failures"] = serde_json::json!(failures);
+    report["images"] = images_json(&calib, &views.per_image);
+    report["projection_uncertainty"] = serde_json::json!(uncertainty);
     io::save_json(&dir.path("report.json"), &report)?;
     let rectified = match request.rectify_pair {
         Some((l, r)) => {
@@ -285,6 +325,91 @@ pub fn calibrate(
         calibration: calib,
         report,
     })
+}
+
+/// Every view's corners as `corners/<camera>/<view>.csv` (EuRoC / yac CSV, which
+/// `--corners-left`, `--corners-right` and `--corners` read back), and for a chessboard mrcal's
+/// `corners.vnl` of every image.
+fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> Result<()> {
+    let stereo = !views.right.is_empty();
+    let sides = if stereo {
+        [("left", &views.left), ("right", &views.right)].to_vec()
+    } else {
+        [("camera", &views.left)].to_vec()
+    };
+    for (camera, corners) in &sides {
+        io::save_corner_csvs(&dir.path(&format!("corners/{camera}")), corners, target)?;
+    }
+    if let Target::Checkerboard(board) = target {
+        let images: Vec<(String, &[Corner])> = views
+            .per_image
+            .iter()
+            .map(|r| {
+                let side = if r.camera == "right" {
+                    &views.right
+                } else {
+                    &views.left
+                };
+                let corners = side.get(&r.view).map_or(&[][..], Vec::as_slice);
+                (r.image.clone(), corners)
+            })
+            .collect();
+        io::save_corners_vnl(
+            &dir.path("corners.vnl"),
+            &images,
+            board.target_cols,
+            board.target_rows,
+        )?;
+    }
+    Ok(())
+}
+
+/// Each image's record with whether its view was used and how many of its corners were left
+/// out as outliers; a view that found a board but was not used says why.
+fn images_json(calib: &Calibration, records: &[ImageRecord]) -> serde_json::Value {
+    let used: std::collections::BTreeSet<&str> =
+        calib.used.iter().map(|v| v.name.as_str()).collect();
+    records
+        .iter()
+        .map(|r| {
+            let mut v = serde_json::json!(r);
+            let is_used = used.contains(r.view.as_str());
+            v["used"] = is_used.into();
+            v["outliers"] = calib
+                .outliers
+                .iter()
+                .filter(|o| o.view == r.view && o.camera == r.camera)
+                .count()
+                .into();
+            if !is_used && r.miss.is_none() {
+                v["miss"] = format!(
+                    "{} corners here, or in the other camera's image of this view, fewer than the {} a view needs",
+                    r.corners,
+                    crate::calib::CalibConfig::default().min_corners
+                )
+                .into();
+            }
+            v
+        })
+        .collect()
+}
+
+/// The views of corner files, one directory a camera (`left` and `right`, or `camera` alone).
+fn corner_files(dirs: &[(&Path, &'static str)], target: &Target) -> Result<CalibrationViews> {
+    let aprilgrid = matches!(target, Target::Aprilgrid(_));
+    let mut out = CalibrationViews::default();
+    for (k, (dir, camera)) in dirs.iter().enumerate() {
+        let views = io::load_corner_csvs(dir)?;
+        out.per_image.extend(views.iter().map(|(view, corners)| {
+            ImageRecord::of_corner_file(dir, view, camera, corners, aprilgrid)
+        }));
+        if k == 0 {
+            out.left = views;
+        } else {
+            out.right = views;
+        }
+    }
+    Ok(out)
 }
 
 /// `report.json`: the metrics, timings (`[detect, solve, total]` seconds), target, intrinsics
@@ -441,6 +566,18 @@ pub fn report_markdown(calib: &Calibration, intrinsics_fixed: bool) -> String {
         }
         md.push('\n');
     }
+    let uncertainty = crate::calib::projection_uncertainty(calib);
+    if !uncertainty.is_empty() {
+        md.push_str(
+            "\n## Projection uncertainty (1σ, worst direction, px)\n\n| | centre | median | largest |\n|---|---:|---:|---:|\n",
+        );
+        for u in &uncertainty {
+            md.push_str(&format!(
+                "| {} | {:.3} | {:.3} | {:.3} |\n",
+                u.camera, u.centre_px, u.median_px, u.max_px
+            ));
+        }
+    }
     if !calib.stereo {
         return md;
     }
@@ -551,13 +688,26 @@ pub fn detect_views(
             )));
         }
         out.resolution = Some(l.size);
-        let misses = std::iter::once((&lf[i], &l.view.miss))
-            .chain(r.as_ref().map(|r| (&rf[i], &r.view.miss)));
-        for (path, miss) in misses {
-            if let Some(m) = miss {
+        let (first, second) = if right.is_some() {
+            ("left", "right")
+        } else {
+            ("camera", "")
+        };
+        let found = std::iter::once((&lf[i], &l.view, first))
+            .chain(r.as_ref().map(|r| (&rf[i], &r.view, second)));
+        for (path, view, camera) in found {
+            if let Some(m) = &view.miss {
                 tracing::info!("{}: {m}", path.display());
                 out.misses.push(format!("{}: {m}", path.display()));
             }
+            out.per_image.push(ImageRecord {
+                image: path.display().to_string(),
+                view: l.name.clone(),
+                camera,
+                tags: view.tags.len(),
+                corners: view.corners.len(),
+                miss: view.miss.clone(),
+            });
         }
         if let Some(lj) = l.jpeg {
             let rj = r.as_ref().and_then(|r| r.jpeg.clone()).unwrap_or_default();
