@@ -62,3 +62,33 @@ fn euroc_pair_calibrates_from_its_images() {
     let b = m["baseline_m"].as_f64().unwrap();
     assert!((b - 0.110078).abs() < 0.004, "baseline {b}");
 }
+
+/// `stereotag detect --family aprilgrid36h11` (or `tag36h11b2`) sees the AprilGrid tags the
+/// calibration sees: all 36 in the EuRoC frame, all 72 of the two boards; `tag36h11` alone finds
+/// at most two there (the 2-bit border is not its 1-bit one).
+#[test]
+fn detect_sees_kalibr_aprilgrids() {
+    let count = |family: &str, frame: &str| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_stereotag"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["detect", "--family", family])
+            .arg(Path::new("../shared/data/aprilgrid_frames").join(frame))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let found = json["detections"].as_array().unwrap().clone();
+        for d in &found {
+            let expected = if family == "tag36h11" {
+                "tag36h11"
+            } else {
+                "aprilgrid36h11"
+            };
+            assert_eq!(d["family"], expected, "{d}");
+        }
+        found.len()
+    };
+    assert_eq!(count("aprilgrid36h11", "EuRoC.png"), 36);
+    assert_eq!(count("tag36h11b2", "two_boards.png"), 72);
+    assert!(count("tag36h11", "EuRoC.png") <= 2);
+}

@@ -21,7 +21,9 @@ pub struct Detect {
     /// Detector backend.
     #[arg(long, value_enum, default_value = "apriltag-c")]
     backend: Backend,
-    /// Tag family: tag36h11, tag25h9, tag16h5 or tagStandard41h12 (repeat for several).
+    /// Tag family: tag36h11, tag25h9, tag16h5, tagStandard41h12, or aprilgrid36h11 (alias
+    /// tag36h11b2: Kalibr's AprilGrid tags, with their 2-bit border; searched at their own
+    /// decimations) (repeat for several).
     #[arg(long, default_value = "tag36h11")]
     family: Vec<String>,
     /// Decimation before quad detection (1 = full resolution; default: the survey's, 1.5 with

@@ -84,9 +84,16 @@ impl TagFamily {
         }
     }
 
-    /// A family the detectors look for, from the library's name.
+    /// A family from its name: the library's, or `aprilgrid36h11` (also `tag36h11b2`, the
+    /// 2-bit-border name) for Kalibr's AprilGrid tags.
     pub fn from_name(name: &str) -> Option<Self> {
-        DETECTABLE_FAMILIES.into_iter().find(|f| f.name() == name)
+        if name == "tag36h11b2" {
+            return Some(TagFamily::Aprilgrid36h11);
+        }
+        DETECTABLE_FAMILIES
+            .into_iter()
+            .chain([TagFamily::Aprilgrid36h11])
+            .find(|f| f.name() == name)
     }
 
     pub(super) fn kornia(&self) -> kornia_apriltag::family::TagFamilyKind {

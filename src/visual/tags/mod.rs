@@ -185,12 +185,63 @@ impl Backend {
     /// println!("centre {:?} px, corners {:?}", found[0].centre_px, found[0].corners_px);
     /// # Ok::<(), stereotag::visual::tags::TagError>(())
     /// ```
+    ///
+    /// With [`TagFamily::Aprilgrid36h11`] among the families, Kalibr AprilGrid tags (2-bit
+    /// border) are found too, by [`AprilGridMultiScale`] (the C library whatever the backend; it
+    /// searches its own decimations), beside the backend's search for the other families.
     pub fn detector(self, config: DetectorConfig) -> Result<Box<dyn TagDetector + Send>, TagError> {
+        let grids = config.families.contains(&TagFamily::Aprilgrid36h11);
+        let mut config = config;
+        config.families.retain(|f| *f != TagFamily::Aprilgrid36h11);
+        if !grids {
+            return self.plain_detector(config);
+        }
+        let plain = if config.families.is_empty() {
+            None
+        } else {
+            Some(self.plain_detector(config)?)
+        };
+        Ok(Box::new(WithAprilGrids {
+            grids: AprilGridMultiScale::new()?,
+            plain,
+        }))
+    }
+
+    /// The backend's detector of the tag families (not AprilGrids).
+    fn plain_detector(
+        self,
+        config: DetectorConfig,
+    ) -> Result<Box<dyn TagDetector + Send>, TagError> {
         Ok(match self {
             Backend::Kornia => Box::new(KorniaDetector::new(config)?),
             Backend::KorniaLibrary => Box::new(KorniaDetector::library(config)?),
             Backend::ApriltagC => Box::new(CDetector::new(config)?),
         })
+    }
+}
+
+/// AprilGrid tags and, when other families are asked for too, the backend's tags.
+struct WithAprilGrids {
+    grids: AprilGridMultiScale,
+    plain: Option<Box<dyn TagDetector + Send>>,
+}
+
+impl TagDetector for WithAprilGrids {
+    fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, TagError> {
+        let mut out = self.grids.detect(image)?;
+        if let Some(plain) = &mut self.plain {
+            out.extend(plain.detect(image)?);
+        }
+        out.sort_by(|a, b| {
+            (a.id, a.family.name())
+                .cmp(&(b.id, b.family.name()))
+                .then(a.centre_px[0].total_cmp(&b.centre_px[0]))
+        });
+        Ok(out)
+    }
+
+    fn name(&self) -> &'static str {
+        self.plain.as_ref().map_or("apriltag-c", |p| p.name())
     }
 }
 
