@@ -206,6 +206,12 @@ fn extrinsics_from_one_shared_view_with_the_true_intrinsics() {
         let baseline = t.iter().map(|v| v * v).sum::<f64>().sqrt();
         let sb = report["sigmas"]["baseline_m"].as_f64().unwrap();
         let est = stereotag::io::load_rig(&dir.path().join(view).join("camchain.yaml")).unwrap();
+        // The camchain carries the relative pose's covariance to the tags.
+        let carried = est
+            .right_from_left_covariance
+            .expect("the covariance in the camchain");
+        let stx = report["sigmas"]["right_from_left.tx"].as_f64().unwrap();
+        assert!((carried[(3, 3)].sqrt() - stx).abs() < 1e-6 * stx);
         let angle =
             (truth.right_from_left.rotation.inverse() * est.right_from_left.rotation).angle();
         let error = truth.right_from_left.inverse() * est.right_from_left;

@@ -107,6 +107,7 @@ proptest! {
                 UnitQuaternion::from_euler_angles(0.0, yaw, 0.0),
             ),
             robot_from_left: Isometry3::identity(),
+            right_from_left_covariance: None,
         };
         let p = Vector3::new(x, y, z);
         let l = rig.left.project(&p).unwrap();

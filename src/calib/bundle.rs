@@ -285,6 +285,16 @@ pub struct Covariance {
     pub matrix: DMatrix<f64>,
 }
 
+impl Covariance {
+    /// The 6x6 block from the parameter `first` on (`right_from_left.rx`: the relative pose's),
+    /// when the covariance holds it.
+    pub fn block(&self, first: &str) -> Option<nalgebra::Matrix6<f64>> {
+        let k = self.names.iter().position(|n| n == first)?;
+        (k + 6 <= self.names.len())
+            .then(|| nalgebra::Matrix6::from_fn(|i, j| self.matrix[(k + i, k + j)]))
+    }
+}
+
 /// Parameter sigmas and covariance: `Σ = rms² (JᵀJ)⁻¹` over intrinsics, extrinsics and board
 /// poses, with `J` by central differences of the reprojections; the sigmas (one per named
 /// parameter, and the baseline's by propagation through its norm) and the covariance of all

@@ -273,6 +273,7 @@ fn adjust(
         right: state.right,
         right_from_left: state.right_from_left,
         robot_from_left: Isometry3::identity(),
+        right_from_left_covariance: covariance.block("right_from_left.rx"),
     };
     let epipolar_error_px = if stereo {
         epipolar_rms(&rig, &views)

@@ -273,6 +273,11 @@ pub struct StereoRig {
     pub right_from_left: Isometry3<f64>,
     /// `robot_from_left`: where the left camera sits on the robot.
     pub robot_from_left: Isometry3<f64>,
+    /// The covariance of `right_from_left` from its calibration, as `[rotation vector (rad),
+    /// translation (m)]` (`right_from_left.rx .. tz` of the calibration report), when known
+    /// (`stereotag.right_from_left_covariance` of a camchain `calibrate` wrote). Triangulated tags
+    /// carry it into their covariance.
+    pub right_from_left_covariance: Option<nalgebra::Matrix6<f64>>,
 }
 
 impl StereoRig {

@@ -166,6 +166,7 @@ mod tests {
                 UnitQuaternion::from_euler_angles(0.01, -0.02, 0.015),
             ),
             robot_from_left: nalgebra::Isometry3::identity(),
+            right_from_left_covariance: None,
         };
         let rect = rig.rectify();
         for &(x, y, z) in &[

@@ -45,6 +45,10 @@ pub struct StereotagExtras {
     /// `robot_from_left`, 4x4 row-major.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub robot_from_left: Option<Vec<Vec<f64>>>,
+    /// The covariance of `cam1.T_cn_cnm1` from its calibration, 6x6 row-major over its rotation
+    /// vector (rad) and translation (m): [`StereoRig::right_from_left_covariance`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub right_from_left_covariance: Option<Vec<Vec<f64>>>,
 }
 
 /// A Kalibr camchain file with two cameras.
@@ -280,13 +284,53 @@ fn parse_rig_mounting(
         Some(rows) => Some(isometry_from(path, "stereotag.robot_from_left", rows)?),
         None => None,
     };
+    let right_from_left_covariance = match chain
+        .stereotag
+        .as_ref()
+        .and_then(|s| s.right_from_left_covariance.as_ref())
+    {
+        Some(rows) => Some(covariance_from(
+            path,
+            "stereotag.right_from_left_covariance",
+            rows,
+        )?),
+        None => None,
+    };
     let rig = StereoRig {
         left,
         right,
         right_from_left,
         robot_from_left: default_mounting(),
+        right_from_left_covariance,
     };
     Ok((rig, mounting))
+}
+
+/// A 6x6 covariance from its rows: finite, symmetric (to 1e-9 of its largest entry), with a
+/// non-negative diagonal.
+fn covariance_from(
+    path: &Path,
+    key: &str,
+    rows: &[Vec<f64>],
+) -> Result<nalgebra::Matrix6<f64>, IoError> {
+    let shape_ok = rows.len() == 6 && rows.iter().all(|r| r.len() == 6);
+    if !shape_ok || rows.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(IoError::content(
+            path,
+            format!("`{key}` must be a 6x6 matrix of finite numbers"),
+        ));
+    }
+    let m = nalgebra::Matrix6::from_fn(|i, j| rows[i][j]);
+    let scale = m.abs().max().max(1e-300);
+    if (m - m.transpose()).abs().max() > 1e-9 * scale || (0..6).any(|i| m[(i, i)] < 0.0) {
+        return Err(IoError::content(
+            path,
+            format!(
+                "`{key}` is not a covariance: it must be symmetric with a non-negative diagonal"
+            ),
+        ));
+    }
+    Ok(m)
 }
 
 /// Writes a stereo rig as a Kalibr camchain YAML file.
@@ -303,6 +347,9 @@ pub fn save_rig_noted(path: &Path, rig: &StereoRig, notes: &[String]) -> Result<
         cam1: kalibr_from(&rig.right, Some(rows_from(&rig.right_from_left))),
         stereotag: Some(StereotagExtras {
             robot_from_left: Some(rows_from(&rig.robot_from_left)),
+            right_from_left_covariance: rig
+                .right_from_left_covariance
+                .map(|c| c.row_iter().map(|r| r.iter().copied().collect()).collect()),
         }),
     };
     let mut text: String = notes.iter().map(|n| format!("# {n}\n")).collect();
@@ -517,6 +564,27 @@ pub fn save_camera_exports_noted(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_calibrations_covariance_round_trips_and_a_bad_one_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rig = load_rig(Path::new(DEFAULT_RIG)).unwrap();
+        let mut cov = nalgebra::Matrix6::from_diagonal_element(1e-8);
+        cov[(0, 3)] = 2e-9;
+        cov[(3, 0)] = 2e-9;
+        rig.right_from_left_covariance = Some(cov);
+        let path = dir.path().join("rig.yaml");
+        save_rig(&path, &rig).unwrap();
+        let back = load_rig(&path).unwrap().right_from_left_covariance.unwrap();
+        assert!((back - cov).abs().max() < 1e-15);
+        // The first entry made negative: no covariance.
+        let mut text = read_text(&path).unwrap();
+        let key = text.find("right_from_left_covariance:").unwrap();
+        let first = key + text[key..].find("- - ").unwrap() + 4;
+        text.insert(first, '-');
+        let err = parse_rig(&path, &text).unwrap_err().to_string();
+        assert!(err.contains("right_from_left_covariance"), "{err}");
+    }
 
     #[test]
     fn a_mounting_comes_from_the_run_the_file_or_the_flag() {

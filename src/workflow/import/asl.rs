@@ -226,6 +226,7 @@ pub fn import_asl(
         right: cams[1].camera,
         right_from_left: cams[1].body_from_camera.inverse() * cams[0].body_from_camera,
         robot_from_left: cams[0].body_from_camera,
+        right_from_left_covariance: None,
     };
     let layout = SonarLayout {
         name: "none".into(),

@@ -149,6 +149,7 @@ impl Gathered {
                 (
                     StereoRig {
                         robot_from_left,
+                        right_from_left_covariance: None,
                         ..file_rig
                     },
                     sizes[0].0,
@@ -222,6 +223,7 @@ impl Gathered {
             right: cameras[1],
             right_from_left,
             robot_from_left,
+            right_from_left_covariance: None,
         };
         Ok(((rig, sizes[0].0), from.to_owned()))
     }
