@@ -7,7 +7,9 @@
 //!   result on the same images (reference_output.txt there);
 //! - too few usable views: exit status 2 from the command, the images without a board named.
 
-use nalgebra::{Point2, Vector3};
+mod common;
+
+use common::max_projection_difference_px;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
@@ -97,27 +99,6 @@ fn rendered(
     let truth_rig = stereotag::io::load_rig(&seq.join("rig.yaml")).unwrap();
     let est = stereotag::io::load_rig(&out.join("camchain.yaml")).unwrap();
     (report, truth_rig, est)
-}
-
-/// Largest pixel difference between two cameras' projections over the image (rays through a
-/// 33 x 25 grid of the true camera's pixels, those in front of it).
-fn max_projection_difference_px(truth: &Camera, est: &Camera) -> f64 {
-    let mut worst: f64 = 0.0;
-    for i in 0..=32 {
-        for j in 0..=24 {
-            let px = Point2::new(
-                i as f64 * (truth.width - 1) as f64 / 32.0,
-                j as f64 * (truth.height - 1) as f64 / 24.0,
-            );
-            // Pixels beyond a fisheye's 180 degrees have no ray in front of the camera.
-            let Some(n) = truth.unproject(&px) else {
-                continue;
-            };
-            let q = est.project(&Vector3::new(n.x, n.y, 1.0)).unwrap();
-            worst = worst.max((q - px).norm());
-        }
-    }
-    worst
 }
 
 /// Checks intrinsics and baseline (within `share`) and rotation (within `degrees`) against the

@@ -21,17 +21,21 @@ pub(super) struct State {
     pub(super) stereo: bool,
 }
 
-/// `[fx, fy, cx, cy, d0, d1, d2, d3]`: radtan k1, k2, p1, p2 or equidistant k1..k4.
+/// `[fx, fy, cx, cy, d...]`: radtan k1, k2, p1, p2, equidistant k1..k4, double sphere ξ, α,
+/// extended unified α, β (the length [`intrinsics_names`] gives).
 pub(super) fn intrinsics_vec(c: &Camera) -> Vec<f64> {
-    let d = match c.distortion {
-        Distortion::Radtan { k1, k2, p1, p2, .. } => [k1, k2, p1, p2],
-        Distortion::Equidistant { k1, k2, k3, k4 } => [k1, k2, k3, k4],
-        Distortion::None => [0.0; 4],
-    };
-    vec![c.fx, c.fy, c.cx, c.cy, d[0], d[1], d[2], d[3]]
+    let mut v = vec![c.fx, c.fy, c.cx, c.cy];
+    match c.distortion {
+        Distortion::Radtan { k1, k2, p1, p2, .. } => v.extend([k1, k2, p1, p2]),
+        Distortion::Equidistant { k1, k2, k3, k4 } => v.extend([k1, k2, k3, k4]),
+        Distortion::None => v.extend([0.0; 4]),
+        Distortion::DoubleSphere { xi, alpha } => v.extend([xi, alpha]),
+        Distortion::Eucm { alpha, beta } => v.extend([alpha, beta]),
+    }
+    v
 }
 
-/// The camera of an intrinsics vector, in the model of `like`.
+/// The camera of an intrinsics vector, in the model of `like` (radtan for none).
 pub(super) fn camera_from_vec(v: &[f64], like: &Camera) -> Camera {
     let distortion = match like.distortion {
         Distortion::Equidistant { .. } => Distortion::Equidistant {
@@ -54,6 +58,14 @@ pub(super) fn camera_from_vec(v: &[f64], like: &Camera) -> Camera {
             p2: v[7],
             k3: 0.0,
         },
+        Distortion::DoubleSphere { .. } => Distortion::DoubleSphere {
+            xi: v[4],
+            alpha: v[5],
+        },
+        Distortion::Eucm { .. } => Distortion::Eucm {
+            alpha: v[4],
+            beta: v[5],
+        },
     };
     Camera {
         fx: v[0],
@@ -67,10 +79,14 @@ pub(super) fn camera_from_vec(v: &[f64], like: &Camera) -> Camera {
 }
 
 /// Names of the intrinsics vector's entries.
-pub(super) fn intrinsics_names(c: &Camera) -> [&'static str; 8] {
+pub(super) fn intrinsics_names(c: &Camera) -> &'static [&'static str] {
     match c.distortion {
-        Distortion::Equidistant { .. } => ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
-        _ => ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"],
+        Distortion::Equidistant { .. } => &["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
+        Distortion::DoubleSphere { .. } => &["fx", "fy", "cx", "cy", "xi", "alpha"],
+        Distortion::Eucm { .. } => &["fx", "fy", "cx", "cy", "alpha", "beta"],
+        Distortion::Radtan { .. } | Distortion::None => {
+            &["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"]
+        }
     }
 }
 
@@ -164,6 +180,8 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for RightCorner {
 pub(super) fn lens_model(cam: &Camera) -> LensModel {
     match cam.distortion {
         Distortion::Equidistant { .. } => LensModel::Equidistant,
+        Distortion::DoubleSphere { .. } => LensModel::DoubleSphere,
+        Distortion::Eucm { .. } => LensModel::Eucm,
         Distortion::Radtan { .. } | Distortion::None => LensModel::Radtan,
     }
 }
@@ -240,8 +258,10 @@ pub(super) fn solve(
         }
     }
     if config.fixed_intrinsics.is_some() {
-        for k in 0..8 {
+        for k in 0..intrinsics_vec(&state.left).len() {
             problem.fix_variable(LEFT, k);
+        }
+        for k in 0..intrinsics_vec(&state.right).len() {
             if state.stereo {
                 problem.fix_variable(RIGHT, k);
             }
@@ -328,12 +348,13 @@ pub(super) fn parameter_covariance(
     for p in &state.poses {
         x.extend(pose_vec(p));
     }
+    let n_left = intrinsics_vec(&state.left).len();
     let residuals = |x: &[f64]| -> Vec<f64> {
         let (cl, cr) = if free_intrinsics {
             (
-                camera_from_vec(&x[0..8], &state.left),
+                camera_from_vec(&x[..n_left], &state.left),
                 if state.stereo {
-                    camera_from_vec(&x[8..16], &state.right)
+                    camera_from_vec(&x[n_left..base], &state.right)
                 } else {
                     state.right
                 },

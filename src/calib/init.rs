@@ -89,9 +89,10 @@ pub(super) fn zhang<'a>(
 }
 
 /// A camera to start the adjustment from: Zhang's closed form for radtan lenses; for fisheye
-/// lenses, whose raw corners no homography fits, the equidistant focal length (principal point
-/// at the image centre, no distortion) that best reprojects every view's board pose, searched
-/// from a sixth to twice the image width.
+/// lenses, whose raw corners no homography fits, the focal length (principal point at the image
+/// centre; equidistant without distortion, double sphere ξ 0 and α 0.5, extended unified α 0.5
+/// and β 1) that best reprojects every view's board pose, searched from a sixth to twice the
+/// image width.
 pub(super) fn initial_camera<'a>(
     views: impl Iterator<Item = &'a Vec<Corner>> + Clone,
     resolution: (u32, u32),
@@ -101,17 +102,30 @@ pub(super) fn initial_camera<'a>(
         return zhang(views, resolution);
     }
     let (w, h) = (resolution.0 as f64, resolution.1 as f64);
-    let guess = |f: f64| Camera {
-        fx: f,
-        fy: f,
-        cx: 0.5 * (w - 1.0),
-        cy: 0.5 * (h - 1.0),
-        distortion: Distortion::Equidistant {
+    let lens = match model {
+        // A middle of each fisheye model's range: no sphere offset, half-way between the
+        // pinhole (α = 0) and the sphere; for the extended unified, a sphere (β = 1).
+        LensModel::DoubleSphere => Distortion::DoubleSphere {
+            xi: 0.0,
+            alpha: 0.5,
+        },
+        LensModel::Eucm => Distortion::Eucm {
+            alpha: 0.5,
+            beta: 1.0,
+        },
+        _ => Distortion::Equidistant {
             k1: 0.0,
             k2: 0.0,
             k3: 0.0,
             k4: 0.0,
         },
+    };
+    let guess = |f: f64| Camera {
+        fx: f,
+        fy: f,
+        cx: 0.5 * (w - 1.0),
+        cy: 0.5 * (h - 1.0),
+        distortion: lens,
         width: resolution.0,
         height: resolution.1,
     };

@@ -50,6 +50,15 @@ pub struct CalibConfig {
     /// A corner whose reprojection error exceeds this after the first solve is an outlier, pixels
     /// (ours: 2 px: real detections hold outliers of several pixels, good ones stay below 1).
     pub outlier_px: f64,
+    /// After the second solve of free intrinsics, a corner whose error exceeds this many times
+    /// the fit's own scatter (its robust per-axis sigma, from the median error) is an outlier too, but never
+    /// one under [`CalibConfig::outlier_floor_px`] (ours: 5: a Gaussian corner error passes 5
+    /// sigma once in 270,000; a mis-refined corner on a fisheye's rim, 0.3-2 px off where good
+    /// ones are 0.03 px off, does not).
+    pub outlier_sigmas: f64,
+    /// The second pass never calls a corner within this of its projection an outlier, pixels
+    /// (ours: 0.5 px).
+    pub outlier_floor_px: f64,
     /// Corners a view needs to be used (ours: 12).
     pub min_corners: usize,
     /// Keep these intrinsics (and distortion) fixed and solve the extrinsics only.
@@ -65,6 +74,8 @@ impl Default for CalibConfig {
         Self {
             huber_px: 1.0,
             outlier_px: 2.0,
+            outlier_sigmas: 5.0,
+            outlier_floor_px: 0.5,
             min_corners: 12,
             fixed_intrinsics: None,
             max_iterations: 100,
@@ -219,12 +230,15 @@ pub(crate) struct View<'a> {
     pub(crate) right: Vec<Corner>,
 }
 
-/// A camera's eight calibrated intrinsics by name (`fx`, `fy`, `cx`, `cy` and four distortion
-/// terms), named as [`Calibration::sigmas`] names them (after `left.` or `right.`).
-pub fn named_intrinsics(c: &Camera) -> [(&'static str, f64); 8] {
-    let names = bundle::intrinsics_names(c);
-    let values = bundle::intrinsics_vec(c);
-    std::array::from_fn(|i| (names[i], values[i]))
+/// A camera's calibrated intrinsics by name (`fx`, `fy`, `cx`, `cy` and its lens model's terms:
+/// four for radtan and equidistant, two for double sphere and extended unified), named as
+/// [`Calibration::sigmas`] names them (after `left.`, `right.` or `camera.`).
+pub fn named_intrinsics(c: &Camera) -> Vec<(&'static str, f64)> {
+    bundle::intrinsics_names(c)
+        .iter()
+        .copied()
+        .zip(bundle::intrinsics_vec(c))
+        .collect()
 }
 
 /// Calibrates a stereo rig from corners of the same views in both cameras: the cameras and
@@ -263,9 +277,21 @@ fn adjust(
     let stereo = views.iter().any(|v| !v.right.is_empty());
     let mut state = initial_state(&views, resolution, config, stereo)?;
     solve(&mut state, &views, config)?;
-    // Outliers: corners far off after the first solve are dropped, listed, and the solve repeated.
-    let (views, outliers) = drop_outliers(&state, views, config);
+    // Outliers: corners far off after the first solve are dropped, listed, and the solve
+    // repeated; then, when the intrinsics are free, those far off for the fit's own scatter, and
+    // the solve repeated again. (Fixed intrinsics leave their own mismatch with the views in the
+    // errors, which is no detection's fault: there only the first rule applies.)
+    let (mut views, mut outliers) = drop_outliers(&state, views, config.outlier_px);
     solve(&mut state, &views, config)?;
+    if config.fixed_intrinsics.is_none() {
+        let threshold = scatter_threshold(&state, &views, config);
+        let (kept, more) = drop_outliers(&state, views, threshold);
+        views = kept;
+        if !more.is_empty() {
+            outliers.extend(more);
+            solve(&mut state, &views, config)?;
+        }
+    }
     let fit = Fit::of(&state, &views, resolution);
     let (sigmas, covariance) = parameter_covariance(&state, &views, config, fit.rms_px);
     let rig = StereoRig {
@@ -399,12 +425,39 @@ fn initial_state(
     })
 }
 
-/// The views without the corners whose reprojection error exceeds the outlier threshold, and
-/// those corners.
+/// The outlier threshold of the fit's own scatter: [`CalibConfig::outlier_sigmas`] times the
+/// robust per-axis sigma of the corners' errors (their median over `sqrt(2 ln 2)`, the median of
+/// a 2D Gaussian error's length in sigmas), at least [`CalibConfig::outlier_floor_px`].
+fn scatter_threshold(state: &State, views: &[View<'_>], config: &CalibConfig) -> f64 {
+    let mut errors: Vec<f64> = views
+        .iter()
+        .enumerate()
+        .flat_map(|(i, v)| {
+            let pl = state.poses[i];
+            let pr = state.right_from_left * pl;
+            let left = v
+                .left
+                .iter()
+                .map(move |c| reprojection_error(&state.left, &pl, c));
+            let right = v
+                .right
+                .iter()
+                .map(move |c| reprojection_error(&state.right, &pr, c));
+            left.chain(right)
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
+    let sigma = median / (2.0 * std::f64::consts::LN_2).sqrt();
+    (config.outlier_sigmas * sigma).max(config.outlier_floor_px)
+}
+
+/// The views without the corners whose reprojection error exceeds `threshold_px`, and those
+/// corners.
 fn drop_outliers<'a>(
     state: &State,
     views: Vec<View<'a>>,
-    config: &CalibConfig,
+    threshold_px: f64,
 ) -> (Vec<View<'a>>, Vec<Outlier>) {
     let mut outliers = Vec::new();
     let views = views
@@ -417,7 +470,7 @@ fn drop_outliers<'a>(
                         .into_iter()
                         .filter(|c| {
                             let e = reprojection_error(cam, &pose, c);
-                            if e > config.outlier_px {
+                            if e > threshold_px {
                                 outliers.push(Outlier {
                                     view: v.name.to_string(),
                                     camera: side,

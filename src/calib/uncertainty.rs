@@ -8,7 +8,7 @@
 
 use super::bundle::{camera_from_vec, intrinsics_vec};
 use super::Calibration;
-use nalgebra::{Matrix2, Point2, SMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix2, Point2, Vector3};
 use serde::Serialize;
 
 /// Grid points across the image.
@@ -55,12 +55,14 @@ fn camera_uncertainty(
 ) -> Option<ProjectionUncertainty> {
     let names = &calib.covariance.names;
     let first = names.iter().position(|n| n == &format!("{name}.fx"))?;
-    if first + 8 > names.len() {
+    let intrinsics = intrinsics_vec(cam);
+    let count = intrinsics.len();
+    if first + count > names.len() {
         return None;
     }
-    let sigma =
-        SMatrix::<f64, 8, 8>::from_fn(|i, j| calib.covariance.matrix[(first + i, first + j)]);
-    let intrinsics = intrinsics_vec(cam);
+    let sigma = DMatrix::from_fn(count, count, |i, j| {
+        calib.covariance.matrix[(first + i, first + j)]
+    });
     // The pixel of `ray` through the intrinsics `k` (radtan's fixed k3 kept).
     let project = |k: &[f64], ray: &Vector3<f64>| -> Option<Point2<f64>> {
         camera_from_vec(k, cam).project(ray)
@@ -73,8 +75,8 @@ fn camera_uncertainty(
             return f64::NAN;
         };
         let ray = Vector3::new(n.x, n.y, 1.0);
-        let mut jac = SMatrix::<f64, 2, 8>::zeros();
-        for j in 0..8 {
+        let mut jac = DMatrix::zeros(2, count);
+        for j in 0..count {
             let step = 1e-6 * intrinsics[j].abs().max(1e-3);
             let mut k = intrinsics.clone();
             k[j] += step;
@@ -86,8 +88,12 @@ fn camera_uncertainty(
             jac[(0, j)] = (plus.x - minus.x) / (2.0 * step);
             jac[(1, j)] = (plus.y - minus.y) / (2.0 * step);
         }
-        let sq: Matrix2<f64> = jac * sigma * jac.transpose();
-        sq.symmetric_eigenvalues().max().max(0.0).sqrt()
+        let sq = &jac * &sigma * jac.transpose();
+        Matrix2::from_fn(|i, j| sq[(i, j)])
+            .symmetric_eigenvalues()
+            .max()
+            .max(0.0)
+            .sqrt()
     };
     for r in 0..UNCERTAINTY_ROWS {
         for c in 0..UNCERTAINTY_COLS {

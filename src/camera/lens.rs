@@ -7,7 +7,15 @@
 //!   `xd = x (1 + k1 r2 + k2 r2² + k3 r2³) + 2 p1 x y + p2 (r2 + 2 x²)`, and symmetrically for
 //!   `yd`;
 //! * **equidistant** (Kannala-Brandt, Kalibr `equidistant`, OpenCV fisheye): `θ = atan(r)`,
-//!   `θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, `(xd, yd) = (θd / r) (x, y)`.
+//!   `θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, `(xd, yd) = (θd / r) (x, y)`;
+//! * **double sphere** (Usenko et al. 2018, Kalibr `ds`): of the normalised point `(x, y, 1)`,
+//!   `d1 = √(r² + 1)`, `z' = ξ d1 + 1`, `d2 = √(r² + z'²)`, `(xd, yd) = (x, y) / (α d2 + (1 −
+//!   α) z')`;
+//! * **extended unified** (Khomutenko et al. 2016, Kalibr `eucm`): `d = √(β r² + 1)`,
+//!   `(xd, yd) = (x, y) / (α d + 1 − α)`.
+//!
+//! The last two are written here on the normalised point, so on points in front of the camera:
+//! a lens seeing beyond 180 degrees is cut at 180.
 
 use tiny_solver::na::RealField;
 
@@ -19,6 +27,20 @@ pub enum LensModel {
     Radtan,
     /// Equidistant (Kannala-Brandt) k1..k4, for fisheye lenses.
     Equidistant,
+    /// Double sphere ξ, α (Kalibr `ds-none`), for fisheye lenses.
+    DoubleSphere,
+    /// Extended unified α, β (Kalibr `eucm-none`), for fisheye lenses.
+    Eucm,
+}
+
+impl LensModel {
+    /// How many lens parameters follow `fx, fy, cx, cy`.
+    pub fn lens_parameters(&self) -> usize {
+        match self {
+            LensModel::Radtan | LensModel::Equidistant => 4,
+            LensModel::DoubleSphere | LensModel::Eucm => 2,
+        }
+    }
 }
 
 /// Below this radius (normalised) the equidistant model is the identity (its `θd / r` is 1 in
@@ -55,8 +77,27 @@ pub fn equidistant<T: RealField>([k1, k2, k3, k4]: [T; 4], x: T, y: T) -> [T; 2]
     [s.clone() * x, s * y]
 }
 
+/// Double-sphere distortion of normalised `(x, y)` with `[ξ, α]`.
+pub fn double_sphere<T: RealField>([xi, alpha]: [T; 2], x: T, y: T) -> [T; 2] {
+    let r2 = x.clone() * x.clone() + y.clone() * y.clone();
+    let d1 = (r2.clone() + T::one()).sqrt();
+    let zp = xi * d1 + T::one();
+    let d2 = (r2 + zp.clone() * zp.clone()).sqrt();
+    let den = alpha.clone() * d2 + (T::one() - alpha) * zp;
+    [x / den.clone(), y / den]
+}
+
+/// Extended-unified distortion of normalised `(x, y)` with `[α, β]`.
+pub fn eucm<T: RealField>([alpha, beta]: [T; 2], x: T, y: T) -> [T; 2] {
+    let r2 = x.clone() * x.clone() + y.clone() * y.clone();
+    let d = (beta * r2 + T::one()).sqrt();
+    let den = alpha.clone() * d + (T::one() - alpha);
+    [x / den.clone(), y / den]
+}
+
 /// Pixel of a point `p` in the camera frame through intrinsics `k` = `[fx, fy, cx, cy, d...]`
-/// (`d`: radtan `k1, k2, p1, p2` with k3 zero, or equidistant `k1..k4`): `u = fx xd + cx`,
+/// (`d`: radtan `k1, k2, p1, p2` with k3 zero, equidistant `k1..k4`, double sphere `ξ, α`,
+/// extended unified `α, β`): `u = fx xd + cx`,
 /// `v = fy yd + cy`.
 pub fn project<T: RealField>(k: &[T], model: LensModel, p: [T; 3]) -> [T; 2] {
     let [px, py, pz] = p;
@@ -65,6 +106,8 @@ pub fn project<T: RealField>(k: &[T], model: LensModel, p: [T; 3]) -> [T; 2] {
     let [xd, yd] = match model {
         LensModel::Radtan => radtan([d(0), d(1), d(2), d(3), T::zero()], x, y),
         LensModel::Equidistant => equidistant([d(0), d(1), d(2), d(3)], x, y),
+        LensModel::DoubleSphere => double_sphere([d(0), d(1)], x, y),
+        LensModel::Eucm => eucm([d(0), d(1)], x, y),
     };
     [
         k[0].clone() * xd + k[2].clone(),
@@ -97,6 +140,14 @@ mod tests {
                 k3: -0.08,
                 k4: 0.04,
             },
+            Distortion::DoubleSphere {
+                xi: -0.18,
+                alpha: 0.59,
+            },
+            Distortion::Eucm {
+                alpha: 0.6,
+                beta: 1.1,
+            },
         ];
         for d in models {
             for (x, y) in [(0.3, -0.2), (-0.7, 0.5), (1.1, 0.9), (1e-7, 0.0)] {
@@ -117,6 +168,10 @@ mod tests {
                         Distortion::Equidistant { k1, k2, k3, k4 } => {
                             equidistant([c(k1), c(k2), c(k3), c(k4)], dx, dy)
                         }
+                        Distortion::DoubleSphere { xi, alpha } => {
+                            double_sphere([c(xi), c(alpha)], dx, dy)
+                        }
+                        Distortion::Eucm { alpha, beta } => eucm([c(alpha), c(beta)], dx, dy),
                         Distortion::None => unreachable!("not in the list"),
                     };
                     // The same function in dual numbers: equal but for rounding (num-dual

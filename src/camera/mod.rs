@@ -51,6 +51,20 @@ pub enum Distortion {
         /// θ⁹ term.
         k4: f64,
     },
+    /// Double sphere (Kalibr `ds`): ξ, α ([`lens`]).
+    DoubleSphere {
+        /// The second sphere's offset ξ.
+        xi: f64,
+        /// α, from 0 to 1.
+        alpha: f64,
+    },
+    /// Extended unified (Kalibr `eucm`): α, β ([`lens`]).
+    Eucm {
+        /// α, from 0 to 1.
+        alpha: f64,
+        /// β, positive.
+        beta: f64,
+    },
 }
 
 /// A camera: pinhole projection with distortion.
@@ -98,6 +112,12 @@ pub enum CameraError {
     },
 }
 
+/// The Jacobian of `(x, y) / den(x² + y²)` given `den` and its derivative by `x² + y²`.
+fn radial_quotient_jacobian(x: f64, y: f64, den: f64, dden: f64) -> Matrix2<f64> {
+    let (s, k) = (1.0 / den, -2.0 * dden / (den * den));
+    Matrix2::new(s + k * x * x, k * x * y, k * x * y, s + k * y * y)
+}
+
 /// Largest Gauss-Newton steps taken to undistort a point.
 const UNDISTORT_ITERATIONS: usize = 20;
 /// Undistortion stops when the residual is below this (normalised units, about 1e-7 px).
@@ -114,6 +134,8 @@ impl Distortion {
             Distortion::Equidistant { k1, k2, k3, k4 } => {
                 lens::equidistant([k1, k2, k3, k4], n.x, n.y)
             }
+            Distortion::DoubleSphere { xi, alpha } => lens::double_sphere([xi, alpha], n.x, n.y),
+            Distortion::Eucm { alpha, beta } => lens::eucm([alpha, beta], n.x, n.y),
         };
         Vector2::new(xd, yd)
     }
@@ -164,6 +186,22 @@ impl Distortion {
                     s + y * ds_dr * uy,
                 )
             }
+            // Both are (x, y) / den(q), q = r²: J = I / den − 2 den'(q) (x, y)ᵀ(x, y) / den².
+            Distortion::DoubleSphere { xi, alpha } => {
+                let q = x * x + y * y;
+                let d1 = (q + 1.0).sqrt();
+                let zp = xi * d1 + 1.0;
+                let d2 = (q + zp * zp).sqrt();
+                let den = alpha * d2 + (1.0 - alpha) * zp;
+                let dzp = xi / (2.0 * d1);
+                let dd2 = (1.0 + 2.0 * zp * dzp) / (2.0 * d2);
+                radial_quotient_jacobian(x, y, den, alpha * dd2 + (1.0 - alpha) * dzp)
+            }
+            Distortion::Eucm { alpha, beta } => {
+                let d = (beta * (x * x + y * y) + 1.0).sqrt();
+                let den = alpha * d + 1.0 - alpha;
+                radial_quotient_jacobian(x, y, den, alpha * beta / (2.0 * d))
+            }
         }
     }
 
@@ -203,6 +241,10 @@ impl Camera {
             Distortion::Equidistant { k1, k2, k3, k4 } => {
                 [k1, k2, k3, k4].iter().all(|v| v.is_finite())
             }
+            Distortion::DoubleSphere { xi, alpha } => {
+                xi.is_finite() && (0.0..=1.0).contains(&alpha)
+            }
+            Distortion::Eucm { alpha, beta } => (0.0..=1.0).contains(&alpha) && beta > 0.0,
         };
         if !(self.fx.is_finite()
             && self.fy.is_finite()

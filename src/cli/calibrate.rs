@@ -31,8 +31,9 @@ pub struct Calibrate {
     /// Image size WIDTHxHEIGHT (needed with corner files without --fix-intrinsics; images give it).
     #[arg(long)]
     resolution: Option<String>,
-    /// Lens model of the free calibration: radtan (Kalibr pinhole-radtan) or equidistant
-    /// (pinhole-equi, for fisheye lenses).
+    /// Lens model of the free calibration: radtan (Kalibr pinhole-radtan), or for fisheye
+    /// lenses equidistant (pinhole-equi), ds (double sphere, ds-none) or eucm (extended unified,
+    /// eucm-none).
     #[arg(long, value_enum, default_value_t = Model::Radtan)]
     model: Model,
     /// Keep this rig file's intrinsics and distortion; solve right_from_left only.
@@ -66,6 +67,10 @@ enum Model {
     Radtan,
     /// Equidistant (Kannala-Brandt) k1..k4, for fisheye lenses.
     Equidistant,
+    /// Double sphere xi, alpha (Kalibr ds-none), for fisheye lenses.
+    Ds,
+    /// Extended unified alpha, beta (Kalibr eucm-none), for fisheye lenses.
+    Eucm,
 }
 
 impl Calibrate {
@@ -106,6 +111,8 @@ impl Calibrate {
                 model: match self.model {
                     Model::Radtan => LensModel::Radtan,
                     Model::Equidistant => LensModel::Equidistant,
+                    Model::Ds => LensModel::DoubleSphere,
+                    Model::Eucm => LensModel::Eucm,
                 },
                 fix_intrinsics: self.fix_intrinsics.as_deref(),
                 out: &self.out,

@@ -29,6 +29,8 @@ pub const FILES: &[(&str, &[u8])] = &[
     bundle!("calibration/rigs/default.yaml"),
     bundle!("calibration/rigs/euroc_official.yaml"),
     bundle!("calibration/rigs/fisheye_example.yaml"),
+    bundle!("calibration/rigs/double_sphere_example.yaml"),
+    bundle!("calibration/rigs/eucm_example.yaml"),
     bundle!("calibration/targets/aprilgrid_6x6.yaml"),
     bundle!("calibration/targets/checkerboard_9x6.yaml"),
 ];

@@ -66,32 +66,49 @@ pub struct Camchain {
 
 pub(crate) fn camera_from(path: &Path, key: &str, c: &KalibrCamera) -> Result<Camera, IoError> {
     let bad = |m: String| IoError::content(path, format!("`{key}.{m}"));
-    if c.camera_model != "pinhole" {
-        return Err(bad(format!(
-            "camera_model` is `{}`; only `pinhole` is supported",
-            c.camera_model
-        )));
-    }
-    let [fx, fy, cx, cy] = c.intrinsics[..] else {
-        return Err(bad(format!(
-            "intrinsics` needs 4 numbers [fu, fv, pu, pv], found {}",
-            c.intrinsics.len()
-        )));
-    };
     let [width, height] = c.resolution[..] else {
         return Err(bad("resolution` needs [width, height]".into()));
     };
-    let d = &c.distortion_coeffs;
-    let distortion = match (c.distortion_model.as_str(), d.len()) {
-        ("none", 0) => Distortion::None,
-        ("radtan", 4) => Distortion::Radtan { k1: d[0], k2: d[1], p1: d[2], p2: d[3], k3: 0.0 },
-        ("radtan", 5) => Distortion::Radtan { k1: d[0], k2: d[1], p1: d[2], p2: d[3], k3: d[4] },
-        ("equidistant", 4) => Distortion::Equidistant { k1: d[0], k2: d[1], k3: d[2], k4: d[3] },
-        (m, n) => {
+    let (fx, fy, cx, cy, lens) = match (c.camera_model.as_str(), &c.intrinsics[..]) {
+        ("pinhole", &[fx, fy, cx, cy]) => (fx, fy, cx, cy, None),
+        ("ds", &[xi, alpha, fx, fy, cx, cy]) => {
+            (fx, fy, cx, cy, Some(Distortion::DoubleSphere { xi, alpha }))
+        }
+        ("eucm", &[alpha, beta, fx, fy, cx, cy]) => {
+            (fx, fy, cx, cy, Some(Distortion::Eucm { alpha, beta }))
+        }
+        ("pinhole", i) => {
             return Err(bad(format!(
-                "distortion_model` `{m}` with {n} coefficients: expected radtan (4 or 5), equidistant (4) or none (0)"
+                "intrinsics` needs 4 numbers [fu, fv, pu, pv], found {}",
+                i.len()
             )))
         }
+        ("ds" | "eucm", i) => {
+            return Err(bad(format!(
+                "intrinsics` of a `{}` camera needs 6 numbers ({}, fu, fv, pu, pv), found {}",
+                c.camera_model,
+                if c.camera_model == "ds" { "xi, alpha" } else { "alpha, beta" },
+                i.len()
+            )))
+        }
+        (m, _) => {
+            return Err(bad(format!(
+                "camera_model` is `{m}`; expected pinhole, ds (double sphere) or eucm (extended unified)"
+            )))
+        }
+    };
+    let d = &c.distortion_coeffs;
+    let distortion = match (lens, c.distortion_model.as_str(), d.len()) {
+        (Some(lens), "none", 0) => lens,
+        (Some(_), m, n) => {
+            return Err(bad(format!(
+                "distortion_model` `{m}` with {n} coefficients: a `{}` camera takes `none` with none",
+                c.camera_model
+            )))
+        }
+        (None, m, n) => pinhole_distortion(m, d).ok_or_else(|| bad(format!(
+            "distortion_model` `{m}` with {n} coefficients: expected radtan (4 or 5), equidistant (4) or none (0)"
+        )))?,
     };
     let cam = Camera {
         fx,
@@ -105,6 +122,34 @@ pub(crate) fn camera_from(path: &Path, key: &str, c: &KalibrCamera) -> Result<Ca
     cam.validate()
         .map_err(|e| bad(format!("intrinsics`: {e}")))?;
     Ok(cam)
+}
+
+/// A pinhole camera's distortion from Kalibr's model name and coefficients.
+fn pinhole_distortion(model: &str, d: &[f64]) -> Option<Distortion> {
+    Some(match (model, d.len()) {
+        ("none", 0) => Distortion::None,
+        ("radtan", 4) => Distortion::Radtan {
+            k1: d[0],
+            k2: d[1],
+            p1: d[2],
+            p2: d[3],
+            k3: 0.0,
+        },
+        ("radtan", 5) => Distortion::Radtan {
+            k1: d[0],
+            k2: d[1],
+            p1: d[2],
+            p2: d[3],
+            k3: d[4],
+        },
+        ("equidistant", 4) => Distortion::Equidistant {
+            k1: d[0],
+            k2: d[1],
+            k3: d[2],
+            k4: d[3],
+        },
+        _ => return None,
+    })
 }
 
 pub(crate) fn isometry_from(
@@ -148,7 +193,14 @@ fn rows_from(iso: &Isometry3<f64>) -> Vec<Vec<f64>> {
 }
 
 fn kalibr_from(cam: &Camera, t_cn_cnm1: Option<Vec<Vec<f64>>>) -> KalibrCamera {
+    let focal = [cam.fx, cam.fy, cam.cx, cam.cy];
+    let (camera_model, intrinsics) = match cam.distortion {
+        Distortion::DoubleSphere { xi, alpha } => ("ds", [&[xi, alpha][..], &focal].concat()),
+        Distortion::Eucm { alpha, beta } => ("eucm", [&[alpha, beta][..], &focal].concat()),
+        _ => ("pinhole", focal.to_vec()),
+    };
     let (model, coeffs) = match cam.distortion {
+        Distortion::DoubleSphere { .. } | Distortion::Eucm { .. } => ("none", vec![]),
         Distortion::None => ("none", vec![]),
         Distortion::Radtan {
             k1,
@@ -161,8 +213,8 @@ fn kalibr_from(cam: &Camera, t_cn_cnm1: Option<Vec<Vec<f64>>>) -> KalibrCamera {
         Distortion::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
     };
     KalibrCamera {
-        camera_model: "pinhole".into(),
-        intrinsics: vec![cam.fx, cam.fy, cam.cx, cam.cy],
+        camera_model: camera_model.into(),
+        intrinsics,
         distortion_model: model.into(),
         distortion_coeffs: coeffs,
         resolution: vec![cam.width, cam.height],
@@ -385,6 +437,9 @@ fn distortion_list(c: &Camera) -> (&'static str, Vec<f64>) {
         Distortion::None => ("plumb_bob", vec![0.0; 5]),
         Distortion::Radtan { k1, k2, p1, p2, k3 } => ("plumb_bob", vec![k1, k2, p1, p2, k3]),
         Distortion::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
+        // Neither OpenCV nor ROS has these models: the parameters under the models' own names.
+        Distortion::DoubleSphere { xi, alpha } => ("double_sphere", vec![xi, alpha]),
+        Distortion::Eucm { alpha, beta } => ("eucm", vec![alpha, beta]),
     }
 }
 

@@ -476,6 +476,8 @@ fn intrinsics_json(c: &crate::camera::Camera) -> serde_json::Value {
         crate::camera::Distortion::Equidistant { .. } => "equidistant",
         crate::camera::Distortion::Radtan { .. } => "radtan",
         crate::camera::Distortion::None => "none",
+        crate::camera::Distortion::DoubleSphere { .. } => "ds",
+        crate::camera::Distortion::Eucm { .. } => "eucm",
     };
     distortion.insert("model".into(), model.into());
     for (name, value) in crate::calib::named_intrinsics(c).into_iter().skip(4) {
@@ -550,7 +552,7 @@ pub fn report_markdown(calib: &Calibration, intrinsics_fixed: bool) -> String {
         .iter()
         .map(|(side, cam)| (*side, crate::calib::named_intrinsics(cam)))
         .collect();
-    for k in 0..8 {
+    for k in 0..named[0].1.len() {
         let name = named[0].1[k].0;
         let digits = if name.starts_with('f') || name.starts_with('c') {
             2
