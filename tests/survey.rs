@@ -476,6 +476,10 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
         true,
     );
     self::map(&run, &map, PoseSource::Odometry);
+    // With the run's ground truth, the map reports its trajectory's error (noise-free odometry:
+    // millimetres).
+    let ate = metric(&read_report(&map), "ate_m.trajectory");
+    assert!(ate < 0.05, "ate {ate}");
     let plan_dir = dir.path().join("plan");
     plan(&map, &plan_dir, None, false);
     let plan: Value =
@@ -542,4 +546,73 @@ fn predicted_and_measured(map_dir: &Path, plan_dir: &Path, loc_dir: &Path) -> (f
     }
     assert!(n > 500, "only {n} samples on predicted cells");
     ((p2 / n as f64).sqrt(), (m2 / n as f64).sqrt())
+}
+
+/// A sonar-only run with ground truth but no world file (issue 31, items 3 and 4): the survey
+/// reports the trajectories' ATE and its maps against the ground-truth-pose map, says the offline
+/// pass had nothing to correct against and claims nothing (no `converged`, no odometry
+/// calibration, which a later survey then refuses to take).
+#[test]
+fn a_sonar_only_survey_without_a_world_scores_what_it_can_and_claims_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    simulate(
+        Path::new("samples/office/world.yaml"),
+        &run,
+        SimSettings {
+            seed: Some(3),
+            ..SimSettings::default()
+        },
+        true,
+    );
+    // No world: run.yaml's reference to it dropped.
+    let meta = std::fs::read_to_string(run.join("run.yaml")).unwrap();
+    let without: String = meta
+        .lines()
+        .filter(|l| !l.starts_with("world:"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_ne!(meta, without, "run.yaml names its world");
+    std::fs::write(run.join("run.yaml"), without).unwrap();
+    let request = |out, calibration_from| stereotag::workflow::survey::SurveyRequest {
+        run_dir: &run,
+        out,
+        world: None,
+        config: None,
+        calibration_from,
+        detect: DetectOptions::survey(Backend::ApriltagC),
+        force: false,
+        recording: RecordingRequest::none(),
+    };
+    let out = dir.path().join("survey");
+    stereotag::workflow::survey::survey(&request(&out, None), &Silent).unwrap();
+    let report = read_report(&out);
+    let m = &report["metrics"];
+    eprintln!("sonar-only survey without a world: {m}");
+    for key in [
+        "ate_m.odometry",
+        "ate_m.offline",
+        "map_corrected.vs_ground_truth_map.occupied_precision",
+        "map_raw.vs_ground_truth_map.occupied_precision",
+    ] {
+        assert!(m[key].is_f64(), "{key} missing: {m}");
+    }
+    assert_eq!(m["offline.nothing_to_correct"], 1.0);
+    assert!(m.get("offline.converged").is_none(), "{m}");
+    assert!(
+        m.get("landmarks.planned").is_none(),
+        "no world, no tags planned"
+    );
+    let landmarks = std::fs::read_to_string(out.join("landmarks.json")).unwrap();
+    let landmarks: Value = serde_json::from_str(&landmarks).unwrap();
+    assert!(
+        landmarks["odometry_calibration"].is_null(),
+        "{}",
+        landmarks["odometry_calibration"]
+    );
+    let later = dir.path().join("later");
+    let err = stereotag::workflow::survey::survey(&request(&later, Some(&out)), &Silent)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no odometry_calibration"), "{err}");
 }

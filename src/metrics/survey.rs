@@ -4,12 +4,22 @@
 use crate::dataset::RunDataset;
 use crate::fusion::Survey;
 use crate::geometry::{Pose2, StampedPose};
-use crate::metrics::map::{score_features, score_map, FeatureScore, MapScore};
+use crate::metrics::map::{score_features, score_map, score_map_against, FeatureScore, MapScore};
 use crate::metrics::{align_se2, ate_m};
 use crate::sonar::grid::GridError;
 use crate::sonar::map::{counting_map_along, MappingConfig, SonarMap};
 use crate::world::World;
 use std::collections::BTreeMap;
+
+/// Where the sonars were at each reading: on the ground truth when the run has it, else on the
+/// odometry.
+fn sonar_positions(run: &RunDataset) -> Vec<nalgebra::Point2<f64>> {
+    let trajectory = run.ground_truth.as_deref().unwrap_or(&run.odometry);
+    run.placed_readings(trajectory)
+        .iter()
+        .map(|r| r.world_from_sensor.position())
+        .collect()
+}
 
 /// Scores of a [`SonarMap`] against a world.
 #[derive(Debug, Clone)]
@@ -24,17 +34,60 @@ pub struct SonarScores {
     pub features_offline: FeatureScore,
 }
 
-/// Scores a survey against the world and the run's ground truth: the sonar scores of the raw map,
-/// the online and corrected maps and the map built with ground-truth poses; ATE of each
-/// trajectory; the landmark position errors (also after aligning the whole survey); the visual
-/// turns' errors.
+/// Scores a survey against what is known of the truth: with the run's ground truth, ATE of each
+/// trajectory, the visual turns' errors, and the raw and corrected maps against the map the
+/// ground-truth poses give (their occupied cells within a cell of its occupied cells); with the
+/// world, the sonar scores of the raw map, the online and corrected maps and the ground-truth-pose
+/// map, the corrected map's features (`features_corrected.*`) and the landmark position errors
+/// (also after aligning the whole survey). Empty with neither.
 pub fn score_survey(
     survey: &Survey,
     run: &RunDataset,
-    world: &World,
+    world: Option<&World>,
     mapping: &MappingConfig,
 ) -> Result<BTreeMap<String, f64>, GridError> {
-    let mut m = score_sonar_map(&survey.raw, run, world).metrics();
+    let mut m = BTreeMap::new();
+    let gt_map = match &run.ground_truth {
+        Some(truth) => {
+            // Only its counting grid: not the Hough passes and walls a full map builds.
+            let gt_map = counting_map_along(&run.sonar_log(), truth, mapping)?;
+            for (key, estimate) in [
+                ("ate_m.odometry", &run.odometry),
+                ("ate_m.online", &survey.online.trajectory),
+                ("ate_m.offline", &survey.offline.trajectory),
+            ] {
+                if let Some(ate) = ate_m(estimate, truth) {
+                    m.insert(key.into(), ate);
+                }
+            }
+            m.extend(visual_turn_metrics(&survey.visual, truth));
+            let reference: Vec<bool> = (0..gt_map.occupancy.len())
+                .map(|i| gt_map.is_occupied(i))
+                .collect();
+            for (name, map) in [
+                ("map_raw", &survey.raw.counting),
+                ("map_corrected", &survey.corrected.counting),
+            ] {
+                if map.geometry == gt_map.geometry {
+                    let score = score_map_against(map, &reference);
+                    m.insert(
+                        format!("{name}.vs_ground_truth_map.occupied_precision"),
+                        score.occupied_precision,
+                    );
+                    m.insert(
+                        format!("{name}.vs_ground_truth_map.occupied_recall"),
+                        score.occupied_recall,
+                    );
+                }
+            }
+            Some(gt_map)
+        }
+        None => None,
+    };
+    let Some(world) = world else {
+        return Ok(m);
+    };
+    m.extend(score_sonar_map(&survey.raw, run, world).metrics());
     let mut occupied = |name: &str, map: &crate::sonar::grid::OccupancyMap| {
         let score = score_map(map, world);
         m.insert(
@@ -45,24 +98,18 @@ pub fn score_survey(
     };
     occupied("map_online", &survey.online_map);
     occupied("map_corrected", &survey.corrected.counting);
-    if let Some(truth) = &run.ground_truth {
-        // Only its counting grid is scored: not the Hough passes and walls a full map builds.
-        let gt_map = counting_map_along(&run.sonar_log(), truth, mapping)?;
-        occupied("map_ground_truth", &gt_map);
-        for (key, estimate) in [
-            ("ate_m.odometry", &run.odometry),
-            ("ate_m.online", &survey.online.trajectory),
-            ("ate_m.offline", &survey.offline.trajectory),
-        ] {
-            if let Some(ate) = ate_m(estimate, truth) {
-                m.insert(key.into(), ate);
-            }
-        }
+    if let Some(gt_map) = &gt_map {
+        occupied("map_ground_truth", gt_map);
     }
+    let corrected = score_features(
+        &survey.corrected.features_offline,
+        world,
+        &sonar_positions(run),
+    );
+    m.insert("features_corrected.precision".into(), corrected.precision);
+    m.insert("features_corrected.recall".into(), corrected.recall);
+    m.insert("features_corrected.count".into(), corrected.features as f64);
     m.extend(landmark_metrics(survey, run, world));
-    if let Some(truth) = run.ground_truth.as_deref() {
-        m.extend(visual_turn_metrics(&survey.visual, truth));
-    }
     m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
     m.insert("landmarks.planned".into(), world.tags.len() as f64);
     Ok(m)
@@ -215,11 +262,16 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
             c.distance_scale_error,
         );
     }
+    let o = &survey.offline;
+    if o.kept == crate::fusion::OfflineKept::Nothing {
+        // Nothing was solved: nothing is claimed.
+        m.insert("offline.nothing_to_correct".into(), 1.0);
+        return m;
+    }
     m.insert(
         "offline.converged".into(),
         f64::from(u8::from(survey.offline.converged)),
     );
-    let o = &survey.offline;
     m.insert(
         "offline.kept_solution".into(),
         f64::from(u8::from(o.kept == crate::fusion::OfflineKept::Solution)),
@@ -241,12 +293,7 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
 /// Scores a sonar map against the world. Sonar positions come from the ground truth when the run
 /// has it (else from odometry).
 pub fn score_sonar_map(map: &SonarMap, run: &RunDataset, world: &World) -> SonarScores {
-    let trajectory = run.ground_truth.as_deref().unwrap_or(&run.odometry);
-    let positions: Vec<_> = run
-        .placed_readings(trajectory)
-        .iter()
-        .map(|r| r.world_from_sensor.position())
-        .collect();
+    let positions = sonar_positions(run);
     SonarScores {
         counting: score_map(&map.counting, world),
         log_odds: score_map(&map.log_odds, world),

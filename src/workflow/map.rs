@@ -70,7 +70,9 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     Ok(output)
 }
 
-/// Maps a run and scores it when a world file is given.
+/// Maps a run and scores it when a world file is given; with the run's ground truth, the
+/// trajectory mapped on is scored against it (`ate_m.trajectory`: the odometry's error, or 0
+/// with `--poses ground-truth`).
 pub fn map_and_score(
     run: &RunDataset,
     poses: PoseSource,
@@ -85,6 +87,14 @@ pub fn map_and_score(
     if let Some(w) = world {
         let loaded = io::load_world(w)?;
         metrics = score_sonar_map(&map, run, &loaded.world).metrics();
+    }
+    // With the ground truth, how far the mapped trajectory is from it, world or not.
+    if let Some(ate) = run
+        .ground_truth
+        .as_deref()
+        .and_then(|truth| crate::metrics::ate_m(trajectory, truth))
+    {
+        metrics.insert("ate_m.trajectory".into(), ate);
     }
     let per_reading_us =
         |k: &str| map.timings_s.get(k).copied().unwrap_or(0.0) * 1e6 / map.readings.max(1) as f64;

@@ -192,9 +192,8 @@ pub fn survey_into(
         "online.calibration_from_earlier_survey".into(),
         f64::from(u8::from(inputs.calibration.is_some())),
     );
-    if let Some(w) = world {
-        metrics.extend(score_survey(&result, run, w, mapping)?);
-    }
+    // With the ground truth alone, the trajectories and maps are scored; with the world, all.
+    metrics.extend(score_survey(&result, run, world, mapping)?);
     timings.extend(result.timings_s.clone());
     if let Some(rec) = &recorder {
         // Alongside the survey's stages above, which it slows down on a two-core machine.

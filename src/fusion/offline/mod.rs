@@ -47,6 +47,9 @@ pub enum OfflineKept {
     Solution,
     /// The online estimate the solver started from.
     Start,
+    /// The online estimate, unsolved: the run holds nothing to correct the odometry against
+    /// (no tag sightings, no visual turns).
+    Nothing,
 }
 
 impl OfflineKept {
@@ -55,6 +58,7 @@ impl OfflineKept {
         match self {
             OfflineKept::Solution => "solution",
             OfflineKept::Start => "start",
+            OfflineKept::Nothing => "nothing to correct against",
         }
     }
 }
@@ -151,11 +155,23 @@ pub fn run_offline(
         ..Default::default()
     };
     use tiny_solver::Optimizer;
-    let solution = tiny_solver::LevenbergMarquardtOptimizer::default().optimize(
-        &graph.problem,
-        &graph.init,
-        Some(options),
-    );
+    // Odometry alone corrects nothing: a solve would return its start and an odometry
+    // calibration it cannot observe.
+    let nothing = graph.sightings.is_empty() && visual.is_empty();
+    if nothing {
+        tracing::warn!(
+            "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns): it keeps the online estimate and estimates no odometry calibration"
+        );
+    }
+    let solution = (!nothing)
+        .then(|| {
+            tiny_solver::LevenbergMarquardtOptimizer::default().optimize(
+                &graph.problem,
+                &graph.init,
+                Some(options),
+            )
+        })
+        .flatten();
     // Never worse without saying so: the solution is kept when it explains at least as many
     // sightings as the start (the solver lowers the cost, but a wrong loop can lower it by
     // bending the trajectory away from the sightings it cannot explain); converged means the
@@ -199,6 +215,13 @@ pub fn run_offline(
                 (OfflineKept::Start, init, end_cost, end_consistent, false)
             }
         }
+        None if nothing => (
+            OfflineKept::Nothing,
+            graph.init.clone(),
+            start_cost,
+            start_consistent,
+            false,
+        ),
         None => {
             tracing::warn!("the offline solver failed (NaN cost): the online estimate is kept");
             let init = graph.init.clone();
