@@ -8,6 +8,8 @@
 //!   reported sigmas, the covariance in the report;
 //! - double sphere and extended unified lenses (`--model ds`, `--model eucm`): rendered fisheye
 //!   sequences calibrated to 0.1 px RMS, read and written as Kalibr `ds-none` / `eucm-none`;
+//! - a board of ordinary tags in its own id order (`target_type: tagboard`, a 6x6 tag36h11
+//!   board with reversed ids) rendered and calibrated;
 //! - corners and report out: every view's corners as EuRoC CSV (which calibrate again to the same
 //!   result) and mrcal's `corners.vnl`, per-image counts, the full covariance and the projection
 //!   uncertainty over the image.
@@ -26,6 +28,12 @@ const APRILGRID: &str = "calibration/targets/aprilgrid_6x6.yaml";
 
 /// Renders `views` calibration pairs of `rig` into `dir/seq`; returns the true rig.
 fn render(dir: &Path, rig: &str, views: usize) -> StereoRig {
+    render_target(dir, rig, views, APRILGRID)
+}
+
+/// Renders `views` calibration pairs of `rig` seeing `target` into `dir/seq`; returns the true
+/// rig.
+fn render_target(dir: &Path, rig: &str, views: usize, target: &str) -> StereoRig {
     let seq = dir.join("seq");
     render_calibration_sequence(
         &RenderRequest {
@@ -38,7 +46,7 @@ fn render(dir: &Path, rig: &str, views: usize) -> StereoRig {
             force: false,
         },
         views,
-        Path::new(APRILGRID),
+        Path::new(target),
         &Silent,
     )
     .unwrap();
@@ -403,4 +411,55 @@ fn double_sphere_and_extended_unified_fisheyes_calibrate_to_a_tenth_of_a_pixel()
         assert!((baseline - true_baseline).abs() < 1e-3 * true_baseline);
         assert!(worst < 0.3, "{worst} px");
     }
+}
+
+#[test]
+fn a_board_of_ordinary_tags_in_reversed_order_calibrates_the_rig() {
+    let target = "calibration/targets/tagboard_6x6_reversed.yaml";
+    let dir = tempfile::tempdir().unwrap();
+    let truth = render_target(dir.path(), "calibration/rigs/default.yaml", 30, target);
+    let (left, right) = (
+        format!("{}/seq/left/*.png", dir.path().display()),
+        format!("{}/seq/right/*.png", dir.path().display()),
+    );
+    let report = run(
+        CalibrationInput::Images {
+            left: &left,
+            right: &right,
+        },
+        target,
+        LensModel::Radtan,
+        None,
+        &dir.path().join("cal"),
+    );
+    let m = &report["metrics"];
+    eprintln!("tag board: {m}; left {}", report["left"]);
+    assert!(m["rms_px"].as_f64().unwrap() <= 0.1, "{m}");
+    assert!(m["views_used"].as_u64().unwrap() >= 28, "{m}");
+    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
+        for (k, v) in [("fx", t.fx), ("fy", t.fy), ("cx", t.cx), ("cy", t.cy)] {
+            let e = report[cam][k].as_f64().unwrap();
+            assert!((e - v).abs() <= 1e-3 * v, "{cam}.{k} {e} vs {v}");
+        }
+    }
+    let baseline = m["baseline_m"].as_f64().unwrap();
+    let true_baseline = truth.right_from_left.translation.vector.norm();
+    assert!((baseline - true_baseline).abs() <= 1e-3 * true_baseline);
+    // Tags found per image, reported.
+    assert!(
+        report["images"][0]["tags"].as_u64().unwrap() >= 30,
+        "{}",
+        report["images"][0]
+    );
+    // A layout that names a tag twice is refused, naming the file.
+    let bad = dir.path().join("bad.yaml");
+    let text = std::fs::read_to_string(target)
+        .unwrap()
+        .replace("34, 33", "34, 34");
+    std::fs::write(&bad, text).unwrap();
+    let err = stereotag::io::load_target(&bad).unwrap_err().to_string();
+    assert!(
+        err.contains("bad.yaml") && err.contains("34 appears twice"),
+        "{err}"
+    );
 }

@@ -15,7 +15,9 @@ mod xcorner;
 
 pub use aprilgrid::{aprilgrid_board_point, aprilgrid_corners};
 pub use chessboard::{chessboard_board_corners, chessboard_board_point};
-pub use target::{AprilGridTarget, CheckerboardTarget, Target, TargetDetector, TargetView};
+pub use target::{
+    AprilGridTarget, CheckerboardTarget, TagBoardTarget, Target, TargetDetector, TargetView,
+};
 pub use uncertainty::{
     projection_uncertainty, ProjectionUncertainty, UNCERTAINTY_COLS, UNCERTAINTY_ROWS,
 };

@@ -1,10 +1,13 @@
-//! Calibration targets (Kalibr's target YAML: AprilGrid, checkerboard) and the one detector that
-//! finds any target's corners in an image, each with its position on the board.
+//! Calibration targets (Kalibr's target YAML: AprilGrid, checkerboard; and our tag board: a grid
+//! of ordinary tags of any family with its own id layout) and the one detector that finds any
+//! target's corners in an image, each with its position on the board.
 
 use crate::calib::aprilgrid::refine_aprilgrid;
 use crate::calib::chessboard::detect_chessboard;
 use crate::calib::{aprilgrid_corners, chessboard_board_corners, Corner};
-use crate::visual::tags::{AprilGridMultiScale, TagDetection, TagDetector, TagError};
+use crate::visual::tags::{
+    AprilGridMultiScale, Backend, DetectorConfig, TagDetection, TagDetector, TagError,
+};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 
@@ -16,6 +19,59 @@ pub enum Target {
     Aprilgrid(AprilGridTarget),
     /// Chessboard by inner corners.
     Checkerboard(CheckerboardTarget),
+    /// A grid of ordinary tags (1-bit border) of any family, ids in any order.
+    Tagboard(TagBoardTarget),
+}
+
+/// A board of ordinary tags (`target_type: tagboard`): `tagCols x tagRows` tags of `family`,
+/// laid out as Kalibr lays an AprilGrid (position 0 at the origin, x along a row, y up the board
+/// as printed, pitch `tagSize · (1 + tagSpacing)`), with the tag at each position given by
+/// `ids` (row-major from position 0; default 0, 1, 2, ...). Corner `k` of a tag is the AprilTag
+/// library's corner `k`, placed as an AprilGrid's ([`crate::calib::aprilgrid_board_point`]);
+/// corner ids are tag id × 4 + k.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TagBoardTarget {
+    /// The tags' family (`tag36h11`, `tag25h9`, `tag16h5`, `tagStandard41h12`).
+    pub family: crate::visual::tags::TagFamily,
+    /// Tags across.
+    #[serde(rename = "tagCols")]
+    pub tag_cols: u32,
+    /// Tags down.
+    #[serde(rename = "tagRows")]
+    pub tag_rows: u32,
+    /// Tag edge (the black square), metres.
+    #[serde(rename = "tagSize")]
+    pub tag_size: f64,
+    /// Gap between tags over the tag edge.
+    #[serde(rename = "tagSpacing")]
+    pub tag_spacing: f64,
+    /// The tag id at each position, row-major from position 0 (`tagCols · tagRows` distinct
+    /// ids); default 0, 1, 2, ...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ids: Option<Vec<u32>>,
+    #[serde(default, rename = "target_type", skip_serializing)]
+    kind: Option<serde::de::IgnoredAny>,
+}
+
+impl TagBoardTarget {
+    /// The tag id at each position.
+    pub fn layout(&self) -> Vec<u32> {
+        self.ids
+            .clone()
+            .unwrap_or_else(|| (0..self.tag_cols * self.tag_rows).collect())
+    }
+
+    /// Where corner `id` (tag id × 4 + k) sits on the board, if its tag is on it.
+    pub fn board_point(&self, id: u32) -> Option<[f64; 3]> {
+        let position = self.layout().iter().position(|&t| t == id / 4)? as u32;
+        Some(crate::calib::aprilgrid_board_point(
+            position * 4 + id % 4,
+            self.tag_cols,
+            self.tag_size,
+            self.tag_spacing,
+        ))
+    }
 }
 
 /// A Kalibr AprilGrid (`target_type: aprilgrid`).
@@ -76,6 +132,7 @@ pub struct TargetView {
 pub struct TargetDetector {
     target: Target,
     grid: Option<AprilGridMultiScale>,
+    tags: Option<Box<dyn TagDetector + Send>>,
 }
 
 impl TargetDetector {
@@ -83,11 +140,21 @@ impl TargetDetector {
     pub fn new(target: &Target) -> Result<Self, TagError> {
         let grid = match target {
             Target::Aprilgrid(_) => Some(AprilGridMultiScale::new()?),
-            Target::Checkerboard(_) => None,
+            Target::Checkerboard(_) | Target::Tagboard(_) => None,
+        };
+        let tags = match target {
+            // Full resolution: a calibration wants every tag and the best corners.
+            Target::Tagboard(b) => Some(Backend::ApriltagC.detector(DetectorConfig {
+                families: vec![b.family],
+                decimate: 1.0,
+                ..DetectorConfig::default()
+            })?),
+            _ => None,
         };
         Ok(Self {
             target: target.clone(),
             grid,
+            tags,
         })
     }
 
@@ -125,6 +192,39 @@ impl TargetDetector {
                         tags: Vec::new(),
                         miss: Some(miss.to_string()),
                     },
+                }
+            }
+            (Target::Tagboard(b), _) => {
+                let Some(detector) = self.tags.as_mut() else {
+                    return Err(TagError::Invalid(
+                        "no tag detector was made for this target".into(),
+                    ));
+                };
+                let tags: Vec<TagDetection> = detector
+                    .detect(image)?
+                    .into_iter()
+                    .filter(|t| t.family == b.family && b.board_point(t.id * 4).is_some())
+                    .collect();
+                let corners = tags
+                    .iter()
+                    .flat_map(|t| {
+                        (0..4).filter_map(move |k| {
+                            let id = t.id * 4 + k;
+                            Some(Corner {
+                                id,
+                                board_m: b.board_point(id)?,
+                                px: t.corners_px[k as usize],
+                            })
+                        })
+                    })
+                    .collect();
+                let miss = tags
+                    .is_empty()
+                    .then(|| format!("no {} tags of the board", b.family));
+                TargetView {
+                    corners,
+                    tags,
+                    miss,
                 }
             }
             (Target::Aprilgrid(_), None) => {

@@ -21,6 +21,7 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
     let target = match kind.target_type.as_str() {
         "aprilgrid" => Target::Aprilgrid(parse_yaml(path, &text)?),
         "checkerboard" => Target::Checkerboard(parse_yaml(path, &text)?),
+        "tagboard" => Target::Tagboard(parse_yaml(path, &text)?),
         other => {
             let line = text
                 .lines()
@@ -29,7 +30,9 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
             return Err(IoError::line(
                 path,
                 line,
-                format!("target_type `{other}`: expected `aprilgrid` or `checkerboard`"),
+                format!(
+                    "target_type `{other}`: expected `aprilgrid`, `checkerboard` or `tagboard`"
+                ),
             ));
         }
     };
@@ -40,12 +43,18 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
         Target::Checkerboard(c) => {
             c.target_cols > 1 && c.target_rows > 1 && c.row_spacing_m > 0.0 && c.col_spacing_m > 0.0
         }
+        Target::Tagboard(b) => {
+            b.tag_cols > 0 && b.tag_rows > 0 && b.tag_size > 0.0 && b.tag_spacing >= 0.0
+        }
     };
     if !ok {
         return Err(IoError::content(
             path,
             "counts must be positive and sizes positive numbers of metres",
         ));
+    }
+    if let Target::Tagboard(b) = &target {
+        check_tag_board(path, b)?;
     }
     Ok(target)
 }
@@ -139,6 +148,50 @@ pub fn load_corner_csvs(dir: &Path) -> Result<ViewCorners, IoError> {
     Ok(views)
 }
 
+/// A tag board's family must be one the tag detectors find, and its `ids` one distinct id of
+/// that family per position.
+fn check_tag_board(path: &Path, b: &crate::calib::TagBoardTarget) -> Result<(), IoError> {
+    if !crate::visual::tags::DETECTABLE_FAMILIES.contains(&b.family) {
+        return Err(IoError::content(
+            path,
+            format!(
+                "family {}: a tag board takes an ordinary family (tag36h11, tag25h9, tag16h5, tagStandard41h12); Kalibr's AprilGrid is target_type aprilgrid",
+                b.family
+            ),
+        ));
+    }
+    let layout = b.layout();
+    let positions = (b.tag_cols * b.tag_rows) as usize;
+    if layout.len() != positions {
+        return Err(IoError::content(
+            path,
+            format!(
+                "ids: {} ids for {} x {} = {positions} positions",
+                layout.len(),
+                b.tag_cols,
+                b.tag_rows
+            ),
+        ));
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    for id in &layout {
+        if !seen.insert(id) {
+            return Err(IoError::content(path, format!("ids: {id} appears twice")));
+        }
+        if *id as usize >= b.family.code_count() {
+            return Err(IoError::content(
+                path,
+                format!(
+                    "ids: {id} is not a {} id (it has {})",
+                    b.family,
+                    b.family.code_count()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The header line of EuRoC / yac corner files.
 const CORNER_CSV_HEADER: &str =
     "#ts,tag_rows,tag_cols,tag_size,tag_spacing,kp_x,kp_y,p_x,p_y,p_z,tag_id,corner_idx";
@@ -154,6 +207,7 @@ pub fn save_corner_csvs(dir: &Path, views: &ViewCorners, target: &Target) -> Res
     let (rows, cols, size, spacing) = match target {
         Target::Aprilgrid(g) => (g.tag_rows, g.tag_cols, g.tag_size, g.tag_spacing),
         Target::Checkerboard(c) => (c.target_rows, c.target_cols, c.col_spacing_m, 0.0),
+        Target::Tagboard(b) => (b.tag_rows, b.tag_cols, b.tag_size, b.tag_spacing),
     };
     for (index, (name, corners)) in views.iter().enumerate() {
         let ts = name

@@ -25,8 +25,9 @@ const APRILGRID_CELLS: usize = 10;
 /// A calibration board pattern.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Board {
-    /// Kalibr AprilGrid.
-    AprilGrid {
+    /// A grid of tags: Kalibr's AprilGrid (2-bit borders, black squares in the gaps) or a tag
+    /// board of ordinary tags in any id order.
+    TagGrid {
         /// Tags across.
         cols: u32,
         /// Tags down.
@@ -35,9 +36,15 @@ pub enum Board {
         size_m: f64,
         /// Gap between tags over the tag edge.
         spacing: f64,
-        /// Per tag, `true` where a cell of its black square is white (row-major from the top of
-        /// the tag as printed, `APRILGRID_CELLS²`).
+        /// Cells across a tag's black square.
+        cells_across: usize,
+        /// Per position (row-major from position 0), `true` where a cell of its tag's black
+        /// square is white (row-major from the top of the tag as printed, `cells_across²`).
         cells: Vec<Vec<bool>>,
+        /// The tag id at each position.
+        ids: Vec<u32>,
+        /// Whether the small black squares of an AprilGrid fill the gaps' crossings.
+        gap_squares: bool,
     },
     /// Chessboard by inner corners.
     Chessboard {
@@ -78,12 +85,50 @@ impl Board {
                     .collect())
             })
             .collect::<Result<_, RenderError>>()?;
-        Ok(Self::AprilGrid {
+        Ok(Self::TagGrid {
             cols,
             rows,
             size_m,
             spacing,
+            cells_across: APRILGRID_CELLS,
             cells,
+            ids: (0..cols * rows).collect(),
+            gap_squares: true,
+        })
+    }
+
+    /// A board of ordinary tags ([`crate::calib::TagBoardTarget`]): each tag's black square with
+    /// its data cells, as the AprilTag library prints it, in the board's id layout.
+    pub fn tag_board(target: &crate::calib::TagBoardTarget) -> Result<Self, RenderError> {
+        let family = target.family;
+        let ids = target.layout();
+        let mut cells_across = 0;
+        let cells = ids
+            .iter()
+            .map(|&id| {
+                let code = family.code_image(id).ok_or(RenderError::IdOutOfRange {
+                    id,
+                    family,
+                    count: family.code_count(),
+                })?;
+                // The black square inside the library's white ring.
+                let (tw, n) = (code.total_cells, code.black_square_cells);
+                let border = (tw - n) / 2;
+                cells_across = n;
+                Ok((0..n * n)
+                    .map(|i| code.white[(border + i / n) * tw + border + i % n])
+                    .collect())
+            })
+            .collect::<Result<_, RenderError>>()?;
+        Ok(Self::TagGrid {
+            cols: target.tag_cols,
+            rows: target.tag_rows,
+            size_m: target.tag_size,
+            spacing: target.tag_spacing,
+            cells_across,
+            cells,
+            ids,
+            gap_squares: false,
         })
     }
 
@@ -91,14 +136,24 @@ impl Board {
     pub fn corners(&self) -> Vec<(u32, [f64; 3])> {
         use crate::calib::{aprilgrid_board_point, chessboard_board_point};
         match self {
-            Self::AprilGrid {
+            Self::TagGrid {
                 cols,
-                rows,
                 size_m,
                 spacing,
+                ids,
                 ..
-            } => (0..cols * rows * 4)
-                .map(|id| (id, aprilgrid_board_point(id, *cols, *size_m, *spacing)))
+            } => ids
+                .iter()
+                .enumerate()
+                .flat_map(|(position, tag)| {
+                    (0..4).map(move |k| {
+                        let at = position as u32 * 4 + k;
+                        (
+                            tag * 4 + k,
+                            aprilgrid_board_point(at, *cols, *size_m, *spacing),
+                        )
+                    })
+                })
                 .collect(),
             Self::Chessboard {
                 cols,
@@ -114,7 +169,7 @@ impl Board {
     /// The side of the board the camera must be on (sign of board z).
     fn camera_side(&self) -> f64 {
         match self {
-            Self::AprilGrid { .. } => 1.0,
+            Self::TagGrid { .. } => 1.0,
             Self::Chessboard { .. } => -1.0,
         }
     }
@@ -122,7 +177,7 @@ impl Board {
     /// The printed area `(x0, y0, x1, y1)`, metres: the pattern and a white margin.
     fn paper(&self) -> [f64; 4] {
         match self {
-            Self::AprilGrid {
+            Self::TagGrid {
                 cols,
                 rows,
                 size_m,
@@ -159,12 +214,15 @@ impl Board {
             return None;
         }
         let black = match self {
-            Self::AprilGrid {
+            Self::TagGrid {
                 cols,
                 rows,
                 size_m,
                 spacing,
+                cells_across,
                 cells,
+                gap_squares,
+                ..
             } => {
                 let (pitch, gap) = (size_m * (1.0 + spacing), size_m * spacing);
                 // The black squares between tags sit at every tag corner crossing.
@@ -174,7 +232,7 @@ impl Board {
                 };
                 let (tc, tr) = ((x / pitch).floor(), (y / pitch).floor());
                 let (lx, ly) = (x - tc * pitch, y - tr * pitch);
-                if in_gap(x, *cols) && in_gap(y, *rows) {
+                if *gap_squares && in_gap(x, *cols) && in_gap(y, *rows) {
                     true
                 } else if tc >= 0.0
                     && tr >= 0.0
@@ -183,12 +241,13 @@ impl Board {
                     && lx < *size_m
                     && ly < *size_m
                 {
-                    let cell = size_m / APRILGRID_CELLS as f64;
-                    let mx = ((lx / cell) as usize).min(APRILGRID_CELLS - 1);
+                    let n = *cells_across;
+                    let cell = size_m / n as f64;
+                    let mx = ((lx / cell) as usize).min(n - 1);
                     // Printed upright, the tag's top row is at the largest board y.
-                    let my = APRILGRID_CELLS - 1 - ((ly / cell) as usize).min(APRILGRID_CELLS - 1);
-                    let id = tr as usize * *cols as usize + tc as usize;
-                    !cells[id][my * APRILGRID_CELLS + mx]
+                    let my = n - 1 - ((ly / cell) as usize).min(n - 1);
+                    let position = tr as usize * *cols as usize + tc as usize;
+                    !cells[position][my * n + mx]
                 } else {
                     false
                 }
@@ -390,7 +449,7 @@ mod tests {
     #[test]
     fn aprilgrid_tag_zero_reads_its_code_upright() {
         let board = Board::aprilgrid(2, 2, 0.1, 0.3).expect("grid");
-        let Board::AprilGrid { cells, .. } = &board else {
+        let Board::TagGrid { cells, .. } = &board else {
             unreachable!()
         };
         let code = TagFamily::from_name("tag36h11")

@@ -396,7 +396,7 @@ fn images_json(calib: &Calibration, records: &[ImageRecord]) -> serde_json::Valu
 
 /// The views of corner files, one directory a camera (`left` and `right`, or `camera` alone).
 fn corner_files(dirs: &[(&Path, &'static str)], target: &Target) -> Result<CalibrationViews> {
-    let aprilgrid = matches!(target, Target::Aprilgrid(_));
+    let aprilgrid = matches!(target, Target::Aprilgrid(_) | Target::Tagboard(_));
     let mut out = CalibrationViews::default();
     for (k, (dir, camera)) in dirs.iter().enumerate() {
         let views = io::load_corner_csvs(dir)?;

@@ -152,6 +152,7 @@ pub fn render_calibration_sequence(
             col_m: c.col_spacing_m,
             row_m: c.row_spacing_m,
         },
+        Target::Tagboard(b) => Board::tag_board(b)?,
     };
     let poses = calibration_poses(&rig, &board, n, request.seed);
     if poses.len() < n {
