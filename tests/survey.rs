@@ -116,6 +116,9 @@ fn plan(map: &Path, out: &Path, tags: Option<&Path>, no_walls: bool) {
     .expect("the plan is made");
 }
 
+/// The printed edge of the office's tags (samples/office/world.yaml).
+const OFFICE_TAG_SIZE_M: f64 = 0.16;
+
 #[test]
 fn office_survey_meets_the_figures_and_records_what_it_wrote() {
     let dir = tempfile::tempdir().unwrap();
@@ -182,6 +185,16 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         ] {
             assert!(l.get(key).is_some(), "landmarks.json lacks {key}: {l}");
         }
+        // The size used is the world's printed size; the triangulated one is reported beside it.
+        let (used, triangulated) = (
+            l["size_m"].as_f64().unwrap(),
+            l["size_triangulated_m"].as_f64().unwrap(),
+        );
+        assert_eq!(used, OFFICE_TAG_SIZE_M, "{l}");
+        assert!(
+            (triangulated - used).abs() < 0.15 * used && triangulated != used,
+            "{l}"
+        );
     }
     let layout: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("layout.json")).unwrap()).unwrap();

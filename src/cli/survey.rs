@@ -1,4 +1,4 @@
-use super::{Bars, UsageError};
+use super::Bars;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use stereotag::fusion::Survey;
@@ -74,9 +74,14 @@ pub struct DetectArgs {
     /// still decodes and refines the corners at full resolution either way.
     #[arg(long)]
     decimate: Option<f32>,
-    /// Edge length of the tags in metres when no world gives it (enables the size check).
+    /// Edge length of the tags in metres when no world gives it (enables the size check; the
+    /// size landmarks.json gives).
     #[arg(long)]
     tag_size_m: Option<f64>,
+    /// Tag sizes per tag (YAML: `default: 0.16` and `tags:` a list of `{id, size_m}` with an
+    /// optional `family`); a world file's sizes come first, --tag-size-m is the default.
+    #[arg(long, value_name = "FILE")]
+    tag_sizes: Option<std::path::PathBuf>,
     /// Smallest white-to-black grey difference around a 4x4 tile for it to be searched (both
     /// backends). The default skips wall texture and sensor noise, which is what most detection
     /// time goes to (museum run: 10x faster than the C library's 5, the same tags found); lower
@@ -92,14 +97,21 @@ pub struct DetectArgs {
 
 impl DetectArgs {
     /// The detector options these flags give (the survey's defaults where none is given).
-    pub(crate) fn options(&self) -> Result<DetectOptions, UsageError> {
+    pub(crate) fn options(&self) -> anyhow::Result<DetectOptions> {
         let backend = self.backend.into();
         let families = super::families(&self.family)?;
+        let mut tag_sizes = match &self.tag_sizes {
+            Some(path) => stereotag::io::load_tag_sizes(path)?,
+            None => Default::default(),
+        };
+        if self.tag_size_m.is_some() {
+            tag_sizes.default_m = self.tag_size_m;
+        }
         Ok(DetectOptions {
             families,
             decimate: self.decimate.unwrap_or(survey_decimate(backend)),
             min_contrast: self.min_contrast,
-            tag_size_m: self.tag_size_m,
+            tag_sizes,
             default_mounting: self.default_mounting,
             ..DetectOptions::survey(backend)
         })

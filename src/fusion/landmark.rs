@@ -29,8 +29,16 @@ pub struct Landmark {
     pub id: u32,
     /// Tag family.
     pub family: TagFamily,
-    /// Mean triangulated edge length, metres.
+    /// Edge length, metres: the printed size when known (a world file, `--tag-sizes`,
+    /// `--tag-size-m`), else the mean triangulated one.
     pub size_m: f64,
+    /// The mean triangulated edge length, metres (0 in files older than it).
+    #[serde(default)]
+    pub size_triangulated_m: f64,
+    /// The sightings' triangulated sizes' standard deviation over their mean (0 in files older
+    /// than it).
+    #[serde(default)]
+    pub size_spread: f64,
     /// Tag centre in the world, metres (z is the mean of the sightings).
     pub position_m: [f64; 3],
     /// Direction the tag faces, radians from the world x axis.
@@ -93,6 +101,7 @@ pub(crate) struct Extras {
     pub(crate) z_sum: f64,
     pub(crate) z_sq: f64,
     pub(crate) size_sum: f64,
+    pub(crate) size_sq: f64,
     pub(crate) n: usize,
     pub(crate) corner: Option<CornerMatch>,
 }
@@ -112,6 +121,9 @@ pub(crate) fn landmark_from(
         id: key.id,
         family: key.family,
         size_m: extra.size_sum / n,
+        size_triangulated_m: extra.size_sum / n,
+        size_spread: ((extra.size_sq / n - (extra.size_sum / n).powi(2)).max(0.0)).sqrt()
+            / (extra.size_sum / n).max(1e-9),
         position_m: [xy.x, xy.y, z],
         yaw_rad: wrap_angle(yaw),
         covariance_m2: [

@@ -338,6 +338,7 @@ fn fuse_sighting(
     e.z_sum += zr;
     e.z_sq += zr * zr;
     e.size_sum += sighting.size_m;
+    e.size_sq += sighting.size_m * sighting.size_m;
     e.n += 1;
     result.accepted.push(index);
     true

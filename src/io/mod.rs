@@ -31,9 +31,9 @@ pub use rig::{
 };
 pub use run::{load_run, read_poses, read_uci_sonar_ring, save_run, REORDER_TOLERANCE_S};
 pub use survey::{
-    load_landmarks, save_landmarks, save_localization_csv, save_survey, save_trajectory_csv,
-    save_tum, save_visual_turns_csv, save_wpilib_layout, truth_at, LandmarkRecord, LandmarksFile,
-    Trajectories, LOCALIZATION_HEADER, VISUAL_TURNS_HEADER,
+    load_landmarks, load_tag_sizes, save_landmarks, save_localization_csv, save_survey,
+    save_trajectory_csv, save_tum, save_visual_turns_csv, save_wpilib_layout, truth_at,
+    LandmarkRecord, LandmarksFile, Trajectories, LOCALIZATION_HEADER, VISUAL_TURNS_HEADER,
 };
 pub use world::{load_world, LoadedWorld, WorldFile};
 

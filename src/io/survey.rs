@@ -430,3 +430,82 @@ pub fn save_localization_csv(
     }
     write_file(path, csv.as_bytes())
 }
+
+/// A tag sizes file (`survey --tag-sizes`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TagSizesFile {
+    /// The size of every tag not listed, metres.
+    #[serde(default)]
+    default: Option<f64>,
+    /// Per tag.
+    #[serde(default)]
+    tags: Vec<TagSizeEntry>,
+}
+
+/// One tag's size.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TagSizeEntry {
+    /// Family (default tag36h11).
+    #[serde(default = "default_family")]
+    family: crate::visual::tags::TagFamily,
+    /// Id.
+    id: u32,
+    /// Printed edge length (the black square), metres.
+    size_m: f64,
+}
+
+fn default_family() -> crate::visual::tags::TagFamily {
+    crate::visual::tags::TagFamily::Tag36h11
+}
+
+/// Reads a tag sizes file: `default: 0.16` and `tags:` a list of `{id: 3, size_m: 0.08}` (with
+/// `family:` when not tag36h11). Sizes must be positive and finite; a tag listed twice is an
+/// error naming it.
+///
+/// ```
+/// let dir = tempfile::tempdir()?;
+/// let path = dir.path().join("sizes.yaml");
+/// std::fs::write(&path, "default: 0.16\ntags:\n  - {id: 3, size_m: 0.08}\n")?;
+/// let sizes = stereotag::io::load_tag_sizes(&path)?;
+/// use stereotag::visual::tags::TagFamily::Tag36h11;
+/// assert_eq!((sizes.of(Tag36h11, 3), sizes.of(Tag36h11, 4)), (Some(0.08), Some(0.16)));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn load_tag_sizes(path: &Path) -> Result<crate::visual::sightings::TagSizes, IoError> {
+    let file: TagSizesFile = super::parse_yaml(path, &read_text(path)?)?;
+    let good = |v: f64| v.is_finite() && v > 0.0;
+    if file.default.is_some_and(|d| !good(d)) {
+        return Err(IoError::content(
+            path,
+            "default: a tag size must be a positive number of metres",
+        ));
+    }
+    let mut sizes = crate::visual::sightings::TagSizes {
+        default_m: file.default,
+        ..Default::default()
+    };
+    for t in file.tags {
+        let key = crate::visual::tags::TagId {
+            family: t.family,
+            id: t.id,
+        };
+        if !good(t.size_m) {
+            return Err(IoError::content(
+                path,
+                format!(
+                    "{} {}: size_m {} is not a positive number of metres",
+                    t.family, t.id, t.size_m
+                ),
+            ));
+        }
+        if sizes.by_tag.insert(key, t.size_m).is_some() {
+            return Err(IoError::content(
+                path,
+                format!("{} {} is listed twice", t.family, t.id),
+            ));
+        }
+    }
+    Ok(sizes)
+}

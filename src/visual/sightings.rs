@@ -82,6 +82,26 @@ impl TagSighting {
     }
 }
 
+/// The printed edge length of the tags: per tag, with a default for the rest (`--tag-sizes`
+/// FILE, `--tag-size-m`; a world file's tags come first).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TagSizes {
+    /// The size of every tag not listed, metres.
+    pub default_m: Option<f64>,
+    /// Per tag, metres.
+    pub by_tag: std::collections::BTreeMap<TagId, f64>,
+}
+
+impl TagSizes {
+    /// The size of a tag, if known: its own, else the default.
+    pub fn of(&self, family: TagFamily, id: u32) -> Option<f64> {
+        self.by_tag
+            .get(&TagId { family, id })
+            .copied()
+            .or(self.default_m)
+    }
+}
+
 /// Detects and triangulates the tags of one stereo pair and moves them into the robot frame.
 /// `known_size_m` gives a tag's planned edge length (for the size check) when it is known.
 #[allow(clippy::too_many_arguments)]

@@ -27,8 +27,9 @@ pub struct DetectOptions {
     pub decimate: f32,
     /// Smallest white-to-black grey difference around a tile for it to be searched.
     pub min_contrast: u8,
-    /// Edge length of the tags when no world gives it (enables the size check), metres.
-    pub tag_size_m: Option<f64>,
+    /// Edge length of the tags the world does not give (enables the size check, and is the
+    /// size `landmarks.json` gives), metres: per tag with a default.
+    pub tag_sizes: crate::visual::sightings::TagSizes,
     /// Measure the turns between pictures with the visual odometry as well.
     pub visual_odometry: bool,
     /// Keep each pair's images for the recording.
@@ -36,6 +37,20 @@ pub struct DetectOptions {
     /// Take the default mounting ([`crate::io::default_mounting`]) for a rig that does not say
     /// where it sits on the robot, rather than stop (see [`crate::io::load_mounted_rig`]).
     pub default_mounting: bool,
+}
+
+/// A tag's printed edge length when known: the world file's, else the table's (its own, else
+/// the default).
+pub fn known_tag_size(
+    world: Option<&crate::world::World>,
+    sizes: &crate::visual::sightings::TagSizes,
+    family: TagFamily,
+    id: u32,
+) -> Option<f64> {
+    world
+        .and_then(|w| w.tags.iter().find(|t| t.id == id && t.family == family))
+        .map(|t| t.size_m)
+        .or_else(|| sizes.of(family, id))
 }
 
 /// The survey's default `decimate` for a backend: 1.5 for the C library (the museum survey in
@@ -64,7 +79,7 @@ impl DetectOptions {
             families: Vec::new(),
             decimate: survey_decimate(backend),
             min_contrast: SURVEY_MIN_CONTRAST,
-            tag_size_m: None,
+            tag_sizes: Default::default(),
             visual_odometry: true,
             keep_images: false,
             default_mounting: false,
@@ -238,17 +253,14 @@ pub fn detect_run(
             next[a] = Some(b);
         }
     }
-    let tag_size_m = options.tag_size_m;
+    let tag_sizes = options.tag_sizes.clone();
     let shared = Shared {
         run_dir,
         run,
         rig,
         rect: rig.rectify(),
         known_size: Box::new(move |family: TagFamily, id: u32| {
-            world
-                .and_then(|w| w.tags.iter().find(|t| t.id == id && t.family == family))
-                .map(|t| t.size_m)
-                .or(tag_size_m)
+            known_tag_size(world, &tag_sizes, family, id)
         }),
         stereo: StereoConfig::default(),
         vo,

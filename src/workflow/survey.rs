@@ -2,6 +2,7 @@
 //! corners online and offline, the map rebuilt from the corrected trajectory; the survey
 //! outputs written, scored when the world is known, and recorded.
 
+use super::sightings::known_tag_size;
 use super::sightings::{detect_run, DetectOptions, KeptPair, RunSightings};
 use super::{load_run, load_world_of_run, Error, Result};
 use crate::camera::StereoRig;
@@ -59,6 +60,37 @@ pub fn survey(request: &SurveyRequest<'_>, progress: &dyn Progress) -> Result<Su
     let output = survey_into(request, &dir, progress)?;
     dir.commit()?;
     Ok(output)
+}
+
+/// A tag whose sightings' triangulated sizes spread more than this (standard deviation over
+/// mean) is warned about when no printed size is known: 10% (a tag's size triangulates to a few
+/// percent; several different tags under one id, or one moved between sizes, do not).
+pub const SIZE_SPREAD_WARNING: f64 = 0.1;
+
+/// Each landmark's size: the printed one when known ([`known_tag_size`]); else the triangulated
+/// mean stays, with a warning when the sightings disagree about it (over
+/// [`SIZE_SPREAD_WARNING`], from three sightings).
+fn size_landmarks(
+    landmarks: &mut [fusion::Landmark],
+    world: Option<&World>,
+    sizes: &crate::visual::sightings::TagSizes,
+) {
+    for l in landmarks {
+        match known_tag_size(world, sizes, l.family, l.id) {
+            Some(size) => l.size_m = size,
+            None if l.observations >= 3 && l.size_spread > SIZE_SPREAD_WARNING => {
+                tracing::warn!(
+                    "{} {}: its {} sightings triangulate to sizes {:.0}% apart (mean {:.3} m) and no printed size is known: give it with --tag-sizes or --tag-size-m",
+                    l.family,
+                    l.id,
+                    l.observations,
+                    100.0 * l.size_spread,
+                    l.size_triangulated_m
+                );
+            }
+            None => {}
+        }
+    }
 }
 
 /// The odometry calibration an earlier survey found, from its `landmarks.json`.
@@ -182,7 +214,8 @@ pub fn survey_into(
             fusion::survey(run, raw, &seen.sightings, &seen.visual, &settings)
         },
     );
-    let result = result?;
+    let mut result = result?;
+    size_landmarks(&mut result.landmarks, world, &request.detect.tag_sizes);
     let mut metrics = survey_metrics(&result, seen.sightings.len());
     metrics.insert(
         "sightings.implausible_height".into(),
