@@ -360,6 +360,7 @@ fn a_later_run_localises_against_the_survey() {
                 detect: DetectOptions::survey(Backend::ApriltagC),
                 raw_odometry: false,
                 no_walls: !walls,
+                start: Default::default(),
                 force: false,
                 recording: if record {
                     RecordingRequest::default()

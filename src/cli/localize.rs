@@ -1,5 +1,6 @@
-use super::Bars;
+use super::{Bars, UsageError};
 use std::path::PathBuf;
+use stereotag::fusion::Start;
 use stereotag::workflow::localize::{localize, LocalizeOutput, LocalizeRequest};
 
 /// Arguments of `stereotag localize`.
@@ -31,6 +32,18 @@ pub struct Localize {
     /// survey's walls (walls_corrected.csv) between sightings.
     #[arg(long)]
     no_walls: bool,
+    /// Where the run starts: `survey` (where the survey's run started, sure of it), `unknown`
+    /// (anywhere: found from the first sighting of a surveyed tag, the sigma 100 m until then), or
+    /// `x,y,theta` in the survey's frame (metres, radians) with --start-sigma-m and
+    /// --start-sigma-deg.
+    #[arg(long, default_value = "survey")]
+    start: String,
+    /// Position sigma of a given --start, metres.
+    #[arg(long, default_value_t = 0.5)]
+    start_sigma_m: f64,
+    /// Heading sigma of a given --start, degrees.
+    #[arg(long, default_value_t = 10.0)]
+    start_sigma_deg: f64,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -39,6 +52,39 @@ pub struct Localize {
 }
 
 impl Localize {
+    /// The start `--start` and its sigmas give.
+    fn start(&self) -> Result<Start, UsageError> {
+        let bad = || {
+            UsageError(format!(
+                "--start {}: expected survey, unknown or x,y,theta (metres, radians)",
+                self.start
+            ))
+        };
+        Ok(match self.start.as_str() {
+            "survey" => Start::Survey,
+            "unknown" => Start::Unknown,
+            text => {
+                let v: Vec<f64> = text
+                    .split(',')
+                    .map(|p| p.trim().parse::<f64>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| bad())?;
+                let [x, y, theta] = v[..] else {
+                    return Err(bad());
+                };
+                let sigmas_ok = self.start_sigma_m > 0.0 && self.start_sigma_deg > 0.0;
+                if !(v.iter().all(|a| a.is_finite()) && sigmas_ok) {
+                    return Err(bad());
+                }
+                Start::Given {
+                    pose: stereotag::geometry::Pose2::new(x, y, theta),
+                    sigma_m: self.start_sigma_m,
+                    sigma_rad: self.start_sigma_deg.to_radians(),
+                }
+            }
+        })
+    }
+
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
         let output = localize(
             &LocalizeRequest {
@@ -50,6 +96,7 @@ impl Localize {
                 detect: self.detect.options()?,
                 raw_odometry: self.raw_odometry,
                 no_walls: self.no_walls,
+                start: self.start()?,
                 force: self.force,
                 recording: self.rerun.request()?,
             },

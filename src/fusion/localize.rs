@@ -195,18 +195,54 @@ fn fuse_range(
     Some(ekf.update_scalar(range - expected, &h, r, config.sonar_gate_chi2))
 }
 
+/// Where a localisation starts.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Start {
+    /// At the odometry's first pose in the survey's frame, sure of it: the robot leaves from
+    /// where the survey's run did.
+    #[default]
+    Survey,
+    /// At a pose given in the survey's frame, with these sigmas.
+    Given {
+        /// The pose.
+        pose: Pose2,
+        /// Its position sigma, metres.
+        sigma_m: f64,
+        /// Its heading sigma, radians.
+        sigma_rad: f64,
+    },
+    /// Anywhere: the pose is unknown ([`UNKNOWN_START_SIGMA_M`]) until the first sighting of a
+    /// surveyed tag gives it; until then ranges are not matched with the walls.
+    Unknown,
+}
+
+/// The position sigma reported while the start is unknown, metres (a building's size: the
+/// robot is somewhere in it).
+pub const UNKNOWN_START_SIGMA_M: f64 = 100.0;
+
 /// Tracks a run's pose against surveyed landmarks held fixed (their covariance is added to each
 /// sighting's) and, with `sonar`, its ranges against the surveyed walls (each range whose beam
 /// holds a wall face's normal measures the distance to it): the method's long-term use. The run
 /// starts at its odometry's first pose in the survey's frame (the robot leaves from the same
-/// place).
+/// place); [`localize_from`] starts it elsewhere or nowhere.
 pub fn localize(
     obs: &Observations<'_>,
     landmarks: &[Landmark],
     sonar: Option<SonarInput<'_>>,
     config: &FuseConfig,
 ) -> LocalizeResult {
-    let mut filter = Localizer::new(obs.odometry, config);
+    localize_from(obs, landmarks, sonar, config, Start::Survey)
+}
+
+/// [`localize`] from `start`.
+pub fn localize_from(
+    obs: &Observations<'_>,
+    landmarks: &[Landmark],
+    sonar: Option<SonarInput<'_>>,
+    config: &FuseConfig,
+    start: Start,
+) -> LocalizeResult {
+    let mut filter = Localizer::new(obs.odometry, config, start);
     let first_t = obs.odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
     let mut pending = events(obs.sightings, obs.visual, first_t, config)
         .into_iter()
@@ -249,21 +285,48 @@ struct Localizer<'a> {
     lost: Vec<(Pose2, Pose2)>,
     /// The visual turn whose start the heading copy holds.
     cloned_for: Option<usize>,
+    /// Whether the pose is known (false from an unknown start until a sighting gives it).
+    located: bool,
     out: LocalizeResult,
 }
 
 impl<'a> Localizer<'a> {
-    /// A filter sure of its start, the odometry's first pose.
-    fn new(odometry: &[StampedPose], config: &'a FuseConfig) -> Self {
-        let (ekf, start) = Ekf::at_start(odometry);
+    /// A filter at `start` (the odometry's first pose, sure of it, for [`Start::Survey`]).
+    fn new(odometry: &[StampedPose], config: &'a FuseConfig, start: Start) -> Self {
+        let (mut ekf, first) = Ekf::at_start(odometry);
+        let located = match start {
+            Start::Survey => true,
+            Start::Given {
+                pose,
+                sigma_m,
+                sigma_rad,
+            } => {
+                ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
+                ekf.p = DMatrix::from_diagonal(&DVector::from_vec(vec![
+                    sigma_m * sigma_m,
+                    sigma_m * sigma_m,
+                    sigma_rad * sigma_rad,
+                ]));
+                true
+            }
+            Start::Unknown => {
+                ekf.p = DMatrix::from_diagonal(&DVector::from_vec(vec![
+                    UNKNOWN_START_SIGMA_M.powi(2),
+                    UNKNOWN_START_SIGMA_M.powi(2),
+                    std::f64::consts::PI.powi(2),
+                ]));
+                false
+            }
+        };
         let n = odometry.len();
         Self {
             config,
             ekf,
-            last: start,
+            last: first,
             travelled: 0.0,
             lost: Vec::new(),
             cloned_for: None,
+            located,
             out: LocalizeResult {
                 trajectory: Vec::with_capacity(n),
                 sigma_m: Vec::with_capacity(n),
@@ -318,6 +381,17 @@ impl<'a> Localizer<'a> {
             self.out.unknown.push(k);
             return;
         };
+        if !self.located {
+            // The first sighting of a surveyed tag says where the robot is.
+            let (pose, cov) = pose_from_sighting(s, l, self.config);
+            self.ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
+            self.ekf.p.copy_from(&cov);
+            self.out.relocalised_t_s.push(s.t_s);
+            self.out.accepted.push(k);
+            self.located = true;
+            self.travelled = 0.0;
+            return;
+        }
         if self.fuse_sighting(s, l) {
             self.out.accepted.push(k);
             self.lost.clear();
@@ -392,6 +466,9 @@ impl<'a> Localizer<'a> {
     /// every [`RAY_BEAM_SPACING_RAD`] is used (neighbouring beams see the same wall with the
     /// same pose error: fusing them all would count one error hundreds of times).
     fn range(&mut self, i: usize, reading: &SonarReading, sonar: &SonarInput<'_>) {
+        if !self.located {
+            return;
+        }
         if sonar.layout.beam == BeamModel::Ray {
             let stride = (RAY_BEAM_SPACING_RAD / sonar.layout.cone_rad.max(1e-9))
                 .round()
@@ -542,6 +619,60 @@ mod tests {
         );
         let error = (end.x - gt.x).hypot(end.y - gt.y);
         assert!(error < 0.05, "{error} m off at the end");
+    }
+
+    /// A later run that leaves from 3.5 m away from the survey's start: from an unknown start
+    /// the first sighting puts it where it is, and until then its sigma covers its error; from
+    /// the survey's start it is wrong and sure of it.
+    #[test]
+    fn an_unknown_start_is_found_from_the_first_sighting_and_its_sigma_covers_the_wait() {
+        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig::default();
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
+        // The same run with its odometry (and so its believed start) 3.5 m off.
+        let off = Pose2::new(3.5, 0.0, 0.0);
+        let shifted: Vec<StampedPose> = odom
+            .iter()
+            .map(|p| StampedPose {
+                t_s: p.t_s,
+                pose: off.compose(&p.pose),
+            })
+            .collect();
+        let run = |start| {
+            localize_from(
+                &obs(&shifted, &sightings, &[]),
+                &survey.landmarks,
+                None,
+                &config,
+                start,
+            )
+        };
+        let unknown = run(Start::Unknown);
+        let first = unknown.relocalised_t_s[0];
+        for ((p, sigma), gt) in unknown.trajectory.iter().zip(&unknown.sigma_m).zip(&truth) {
+            let error = (p.pose.x - gt.pose.x).hypot(p.pose.y - gt.pose.y);
+            if p.t_s < first {
+                assert!(
+                    *sigma >= error,
+                    "at {} s: error {error} m, sigma {sigma} m",
+                    p.t_s
+                );
+            }
+        }
+        let end_error = |r: &LocalizeResult| {
+            let (end, gt) = (
+                r.trajectory.last().unwrap().pose,
+                truth.last().unwrap().pose,
+            );
+            (end.x - gt.x).hypot(end.y - gt.y)
+        };
+        assert!(end_error(&unknown) < 0.05, "{}", end_error(&unknown));
+        // From the survey's start: 3.5 m off with a millimetre sigma until three gated-out
+        // sightings agree.
+        let survey_start = run(Start::Survey);
+        let (p, gt) = (survey_start.trajectory[0].pose, truth[0].pose);
+        assert!((p.x - gt.x).hypot(p.y - gt.y) > 3.0 && survey_start.sigma_m[0] < 0.01);
     }
 
     /// The face a range is matched with: the nearest one in the beam, none without an echo.

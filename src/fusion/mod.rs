@@ -42,8 +42,9 @@ pub use crate::visual::sightings::{PairCorners, TagSighting, YAW_SIGMA_PER_DEPTH
 pub use config::{FuseConfig, FuseConfigError};
 pub use landmark::{associate, Conflict, CornerMatch, Landmark};
 pub use localize::{
-    hold_tail_to_walls, localize, wall_in_beam, LocalizeResult, SonarInput, WallMatch,
-    RELOCALISE_AFTER, RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, WALL_CONE_MARGIN_RAD, WALL_INSET_M,
+    hold_tail_to_walls, localize, localize_from, wall_in_beam, LocalizeResult, SonarInput, Start,
+    WallMatch, RELOCALISE_AFTER, RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, UNKNOWN_START_SIGMA_M,
+    WALL_CONE_MARGIN_RAD, WALL_INSET_M,
 };
 pub use observations::Observations;
 pub use offline::{run_offline, OdometryCalibration, OfflineKept, OfflineResult};

@@ -97,8 +97,30 @@ pub fn localization_metrics(
             "ate_m.localized".into(),
             ate_m(&result.trajectory, t).into(),
         );
+        let (mean, worst) = sigma_consistency(result, t);
+        metrics.insert("nees.position_mean".into(), mean.into());
+        metrics.insert("error_over_sigma.max".into(), worst.into());
     }
     metrics
+}
+
+/// How well the reported position sigma covers the error (no alignment: the survey's frame is
+/// the truth's), from the first instant: the mean of `e² / (2 σ²)` (the 2D NEES with the
+/// worst-direction sigma, so at most the full NEES: about 1 or below when honest) and the
+/// largest `e / σ`.
+fn sigma_consistency(result: &LocalizeResult, truth: &[StampedPose]) -> (f64, f64) {
+    let (mut sum, mut n, mut worst) = (0.0, 0usize, 0.0f64);
+    for (p, sigma) in result.trajectory.iter().zip(&result.sigma_m) {
+        let Some(gt) = pose_at(truth, p.t_s) else {
+            continue;
+        };
+        let e = (p.pose.x - gt.x).hypot(p.pose.y - gt.y);
+        let s = sigma.max(1e-9);
+        sum += e * e / (2.0 * s * s);
+        n += 1;
+        worst = worst.max(e / s);
+    }
+    (sum / n.max(1) as f64, worst)
 }
 
 /// What the localisation had to work with, for its report.

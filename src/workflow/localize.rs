@@ -38,6 +38,8 @@ pub struct LocalizeRequest<'a> {
     pub raw_odometry: bool,
     /// Track with the tags alone, not the sonar against the survey's walls.
     pub no_walls: bool,
+    /// Where the run starts (default: where the survey's run did).
+    pub start: fusion::Start,
     /// Replace the output directory if it exists.
     pub force: bool,
     /// Where the recording goes (default: `localize.rrd` in the output).
@@ -158,6 +160,7 @@ fn corrected_odometry<'r>(
 ///         detect: DetectOptions::survey(Backend::ApriltagC),
 ///         raw_odometry: false,
 ///         no_walls: false,
+///         start: stereotag::fusion::Start::Unknown,
 ///         force: false,
 ///         recording: RecordingRequest::none(),
 ///     },
@@ -215,7 +218,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         visual: &seen.visual,
     };
     let sonar = (!walls.is_empty()).then_some(sonar);
-    let result = fusion::localize(&obs, &landmarks, sonar, &config);
+    let result = fusion::localize_from(&obs, &landmarks, sonar, &config, request.start);
     let truth = run.ground_truth.as_deref();
     let growth = error_growth(&result, truth);
     io::save_localization_csv(&dir.path("localization.csv"), &run.odometry, &result, truth)?;
