@@ -748,7 +748,7 @@ fn calibration_target_with_a_wrong_typed_or_unknown_key_names_the_line() {
         ),
         (
             "# a ring of circles\ntarget_type: circles\n",
-            "t.yaml:2: target_type `circles`: expected `aprilgrid` or `checkerboard`",
+            "t.yaml:2: target_type `circles`: expected `aprilgrid`, `checkerboard` or `tagboard`",
         ),
     ] {
         let target = tmp.path().join("t.yaml");
