@@ -71,6 +71,7 @@
 //!         detect: DetectOptions::survey(Backend::ApriltagC),
 //!         force: false,
 //!         recording: RecordingRequest::none(),
+//!         anchors: Default::default(), // the frame is the robot's start
 //!     },
 //!     &Silent,
 //! )?;

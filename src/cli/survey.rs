@@ -31,6 +31,23 @@ pub struct SurveyArgs {
     calibration_from: Option<PathBuf>,
     #[command(flatten)]
     detect: DetectArgs,
+    /// Known tag poses to solve the survey in the frame of, any subset of the tags: a WPILib
+    /// AprilTag field layout (.json) or YAML (`anchors:` a list of `{id, x_m, y_m, z_m, yaw_deg,
+    /// sigma_m, sigma_deg}`, all but id, x_m and y_m optional). Each is a prior on its landmark;
+    /// report.json gives each one's residual. Then `localize` starts a later run where the
+    /// survey's did, in this frame.
+    #[arg(long, value_name = "FILE", conflicts_with = "origin_tag")]
+    anchors: Option<PathBuf>,
+    /// Position sigma of an anchor whose file gives none (a WPILib layout), metres.
+    #[arg(long, default_value_t = stereotag::workflow::survey::DEFAULT_ANCHOR_SIGMA_M)]
+    anchor_sigma_m: f64,
+    /// Facing sigma of an anchor whose file gives none, degrees.
+    #[arg(long, default_value_t = stereotag::workflow::survey::DEFAULT_ANCHOR_SIGMA_DEG)]
+    anchor_sigma_deg: f64,
+    /// Put the survey's origin at this tag (of the first --family, else tag36h11), x out of its
+    /// face, instead of at the robot's start.
+    #[arg(long, value_name = "ID")]
+    origin_tag: Option<u32>,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -120,6 +137,27 @@ impl DetectArgs {
 
 impl SurveyArgs {
     pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        let detect = self.detect.options()?;
+        for (name, v) in [
+            ("--anchor-sigma-m", self.anchor_sigma_m),
+            ("--anchor-sigma-deg", self.anchor_sigma_deg),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                anyhow::bail!("{name} {v}: must be a positive number");
+            }
+        }
+        let anchors = stereotag::workflow::survey::Anchoring {
+            file: self.anchors.as_deref(),
+            default_sigma: (self.anchor_sigma_m, self.anchor_sigma_deg.to_radians()),
+            origin_tag: self.origin_tag.map(|id| stereotag::visual::tags::TagId {
+                family: detect
+                    .families
+                    .first()
+                    .copied()
+                    .unwrap_or(stereotag::visual::tags::TagFamily::Tag36h11),
+                id,
+            }),
+        };
         let output = survey(
             &SurveyRequest {
                 run_dir: &self.run,
@@ -127,9 +165,10 @@ impl SurveyArgs {
                 world: self.world.as_deref(),
                 config: self.config.as_deref(),
                 calibration_from: self.calibration_from.as_deref(),
-                detect: self.detect.options()?,
+                detect,
                 force: self.force,
                 recording: self.rerun.request()?,
+                anchors,
             },
             &Bars::new(quiet),
         )?;

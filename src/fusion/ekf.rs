@@ -28,6 +28,7 @@ fn compose_jacobians(theta: f64, dx: f64, dy: f64) -> (Matrix3<f64>, Matrix3<f64
 }
 
 /// The EKF state: pose first, then three numbers per landmark.
+#[derive(Debug, Clone)]
 pub(crate) struct Ekf {
     pub(crate) x: DVector<f64>,
     pub(crate) p: DMatrix<f64>,
@@ -48,13 +49,8 @@ impl Ekf {
         (ekf, start)
     }
 
-    /// Predicts with the odometry increment from `last` to `to` and moves `last` on; returns the
-    /// distance travelled.
-    pub(crate) fn advance(&mut self, last: &mut Pose2, to: Pose2, config: &FuseConfig) -> f64 {
-        self.advance_calibrated(last, to, None, config)
-    }
-
-    /// [`Ekf::advance`] with the increment corrected by an odometry calibration.
+    /// Predicts with the odometry increment from `last` to `to`, corrected by an odometry
+    /// calibration when given, and moves `last` on; returns the distance travelled.
     pub(crate) fn advance_calibrated(
         &mut self,
         last: &mut Pose2,
@@ -344,7 +340,7 @@ mod tests {
         let r = Matrix3::from_diagonal(&Vector3::new(0.01, 0.02, 0.03));
         let moved = |ekf: &mut Ekf| {
             let mut last = odometry[0].pose;
-            ekf.advance(&mut last, Pose2::new(2.0, 2.5, 0.6), &config);
+            ekf.advance_calibrated(&mut last, Pose2::new(2.0, 2.5, 0.6), None, &config);
         };
         let (mut copy_first, _) = Ekf::at_start(&odometry);
         moved(&mut copy_first);

@@ -234,7 +234,8 @@ pub fn localize(
     localize_from(obs, landmarks, sonar, config, Start::Survey)
 }
 
-/// [`localize`] from `start`.
+/// [`localize`] from `start`: a loop over a [`Localizer`] fed the run's odometry, sightings,
+/// visual turns and ranges in time order.
 pub fn localize_from(
     obs: &Observations<'_>,
     landmarks: &[Landmark],
@@ -242,7 +243,11 @@ pub fn localize_from(
     config: &FuseConfig,
     start: Start,
 ) -> LocalizeResult {
-    let mut filter = Localizer::new(obs.odometry, config, start);
+    let mut filter = Localizer::new(landmarks.to_vec(), config.clone(), start);
+    if let Some(s) = &sonar {
+        filter = filter.with_walls(s.walls.to_vec(), s.layout.clone());
+    }
+    let mut out = LocalizeResult::with_capacity(obs.odometry.len());
     let first_t = obs.odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
     let mut pending = events(obs.sightings, obs.visual, first_t, config)
         .into_iter()
@@ -253,153 +258,267 @@ pub fn localize_from(
     let mut ranges = ranges.into_iter().peekable();
     for sample in obs.odometry {
         while let Some((t, event)) = pending.next_if(|&(t, _)| t <= sample.t_s) {
-            let odom = pose_at(obs.odometry, t).unwrap_or(sample.pose);
-            filter.advance(odom);
+            filter.odometry(t, pose_at(obs.odometry, t).unwrap_or(sample.pose));
             match event {
-                Event::TurnStarts(j) => filter.turn_starts(j),
-                Event::TurnEnds(j) => filter.turn_ends(j, &obs.visual[j]),
-                Event::Sighting(k) => filter.sighting(k, &obs.sightings[k], landmarks, odom),
+                Event::TurnStarts(j) => filter.turn_starts(obs.visual[j].from_t_s),
+                Event::TurnEnds(j) => match filter.turn_ends(&obs.visual[j]) {
+                    Some(true) => out.visual_fused += 1,
+                    Some(false) => out.visual_rejected += 1,
+                    None => {}
+                },
+                Event::Sighting(k) => {
+                    let s = &obs.sightings[k];
+                    out.note_sighting(k, s.t_s, filter.sighting(s));
+                }
             }
         }
-        filter.advance(sample.pose);
+        filter.odometry(sample.t_s, sample.pose);
         // The sonar sampled with this odometry pose (or before it).
         while let Some((i, reading)) = ranges.next_if(|r| r.1.t_s <= sample.t_s) {
-            if let Some(s) = &sonar {
-                filter.range(i, reading, s);
+            if let Some(fused) = filter.range(reading) {
+                out.range_outcomes.push((i, fused));
             }
         }
-        filter.record(sample.t_s);
+        out.record(&filter.estimate());
     }
-    filter.out
+    out
 }
 
-/// The localisation filter's state as it works through a run.
-struct Localizer<'a> {
-    config: &'a FuseConfig,
+/// What became of a sighting fed to a [`Localizer`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SightingOutcome {
+    /// Fused against its surveyed landmark.
+    Fused,
+    /// Gated out: the pose and the sighting disagree.
+    GatedOut,
+    /// Gated out, and with the [`RELOCALISE_AFTER`] before it agreeing, taken for where the
+    /// robot is: the filter started again from it.
+    Relocalised,
+    /// The first sighting of a surveyed tag after an unknown start: the pose was taken from it.
+    Located,
+    /// A tag the survey does not hold.
+    NotSurveyed,
+    /// Fed before any odometry: the filter has not started and left it.
+    BeforeStart,
+}
+
+/// The pose a [`Localizer`] holds after what it was last fed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseEstimate {
+    /// Time of the last odometry fed, seconds.
+    pub t_s: f64,
+    /// `world_from_robot` in the survey's frame.
+    pub pose: Pose2,
+    /// Covariance of `(x, y, theta)`.
+    pub covariance: Matrix3<f64>,
+    /// Whether the pose is known: false from an unknown start until a surveyed tag is seen.
+    pub located: bool,
+    /// Distance travelled since the last fused sighting (or the start, or a relocalisation),
+    /// metres.
+    pub since_sighting_m: f64,
+}
+
+impl PoseEstimate {
+    /// Position sigma along the worst direction (square root of the largest eigenvalue of the
+    /// position covariance), metres.
+    pub fn position_sigma_m(&self) -> f64 {
+        let pos = self.covariance.fixed_view::<2, 2>(0, 0).into_owned();
+        pos.symmetric_eigenvalues().max().max(0.0).sqrt()
+    }
+}
+
+/// The localisation filter, fed one measurement at a time: odometry poses, tag sightings, visual
+/// turns and range readings, in time order; [`Localizer::estimate`] gives the pose and its
+/// covariance after each. [`localize`] is a loop over it; a robot embeds it (or the
+/// [`StereoLocalizer`](crate::fusion::StereoLocalizer) around it, which takes stereo pairs) to
+/// ask where it is as its data arrive.
+///
+/// ```
+/// use stereotag::fusion::{FuseConfig, Localizer, Start};
+/// use stereotag::geometry::Pose2;
+///
+/// // No surveyed tag: the odometry alone, from where the survey's run left.
+/// let mut filter = Localizer::new(Vec::new(), FuseConfig::default(), Start::Survey);
+/// for k in 0..=10 {
+///     filter.odometry(0.1 * k as f64, Pose2::new(0.1 * k as f64, 0.0, 0.0));
+/// }
+/// let now = filter.estimate();
+/// assert!((now.pose.x - 1.0).abs() < 1e-9);
+/// assert!(now.position_sigma_m() > 0.0 && now.since_sighting_m > 0.99);
+/// ```
+#[derive(Debug, Clone)]
+pub struct Localizer {
+    config: FuseConfig,
+    landmarks: Vec<Landmark>,
+    /// The surveyed walls and the layout of the sensors whose ranges are matched with them.
+    walls: Vec<WallSegment>,
+    layout: Option<SonarLayout>,
+    /// Corrects each odometry increment before it predicts.
+    calibration: Option<OdometryCalibration>,
+    start: Start,
     ekf: Ekf,
-    /// The odometry pose predicted to.
-    last: Pose2,
+    /// The odometry pose predicted to, and its time; `None` before the first.
+    last: Option<(f64, Pose2)>,
     /// Distance travelled since the last fused sighting (or relocalisation), metres.
     travelled: f64,
     /// Gated-out sightings since the last fused one: the pose each gives and the odometry then.
     lost: Vec<(Pose2, Pose2)>,
-    /// The visual turn whose start the heading copy holds.
-    cloned_for: Option<usize>,
+    /// The start time of the visual turn whose start the heading copy holds.
+    cloned_from_t_s: Option<f64>,
     /// Whether the pose is known (false from an unknown start until a sighting gives it).
     located: bool,
-    out: LocalizeResult,
 }
 
-impl<'a> Localizer<'a> {
-    /// A filter at `start` (the odometry's first pose, sure of it, for [`Start::Survey`]).
-    fn new(odometry: &[StampedPose], config: &'a FuseConfig, start: Start) -> Self {
-        let (mut ekf, first) = Ekf::at_start(odometry);
-        let located = match start {
-            Start::Survey => true,
+impl Localizer {
+    /// A filter tracking against the surveyed `landmarks` from `start`; it starts at the first
+    /// odometry fed.
+    pub fn new(landmarks: Vec<Landmark>, config: FuseConfig, start: Start) -> Self {
+        Self {
+            config,
+            landmarks,
+            walls: Vec::new(),
+            layout: None,
+            calibration: None,
+            start,
+            ekf: Ekf::at_start(&[]).0,
+            last: None,
+            travelled: 0.0,
+            lost: Vec::new(),
+            cloned_from_t_s: None,
+            located: false,
+        }
+    }
+
+    /// The same, with the ranges of the sensors of `layout` matched against the surveyed `walls`.
+    pub fn with_walls(mut self, walls: Vec<WallSegment>, layout: SonarLayout) -> Self {
+        self.walls = walls;
+        self.layout = Some(layout);
+        self
+    }
+
+    /// The same, with each odometry increment corrected by a survey's odometry calibration
+    /// before it predicts (give the `config` [`FuseConfig::for_calibrated_odometry`] then).
+    pub fn with_calibration(mut self, calibration: OdometryCalibration) -> Self {
+        self.calibration = Some(calibration);
+        self
+    }
+
+    /// The surveyed landmarks it tracks against.
+    pub fn landmarks(&self) -> &[Landmark] {
+        &self.landmarks
+    }
+
+    /// The settings it runs with.
+    pub fn config(&self) -> &FuseConfig {
+        &self.config
+    }
+
+    /// The last odometry pose fed (as logged, before any calibration) and its time.
+    pub fn last_odometry(&self) -> Option<(f64, Pose2)> {
+        self.last
+    }
+
+    /// Whether a visual turn is under way (its start's heading held for [`Localizer::turn_ends`]).
+    pub fn turn_open(&self) -> bool {
+        self.cloned_from_t_s.is_some()
+    }
+
+    /// The odometry's pose at `t_s` (time order): the first starts the filter, each later one
+    /// predicts with the increment from the one before.
+    pub fn odometry(&mut self, t_s: f64, pose: Pose2) {
+        let Some((_, mut last)) = self.last else {
+            self.begin(t_s, pose);
+            return;
+        };
+        self.travelled +=
+            self.ekf
+                .advance_calibrated(&mut last, pose, self.calibration.as_ref(), &self.config);
+        self.last = Some((t_s, last));
+    }
+
+    /// Starts at the first odometry pose, as [`Start`] says.
+    fn begin(&mut self, t_s: f64, pose: Pose2) {
+        let diagonal = |sm: f64, sr: f64| {
+            DMatrix::from_diagonal(&DVector::from_vec(vec![sm * sm, sm * sm, sr * sr]))
+        };
+        let (at, p, located) = match self.start {
+            Start::Survey => (pose, DMatrix::identity(3, 3) * 1e-9, true),
             Start::Given {
                 pose,
                 sigma_m,
                 sigma_rad,
-            } => {
-                ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
-                ekf.p = DMatrix::from_diagonal(&DVector::from_vec(vec![
-                    sigma_m * sigma_m,
-                    sigma_m * sigma_m,
-                    sigma_rad * sigma_rad,
-                ]));
-                true
-            }
-            Start::Unknown => {
-                ekf.p = DMatrix::from_diagonal(&DVector::from_vec(vec![
-                    UNKNOWN_START_SIGMA_M.powi(2),
-                    UNKNOWN_START_SIGMA_M.powi(2),
-                    std::f64::consts::PI.powi(2),
-                ]));
-                false
-            }
+            } => (pose, diagonal(sigma_m, sigma_rad), true),
+            Start::Unknown => (
+                pose,
+                diagonal(UNKNOWN_START_SIGMA_M, std::f64::consts::PI),
+                false,
+            ),
         };
-        let n = odometry.len();
-        Self {
-            config,
-            ekf,
-            last: first,
-            travelled: 0.0,
-            lost: Vec::new(),
-            cloned_for: None,
-            located,
-            out: LocalizeResult {
-                trajectory: Vec::with_capacity(n),
-                sigma_m: Vec::with_capacity(n),
-                since_sighting_m: Vec::with_capacity(n),
-                accepted: Vec::new(),
-                rejected: Vec::new(),
-                unknown: Vec::new(),
-                range_outcomes: Vec::new(),
-                relocalised_t_s: Vec::new(),
-                visual_fused: 0,
-                visual_rejected: 0,
-            },
+        self.ekf.x.copy_from_slice(&[at.x, at.y, at.theta]);
+        self.ekf.p = p;
+        self.located = located;
+        self.last = Some((t_s, pose));
+    }
+
+    /// A visual turn starts at `from_t_s` (now): the heading is copied.
+    pub fn turn_starts(&mut self, from_t_s: f64) {
+        if self.last.is_none() {
+            return;
         }
-    }
-
-    /// Predicts with the odometry up to `odom`.
-    fn advance(&mut self, odom: Pose2) {
-        self.travelled += self.ekf.advance(&mut self.last, odom, self.config);
-    }
-
-    /// Visual turn `j` starts: the heading is copied.
-    fn turn_starts(&mut self, j: usize) {
         self.ekf.clone_heading();
-        self.cloned_for = Some(j);
+        self.cloned_from_t_s = Some(from_t_s);
     }
 
-    /// Visual turn `j` ends: fused when it started with the copy held.
-    fn turn_ends(&mut self, j: usize, v: &VisualTurn) {
-        if self.cloned_for == Some(j) {
-            let gate = self.config.visual_gate_chi2;
-            if self.ekf.update_turn(v.turn_rad, v.sigma_rad.powi(2), gate) {
-                self.out.visual_fused += 1;
-            } else {
-                self.out.visual_rejected += 1;
-            }
-        }
+    /// A visual turn ends now: fused when its start's heading is held (`Some(true)`, or
+    /// `Some(false)` when gated out); `None` when it is not (a sighting came between, or its
+    /// start was not fed).
+    pub fn turn_ends(&mut self, v: &VisualTurn) -> Option<bool> {
+        let held = self.cloned_from_t_s == Some(v.from_t_s);
+        let fused = held.then(|| {
+            self.ekf.update_turn(
+                v.turn_rad,
+                v.sigma_rad.powi(2),
+                self.config.visual_gate_chi2,
+            )
+        });
+        self.drop_turn();
+        fused
+    }
+
+    /// Lets the turn under way go unfused.
+    pub fn drop_turn(&mut self) {
         self.ekf.drop_clone();
-        self.cloned_for = None;
+        self.cloned_from_t_s = None;
     }
 
-    /// Sighting `k` (`s`), with the odometry at `odom`: fused against its surveyed landmark, or
-    /// gated out (and, [`RELOCALISE_AFTER`] in a row agreeing, taken for where the robot is).
-    fn sighting(&mut self, k: usize, s: &TagSighting, landmarks: &[Landmark], odom: Pose2) {
+    /// A sighting taken now: fused against its surveyed landmark, or gated out (and, with
+    /// [`RELOCALISE_AFTER`] in a row agreeing, taken for where the robot is).
+    pub fn sighting(&mut self, s: &TagSighting) -> SightingOutcome {
+        let Some((_, odom)) = self.last else {
+            return SightingOutcome::BeforeStart;
+        };
         // A sighting updates the pose alone: a heading copy is let go (the turn under way is
         // not fused).
-        self.ekf.drop_clone();
-        self.cloned_for = None;
-        let Some(l) = landmarks
+        self.drop_turn();
+        let Some(l) = self
+            .landmarks
             .iter()
             .find(|l| l.id == s.id && l.family == s.family)
         else {
-            self.out.unknown.push(k);
-            return;
+            return SightingOutcome::NotSurveyed;
         };
+        let (pose, cov) = pose_from_sighting(s, l, &self.config);
         if !self.located {
             // The first sighting of a surveyed tag says where the robot is.
-            let (pose, cov) = pose_from_sighting(s, l, self.config);
-            self.ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
-            self.ekf.p.copy_from(&cov);
-            self.out.relocalised_t_s.push(s.t_s);
-            self.out.accepted.push(k);
+            self.restart_at(pose, &cov);
             self.located = true;
-            self.travelled = 0.0;
-            return;
+            return SightingOutcome::Located;
         }
-        if self.fuse_sighting(s, l) {
-            self.out.accepted.push(k);
+        if fuse_sighting(&mut self.ekf, s, l, &self.config) {
             self.lost.clear();
             self.travelled = 0.0;
-            return;
+            return SightingOutcome::Fused;
         }
-        self.out.rejected.push(k);
-        let (pose, cov) = pose_from_sighting(s, l, self.config);
         self.lost.push((pose, odom));
         let agree = self.lost.len() >= RELOCALISE_AFTER
             && self.lost[self.lost.len() - RELOCALISE_AFTER..]
@@ -410,86 +529,142 @@ impl<'a> Localizer<'a> {
                         && wrap_angle(moved.theta - pose.theta).abs() <= RELOCALISE_AGREE_RAD
                 });
         if agree {
-            self.ekf.x[0] = pose.x;
-            self.ekf.x[1] = pose.y;
-            self.ekf.x[2] = pose.theta;
-            self.ekf.p.copy_from(&cov);
-            self.out.relocalised_t_s.push(s.t_s);
-            self.lost.clear();
-            self.travelled = 0.0;
+            self.restart_at(pose, &cov);
+            return SightingOutcome::Relocalised;
         }
+        SightingOutcome::GatedOut
     }
 
-    /// Updates the pose with a sighting of surveyed landmark `l`, held fixed (a pose-only filter
-    /// with the landmark's uncertainty moved into the measurement noise); false when gated out.
-    fn fuse_sighting(&mut self, s: &TagSighting, l: &Landmark) -> bool {
-        let (ekf, config) = (&mut self.ekf, self.config);
-        let mut full = Ekf {
-            x: DVector::from_vec(vec![
-                ekf.x[0],
-                ekf.x[1],
-                ekf.x[2],
-                l.position_m[0],
-                l.position_m[1],
-                l.yaw_rad,
-            ]),
-            p: DMatrix::zeros(6, 6),
-            slots: vec![TagId {
-                family: l.family,
-                id: l.id,
-            }],
-        };
-        full.p
-            .fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
-        let c = &l.covariance_m2;
-        full.p[(3, 3)] = c[0][0];
-        full.p[(3, 4)] = c[0][1];
-        full.p[(4, 3)] = c[1][0];
-        full.p[(4, 4)] = c[1][1];
-        full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
-        let (z, r) = sighting_measurement(s, config);
-        let (y, sm, jac) = full.innovation(0, &z, &r);
-        let d2 = sm
-            .try_inverse()
-            .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
-        if d2 > config.gate_chi2 {
-            return false;
-        }
-        full.update(&y, &sm, &jac, &r);
-        ekf.x.copy_from(&full.x.rows(0, 3));
-        ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
-        true
+    /// Starts again at `pose` with covariance `cov`.
+    fn restart_at(&mut self, pose: Pose2, cov: &Matrix3<f64>) {
+        self.ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
+        self.ekf.p.copy_from(cov);
+        self.lost.clear();
+        self.travelled = 0.0;
     }
 
-    /// Reading `i` of the run, matched against the surveyed walls. Of a laser's beams, one in
-    /// every [`RAY_BEAM_SPACING_RAD`] is used (neighbouring beams see the same wall with the
-    /// same pose error: fusing them all would count one error hundreds of times).
-    fn range(&mut self, i: usize, reading: &SonarReading, sonar: &SonarInput<'_>) {
-        if !self.located {
-            return;
+    /// A range reading taken now, matched against the surveyed walls: `Some(fused)` when a
+    /// wall face is in its beam, `None` when none is, the pose is not known yet, or the filter
+    /// has no walls. Of a laser's beams, one in every [`RAY_BEAM_SPACING_RAD`] is used
+    /// (neighbouring beams see the same wall with the same pose error: fusing them all would
+    /// count one error hundreds of times).
+    pub fn range(&mut self, reading: &SonarReading) -> Option<bool> {
+        let layout = self.layout.as_ref()?;
+        if !self.located || self.last.is_none() {
+            return None;
         }
-        if sonar.layout.beam == BeamModel::Ray {
-            let stride = (RAY_BEAM_SPACING_RAD / sonar.layout.cone_rad.max(1e-9))
+        if layout.beam == BeamModel::Ray {
+            let stride = (RAY_BEAM_SPACING_RAD / layout.cone_rad.max(1e-9))
                 .round()
                 .max(1.0) as usize;
             if !reading.sensor.is_multiple_of(stride) {
-                return;
+                return None;
             }
         }
-        if let Some(fused) = fuse_range(&mut self.ekf, reading, sonar, self.config) {
-            self.out.range_outcomes.push((i, fused));
+        let sonar = SonarInput {
+            readings: &[],
+            layout,
+            walls: &self.walls,
+        };
+        fuse_range(&mut self.ekf, reading, &sonar, &self.config)
+    }
+
+    /// The pose now, with its covariance.
+    pub fn estimate(&self) -> PoseEstimate {
+        PoseEstimate {
+            t_s: self.last.map_or(f64::NAN, |(t, _)| t),
+            pose: self.ekf.pose(),
+            covariance: self.ekf.p.fixed_view::<3, 3>(0, 0).into_owned(),
+            located: self.located,
+            since_sighting_m: self.travelled,
+        }
+    }
+}
+
+/// Updates the pose with a sighting of surveyed landmark `l`, held fixed (a pose-only filter
+/// with the landmark's uncertainty moved into the measurement noise); false when gated out.
+fn fuse_sighting(ekf: &mut Ekf, s: &TagSighting, l: &Landmark, config: &FuseConfig) -> bool {
+    let mut full = Ekf {
+        x: DVector::from_vec(vec![
+            ekf.x[0],
+            ekf.x[1],
+            ekf.x[2],
+            l.position_m[0],
+            l.position_m[1],
+            l.yaw_rad,
+        ]),
+        p: DMatrix::zeros(6, 6),
+        slots: vec![TagId {
+            family: l.family,
+            id: l.id,
+        }],
+    };
+    full.p
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
+    let c = &l.covariance_m2;
+    full.p[(3, 3)] = c[0][0];
+    full.p[(3, 4)] = c[0][1];
+    full.p[(4, 3)] = c[1][0];
+    full.p[(4, 4)] = c[1][1];
+    full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
+    let (z, r) = sighting_measurement(s, config);
+    let (y, sm, jac) = full.innovation(0, &z, &r);
+    let d2 = sm
+        .try_inverse()
+        .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
+    if d2 > config.gate_chi2 {
+        return false;
+    }
+    full.update(&y, &sm, &jac, &r);
+    ekf.x.copy_from(&full.x.rows(0, 3));
+    ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
+    true
+}
+
+impl LocalizeResult {
+    /// An empty result for a run of `n` odometry poses.
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            trajectory: Vec::with_capacity(n),
+            sigma_m: Vec::with_capacity(n),
+            since_sighting_m: Vec::with_capacity(n),
+            accepted: Vec::new(),
+            rejected: Vec::new(),
+            unknown: Vec::new(),
+            range_outcomes: Vec::new(),
+            relocalised_t_s: Vec::new(),
+            visual_fused: 0,
+            visual_rejected: 0,
         }
     }
 
-    /// Notes the pose, its sigma and the distance since the last sighting at odometry time `t_s`.
-    fn record(&mut self, t_s: f64) {
-        self.out.trajectory.push(StampedPose {
-            t_s,
-            pose: self.ekf.pose(),
+    /// Notes what became of sighting `k`, taken at `t_s`.
+    fn note_sighting(&mut self, k: usize, t_s: f64, outcome: SightingOutcome) {
+        match outcome {
+            SightingOutcome::Fused => self.accepted.push(k),
+            SightingOutcome::Located => {
+                self.accepted.push(k);
+                self.relocalised_t_s.push(t_s);
+            }
+            SightingOutcome::GatedOut => self.rejected.push(k),
+            SightingOutcome::Relocalised => {
+                self.rejected.push(k);
+                self.relocalised_t_s.push(t_s);
+            }
+            SightingOutcome::NotSurveyed => self.unknown.push(k),
+            SightingOutcome::BeforeStart => {}
+        }
+    }
+
+    /// Notes the pose, its sigma and the distance since the last sighting.
+    fn record(&mut self, now: &PoseEstimate) {
+        self.trajectory.push(StampedPose {
+            t_s: now.t_s,
+            pose: now.pose,
         });
-        self.out.sigma_m.push(self.ekf.position_sigma_m());
-        self.out.since_sighting_m.push(self.travelled);
+        self.sigma_m.push(now.position_sigma_m());
+        self.since_sighting_m.push(now.since_sighting_m);
     }
 }
 

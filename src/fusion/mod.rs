@@ -25,6 +25,7 @@
 //! (`offline/`), localisation against a survey (`localize.rs`) and the survey over a whole run
 //! (`survey.rs`).
 
+mod anchors;
 mod config;
 mod ekf;
 mod events;
@@ -34,19 +35,27 @@ mod measurement;
 mod observations;
 mod offline;
 mod online;
+mod streaming;
 mod survey;
 #[cfg(test)]
 pub(crate) mod testing;
 
 pub use crate::visual::sightings::{PairCorners, TagSighting, YAW_SIGMA_PER_DEPTH_SIGMA};
+pub use anchors::{
+    anchor_frame, anchor_residuals, origin_anchor, Anchor, AnchorError, AnchorResidual,
+};
 pub use config::{FuseConfig, FuseConfigError};
 pub use landmark::{associate, Conflict, CornerMatch, Landmark};
 pub use localize::{
-    hold_tail_to_walls, localize, localize_from, wall_in_beam, LocalizeResult, SonarInput, Start,
-    WallMatch, RELOCALISE_AFTER, RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, UNKNOWN_START_SIGMA_M,
-    WALL_CONE_MARGIN_RAD, WALL_INSET_M,
+    hold_tail_to_walls, localize, localize_from, wall_in_beam, LocalizeResult, Localizer,
+    PoseEstimate, SightingOutcome, SonarInput, Start, WallMatch, RELOCALISE_AFTER,
+    RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, UNKNOWN_START_SIGMA_M, WALL_CONE_MARGIN_RAD,
+    WALL_INSET_M,
 };
 pub use observations::Observations;
-pub use offline::{run_offline, OdometryCalibration, OfflineKept, OfflineResult};
+pub use offline::{
+    run_offline, run_offline_anchored, OdometryCalibration, OfflineKept, OfflineResult,
+};
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
+pub use streaming::{PairError, PairUpdate, StereoLocalizer};
 pub use survey::{survey, Survey, SurveySettings};

@@ -4,8 +4,8 @@
 
 use crate::dataset::RunDataset;
 use crate::fusion::{
-    associate, hold_tail_to_walls, run_offline, run_online, FuseConfig, Landmark, Observations,
-    OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
+    associate, hold_tail_to_walls, run_offline_anchored, run_online, FuseConfig, Landmark,
+    Observations, OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
 };
 use crate::progress::timed;
 use crate::sonar::grid::{GridError, OccupancyMap};
@@ -35,6 +35,9 @@ pub struct Survey {
     pub visual: Vec<VisualTurn>,
     /// Seconds per stage.
     pub timings_s: BTreeMap<String, f64>,
+    /// Where the run's odometry frame lies in the survey's, when the survey is solved in another
+    /// frame than its start's (anchors): the run's odometry was moved by it before the survey.
+    pub frame_from_odometry: Option<crate::geometry::Pose2>,
 }
 
 /// How a survey is made.
@@ -47,6 +50,9 @@ pub struct SurveySettings<'a> {
     /// The same robot's odometry errors found by an earlier survey: the online filter predicts
     /// with them until it finds the run's own.
     pub calibration: Option<OdometryCalibration>,
+    /// Known tag poses, held as priors in the offline pass (the run's odometry already in their
+    /// frame: see [`crate::fusion::anchor_frame`]); empty for a survey in its start's frame.
+    pub anchors: &'a [crate::fusion::Anchor],
 }
 
 /// Runs the survey over a run, its raw map (the grid and features with the odometry's poses),
@@ -74,7 +80,7 @@ pub fn survey(
         counting_map_along(&run.sonar_log(), &online.trajectory, mapping)
     })?;
     let mut offline = timed("fuse_offline", times, || {
-        run_offline(&obs, &online, fuse, None)
+        run_offline_anchored(&obs, &online, fuse, None, settings.anchors)
     });
     if fuse.hold_tail_to_walls {
         timed("fuse_tail", times, || {
@@ -105,6 +111,7 @@ pub fn survey(
         landmarks,
         visual: visual.to_vec(),
         timings_s,
+        frame_from_odometry: None,
     })
 }
 

@@ -4,6 +4,7 @@
 //! the file and line of the first problem. Writers go through [`OutputDir`], which builds the
 //! output under a temporary name and renames it into place, so a failure leaves nothing half-written.
 
+mod anchors;
 pub mod asl;
 mod bundled;
 mod calib;
@@ -16,6 +17,7 @@ mod run;
 mod survey;
 mod world;
 
+pub use anchors::load_anchors;
 pub use bundled::{bundled, extract as extract_bundled, FILES as BUNDLED_FILES};
 pub use calib::{load_corner_csvs, load_target, save_corner_csvs, save_corners_vnl};
 pub use maps::{

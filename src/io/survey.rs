@@ -31,6 +31,11 @@ pub struct LandmarksFile {
     /// DESIGN.md's keys; `localize` corrects a later run's odometry with it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub odometry_calibration: Option<OdometryCalibration>,
+    /// `[x, y, theta]` (metres, radians) of the run's odometry frame in the survey's, when the
+    /// survey is not in its start's frame (`--anchors`, `--origin-tag`): `localize` moves a later
+    /// run's odometry by it, as the survey did its run's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_from_odometry: Option<[f64; 3]>,
 }
 
 /// Largest magnitude of each odometry calibration term a file may give (50% scale errors, 0.5
@@ -86,6 +91,15 @@ pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
                 format!("odometry_calibration.{name} = {v}: expected a finite value within +-{CALIBRATION_LIMIT}"),
             ));
         }
+    }
+    if let Some(f) = file
+        .frame_from_odometry
+        .filter(|f| !f.iter().all(|v| v.is_finite()))
+    {
+        return Err(IoError::content(
+            path,
+            format!("frame_from_odometry {f:?}: expected three finite numbers"),
+        ));
     }
     Ok(file)
 }
@@ -342,6 +356,7 @@ pub fn save_survey(
         &LandmarksFile {
             landmarks: records,
             odometry_calibration: s.offline.odometry_calibration,
+            frame_from_odometry: s.frame_from_odometry.map(|f| [f.x, f.y, f.theta]),
         },
     )?;
     super::save_wpilib_layout(
@@ -456,7 +471,7 @@ struct TagSizeEntry {
     size_m: f64,
 }
 
-fn default_family() -> crate::visual::tags::TagFamily {
+pub(super) fn default_family() -> crate::visual::tags::TagFamily {
     crate::visual::tags::TagFamily::Tag36h11
 }
 

@@ -102,6 +102,11 @@ impl TagSizes {
     }
 }
 
+/// Heights (robot frame z, metres) a tag may be triangulated at when nothing says how high the
+/// walls are: from 0.3 m below the floor to 3.5 m (a home's ceiling is under 3 m). Outside, a
+/// sighting is a wrong rig mounting or a false match between the cameras.
+pub const TAG_HEIGHT_RANGE_M: (f64, f64) = (-0.3, 3.5);
+
 /// Detects and triangulates the tags of one stereo pair and moves them into the robot frame.
 /// `known_size_m` gives a tag's planned edge length (for the size check) when it is known.
 #[allow(clippy::too_many_arguments)]

@@ -72,6 +72,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
             detect: request.detect.clone(),
             force: request.force,
             recording: request.recording.clone(),
+            anchors: Default::default(),
         },
         &dir,
         progress,

@@ -7,7 +7,7 @@ use super::survey::load_run_rig;
 use super::{load_run, load_world_of_run, Error, Result};
 use crate::dataset::RunDataset;
 use crate::fusion::{self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, SonarInput};
-use crate::geometry::StampedPose;
+use crate::geometry::{Pose2, StampedPose};
 use crate::io::{self, OutputDir};
 use crate::metrics::{error_growth, localization_metrics, GrowthBin, LocalizationCounts};
 use crate::progress::Progress;
@@ -99,6 +99,8 @@ struct Surveyed {
     walls: Vec<WallSegment>,
     /// The odometry's errors the survey found, unless told to track with the raw odometry.
     calibration: Option<OdometryCalibration>,
+    /// Where the survey's run's odometry frame lies in the survey's frame (an anchored survey).
+    frame_from_odometry: Option<Pose2>,
 }
 
 impl Surveyed {
@@ -106,6 +108,9 @@ impl Surveyed {
         let file = io::load_landmarks(&request.survey.join("landmarks.json"))?;
         Ok(Self {
             calibration: file.odometry_calibration.filter(|_| !request.raw_odometry),
+            frame_from_odometry: file
+                .frame_from_odometry
+                .map(|[x, y, theta]| Pose2::new(x, y, theta)),
             landmarks: file.landmarks.into_iter().map(|r| r.landmark).collect(),
             walls: surveyed_walls(request.survey, request.no_walls)?,
         })
@@ -174,7 +179,24 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
     let surveyed = Surveyed::load(request)?;
     let run = load_run(request.run_dir)?;
     let calibration = surveyed.calibration.as_ref();
-    let odometry = corrected_odometry(&run, calibration);
+    let mut odometry = corrected_odometry(&run, calibration);
+    if let (Some(frame), fusion::Start::Survey) = (surveyed.frame_from_odometry, request.start) {
+        // The survey is in its anchors' frame: the run leaves from where the survey's did, there.
+        tracing::info!(
+            "the survey is anchored: the run's odometry is moved into its frame by ({:.3}, {:.3}) m, {:.1} degrees, as the survey's run was",
+            frame.x,
+            frame.y,
+            frame.theta.to_degrees()
+        );
+        odometry = odometry
+            .iter()
+            .map(|p| StampedPose {
+                t_s: p.t_s,
+                pose: frame.compose(&p.pose),
+            })
+            .collect::<Vec<_>>()
+            .into();
+    }
     let config = filter_config(io::load_fuse_config(request.config)?, calibration);
     let world = load_world_of_run(request.world, request.run_dir, &run)?;
     let dir = OutputDir::create(request.out, request.force)?;

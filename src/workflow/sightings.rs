@@ -113,10 +113,11 @@ pub struct RunSightings {
 /// 0.5 m above the highest wall of the world, or 3.5 m without one (a home's ceiling is under
 /// 3 m).
 pub fn plausible_height_m(world: Option<&World>) -> (f64, f64) {
+    let (low, high) = crate::visual::sightings::TAG_HEIGHT_RANGE_M;
     let top = world
         .and_then(|w| w.walls.iter().map(|wall| wall.height_m).reduce(f64::max))
-        .map_or(3.5, |h| h + 0.5);
-    (-0.3, top)
+        .map_or(high, |h| h + 0.5);
+    (low, top)
 }
 
 /// Most memory the decoded pairs kept for the recording may take, bytes; a longer run's pairs

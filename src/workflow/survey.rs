@@ -8,6 +8,7 @@ use super::{load_run, load_world_of_run, Error, Result};
 use crate::camera::StereoRig;
 use crate::dataset::RunDataset;
 use crate::fusion::{self, OdometryCalibration, Survey};
+use crate::geometry::Pose2;
 use crate::io::{self, OutputDir};
 use crate::metrics::{score_survey, survey_metrics};
 use crate::progress::{timed, Progress};
@@ -40,6 +41,62 @@ pub struct SurveyRequest<'a> {
     pub force: bool,
     /// Where the recording goes (default: `survey.rrd` in the output).
     pub recording: RecordingRequest,
+    /// Known tag poses the survey is solved in the frame of (default: none, the frame is the
+    /// robot's start).
+    pub anchors: Anchoring<'a>,
+}
+
+/// The frame a survey is solved in: the robot's start (the default), known tag poses
+/// (`--anchors`), or a tag's (`--origin-tag`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Anchoring<'a> {
+    /// A file of known tag poses: a WPILib AprilTag field layout (JSON) or the YAML of
+    /// [`io::load_anchors`].
+    pub file: Option<&'a Path>,
+    /// The sigmas of an anchor that gives none (a WPILib layout never does): metres, radians.
+    pub default_sigma: (f64, f64),
+    /// The tag the frame's origin is put at, facing along x.
+    pub origin_tag: Option<crate::visual::tags::TagId>,
+}
+
+/// An anchor's position sigma when its file gives none: 1 cm (a tag placed by tape on a
+/// floor plan).
+pub const DEFAULT_ANCHOR_SIGMA_M: f64 = 0.01;
+/// ... and its facing's: 1 degree.
+pub const DEFAULT_ANCHOR_SIGMA_DEG: f64 = 1.0;
+
+impl Default for Anchoring<'_> {
+    fn default() -> Self {
+        Self {
+            file: None,
+            default_sigma: (
+                DEFAULT_ANCHOR_SIGMA_M,
+                DEFAULT_ANCHOR_SIGMA_DEG.to_radians(),
+            ),
+            origin_tag: None,
+        }
+    }
+}
+
+impl Anchoring<'_> {
+    /// The anchors, loaded.
+    fn load(&self) -> Result<Vec<fusion::Anchor>> {
+        let mut anchors = match self.file {
+            Some(path) => io::load_anchors(path, self.default_sigma)?,
+            None => Vec::new(),
+        };
+        anchors.extend(self.origin_tag.map(fusion::origin_anchor));
+        Ok(anchors)
+    }
+
+    /// What the anchors are called in messages.
+    fn name(&self) -> String {
+        match (self.file, self.origin_tag) {
+            (Some(f), _) => format!("--anchors {}", f.display()),
+            (None, Some(t)) => format!("--origin-tag {}", t.id),
+            (None, None) => "no anchors".into(),
+        }
+    }
 }
 
 /// What a survey produced, beyond its files.
@@ -147,6 +204,7 @@ struct Inputs {
     fuse: fusion::FuseConfig,
     calibration: Option<OdometryCalibration>,
     mapping: crate::sonar::map::MappingConfig,
+    anchors: Vec<fusion::Anchor>,
 }
 
 impl Inputs {
@@ -162,6 +220,7 @@ impl Inputs {
             fuse,
             calibration,
             mapping,
+            anchors: request.anchors.load()?,
         })
     }
 }
@@ -173,7 +232,7 @@ pub fn survey_into(
     progress: &dyn Progress,
 ) -> Result<SurveyOutput> {
     let started = std::time::Instant::now();
-    let inputs = Inputs::load(request)?;
+    let mut inputs = Inputs::load(request)?;
     let recorder = Recorder::open(
         &request.recording,
         Recording::Survey,
@@ -190,13 +249,30 @@ pub fn survey_into(
         ..request.detect.clone()
     };
     let mut timings = BTreeMap::new();
+    let anchored = !inputs.anchors.is_empty();
     let (seen, raw, map_raw_s) = timed("detect", &mut timings, || {
         detect_and_map(&inputs, &options, request.run_dir, rig.as_ref(), progress)
     });
     let seen = seen?;
     // Both alongside each other: "detect" is their wall time, "map_raw" the map's alone.
     timings.insert("map_raw".into(), map_raw_s);
-    let raw = raw?;
+    let mut frame_from_odometry = None;
+    let raw = match raw {
+        Some(raw) => raw?,
+        None => {
+            // Anchored: the run is first moved into the anchors' frame, then mapped.
+            let frame = anchor_frame(&inputs, &seen, &request.anchors.name())?;
+            move_run(&mut inputs, frame);
+            frame_from_odometry = Some(frame);
+            timed("map_raw", &mut timings, || {
+                map_trajectory(
+                    &inputs.run.sonar_log(),
+                    &inputs.run.odometry,
+                    &inputs.mapping,
+                )
+            })?
+        }
+    };
     let (run, world, mapping) = (&inputs.run, inputs.world.as_ref(), &inputs.mapping);
     // The pairs are compressed for the recording while the survey runs: it is mostly one thread
     // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
@@ -210,11 +286,13 @@ pub fn survey_into(
                 mapping,
                 fuse: &inputs.fuse,
                 calibration: inputs.calibration,
+                anchors: &inputs.anchors,
             };
             fusion::survey(run, raw, &seen.sightings, &seen.visual, &settings)
         },
     );
     let mut result = result?;
+    result.frame_from_odometry = frame_from_odometry;
     size_landmarks(&mut result.landmarks, world, &request.detect.tag_sizes);
     let mut metrics = survey_metrics(&result, seen.sightings.len());
     metrics.insert(
@@ -225,8 +303,19 @@ pub fn survey_into(
         "online.calibration_from_earlier_survey".into(),
         f64::from(u8::from(inputs.calibration.is_some())),
     );
+    if anchored {
+        report_anchors(&result.landmarks, &inputs.anchors, &mut metrics);
+    }
     // With the ground truth alone, the trajectories and maps are scored; with the world, all.
-    metrics.extend(score_survey(&result, run, world, mapping)?);
+    // A survey in a tag's frame is not in theirs: it is not scored.
+    if let Some(tag) = request.anchors.origin_tag {
+        tracing::info!(
+            "the survey is in tag {}'s frame, not the world's or the ground truth's: it is not scored against them",
+            tag.id
+        );
+    } else {
+        metrics.extend(score_survey(&result, run, world, mapping)?);
+    }
     timings.extend(result.timings_s.clone());
     if let Some(rec) = &recorder {
         // Alongside the survey's stages above, which it slows down on a two-core machine.
@@ -258,14 +347,15 @@ pub fn survey_into(
 }
 
 /// The run's sightings and visual turns (none without a rig) and, alongside them on the other
-/// core, its raw map (the odometry's poses: it needs no pictures), with the map's seconds.
+/// core, its raw map (the odometry's poses: it needs no pictures), with the map's seconds; no
+/// map when the survey is anchored (the run is moved into the anchors' frame first).
 fn detect_and_map(
     inputs: &Inputs,
     options: &DetectOptions,
     run_dir: &Path,
     rig: Option<&StereoRig>,
     progress: &dyn Progress,
-) -> (Result<RunSightings>, RawMap, f64) {
+) -> (Result<RunSightings>, Option<RawMap>, f64) {
     let run = &inputs.run;
     let (seen, (raw, seconds)) = rayon::join(
         || match rig {
@@ -273,12 +363,100 @@ fn detect_and_map(
             None => Ok(RunSightings::default()),
         },
         || {
+            if !inputs.anchors.is_empty() {
+                return (None, 0.0);
+            }
             let t = std::time::Instant::now();
             let raw = map_trajectory(&run.sonar_log(), &run.odometry, &inputs.mapping);
-            (raw, t.elapsed().as_secs_f64())
+            (Some(raw), t.elapsed().as_secs_f64())
         },
     );
     (seen, raw, seconds)
+}
+
+/// `anchors_from_start`: where the anchors put the run's odometry frame, from a first online pass
+/// over the odometry and the sightings (`name`: the anchors as the user gave them).
+fn anchor_frame(inputs: &Inputs, seen: &RunSightings, name: &str) -> Result<Pose2> {
+    let obs = fusion::Observations {
+        odometry: &inputs.run.odometry,
+        sightings: &seen.sightings,
+        visual: &seen.visual,
+    };
+    let online = fusion::run_online(&obs, &[], &inputs.fuse, inputs.calibration);
+    let frame = fusion::anchor_frame(&online.landmarks, &inputs.anchors)
+        .map_err(|e| Error::Request(format!("{name}: {e}")))?;
+    let seen_anchors = fusion::anchor_residuals(&online.landmarks, &inputs.anchors).len();
+    tracing::info!(
+        "{name}: {seen_anchors} of {} anchored tags seen; the run's start is at ({:.3}, {:.3}) m, {:.1} degrees in their frame",
+        inputs.anchors.len(),
+        frame.x,
+        frame.y,
+        frame.theta.to_degrees()
+    );
+    Ok(frame)
+}
+
+/// Moves the run's odometry by `frame` (`anchors_from_start`); the grid run.yaml sets is kept
+/// when that moves no pose by more than a cell, else a grid is fitted to the moved odometry.
+fn move_run(inputs: &mut Inputs, frame: Pose2) {
+    let run = &mut inputs.run;
+    let cell = inputs.mapping.grid.resolution_m;
+    let mut moved_most: f64 = 0.0;
+    for p in &mut run.odometry {
+        let moved = frame.compose(&p.pose);
+        moved_most = moved_most.max((moved.x - p.pose.x).hypot(moved.y - p.pose.y));
+        p.pose = moved;
+    }
+    if moved_most > cell {
+        tracing::info!(
+            "run.yaml's grid is in the odometry's frame, which the anchors move by up to {moved_most:.2} m: a grid is fitted in their frame instead"
+        );
+        run.meta.mapping = None;
+        inputs.mapping = super::mapping_of_run(run, None);
+    }
+}
+
+/// Each anchor's residual in the survey, on stderr and in the metrics (`anchors.*`); a warning for
+/// one over three of its sigmas.
+fn report_anchors(
+    landmarks: &[fusion::Landmark],
+    anchors: &[fusion::Anchor],
+    metrics: &mut BTreeMap<String, f64>,
+) {
+    let residuals = fusion::anchor_residuals(landmarks, anchors);
+    metrics.insert("anchors.given".into(), anchors.len() as f64);
+    metrics.insert("anchors.seen".into(), residuals.len() as f64);
+    for r in &residuals {
+        let key = format!("anchors.{}_{}", r.tag.family, r.tag.id);
+        metrics.insert(format!("{key}.residual_m"), r.distance_m);
+        metrics.insert(format!("{key}.residual_sigmas"), r.sigmas);
+        if let Some(yaw) = r.yaw_rad {
+            metrics.insert(format!("{key}.residual_deg"), yaw.to_degrees());
+        }
+        let yaw = r.yaw_rad.map_or(String::new(), |y| {
+            format!(", facing {:+.2} degrees", y.to_degrees())
+        });
+        if r.sigmas > 3.0 {
+            tracing::warn!(
+                "anchor {} {}: surveyed {:.3} m from where the anchors put it ({:.1} sigmas{yaw}): is the anchor's pose right, or the tag moved?",
+                r.tag.family,
+                r.tag.id,
+                r.distance_m,
+                r.sigmas
+            );
+        } else {
+            tracing::info!(
+                "anchor {} {}: residual {:.3} m ({:.1} sigmas{yaw})",
+                r.tag.family,
+                r.tag.id,
+                r.distance_m,
+                r.sigmas
+            );
+        }
+    }
+    if let Some(worst) = residuals.iter().map(|r| r.distance_m).reduce(f64::max) {
+        metrics.insert("anchors.residual_m.max".into(), worst);
+    }
 }
 
 /// The map along the odometry, before any correction.

@@ -7,7 +7,7 @@ use super::factors::{sqrt_information, BetweenFactor, PriorFactor, TagFactor, Tu
 use super::keyframes::Keyframes;
 use super::OdometryCalibration;
 use crate::fusion::measurement::{odometry_covariance, sighting_measurement};
-use crate::fusion::{FuseConfig, Observations, OnlineResult};
+use crate::fusion::{Anchor, FuseConfig, Observations, OnlineResult};
 use crate::geometry::{wrap_angle, Pose2};
 use crate::visual::tags::TagId;
 use crate::visual::vo::VisualTurn;
@@ -29,6 +29,9 @@ const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
 /// Inverse sigma of the prior that anchors the first pose where the odometry starts (1 mm,
 /// 1 mrad: the survey's frame is its start).
 const START_SQRT_INFO: f64 = 1e3;
+/// ... and when anchors are given (1 m, 1 rad: the anchors fix the frame; this only keeps the
+/// start near where their first fit put it).
+const START_SQRT_INFO_ANCHORED: f64 = 1.0;
 
 /// Name of keyframe `i`'s pose variable.
 pub(super) fn pose_name(i: usize) -> String {
@@ -108,6 +111,7 @@ pub(super) fn build(
     online: &OnlineResult,
     config: &FuseConfig,
     (first, prior): (Pose2, Option<&OdometryCalibration>),
+    anchors: &[Anchor],
 ) -> Graph {
     let mut graph = Graph {
         problem: tiny_solver::Problem::new(),
@@ -130,9 +134,17 @@ pub(super) fn build(
     if config.calibrate_odometry {
         add_calibration_prior(&mut graph, prior, config);
     }
+    let anchored = add_anchor_priors(&mut graph, online, anchors, config);
     let start = PriorFactor {
         measured: vec![first.x, first.y, first.theta],
-        sqrt_info: vec![START_SQRT_INFO; 3],
+        sqrt_info: vec![
+            if anchored {
+                START_SQRT_INFO_ANCHORED
+            } else {
+                START_SQRT_INFO
+            };
+            3
+        ],
     };
     graph.add(3, &[&pose_name(0)], Box::new(start), false, config);
     add_odometry(&mut graph, obs, keyframes, config);
@@ -299,4 +311,37 @@ fn add_corner_priors(graph: &mut Graph, online: &OnlineResult, config: &FuseConf
             graph.add(2, &[&landmark_name(i)], Box::new(factor), false, config);
         }
     }
+}
+
+/// A prior on each landmark that has an anchor, at the anchor with its sigmas (its facing too
+/// when given, unwrapped to the landmark's start); whether any landmark has one.
+fn add_anchor_priors(
+    graph: &mut Graph,
+    online: &OnlineResult,
+    anchors: &[Anchor],
+    config: &FuseConfig,
+) -> bool {
+    let mut any = false;
+    for (i, l) in online.landmarks.iter().enumerate() {
+        let Some(a) = anchors
+            .iter()
+            .find(|a| a.tag.family == l.family && a.tag.id == l.id)
+        else {
+            continue;
+        };
+        let mut measured = vec![a.position_m[0], a.position_m[1]];
+        let mut sqrt_info = vec![1.0 / a.sigma_m.max(1e-6); 2];
+        if let Some(yaw) = a.yaw_rad {
+            measured.push(l.yaw_rad + wrap_angle(yaw - l.yaw_rad));
+            sqrt_info.push(1.0 / a.sigma_rad.max(1e-6));
+        }
+        let dim = measured.len();
+        let factor = PriorFactor {
+            measured,
+            sqrt_info,
+        };
+        graph.add(dim, &[&landmark_name(i)], Box::new(factor), false, config);
+        any = true;
+    }
+    any
 }

@@ -126,6 +126,20 @@ pub fn run_offline(
     config: &FuseConfig,
     prior: Option<&OdometryCalibration>,
 ) -> OfflineResult {
+    run_offline_anchored(obs, online, config, prior, &[])
+}
+
+/// [`run_offline`] with `anchors`: each anchored landmark held near its anchor by a prior with
+/// the anchor's sigmas, and the first pose only loosely held where `online` starts (1 m, 1 rad),
+/// so that the survey is solved in the anchors' frame (`obs` and `online` are already in it:
+/// see [`crate::fusion::anchor_frame`]).
+pub fn run_offline_anchored(
+    obs: &Observations<'_>,
+    online: &OnlineResult,
+    config: &FuseConfig,
+    prior: Option<&OdometryCalibration>,
+    anchors: &[crate::fusion::Anchor],
+) -> OfflineResult {
     let Some(first) = obs.odometry.first() else {
         return OfflineResult {
             trajectory: Vec::new(),
@@ -149,6 +163,7 @@ pub fn run_offline(
         online,
         config,
         (first.pose, prior),
+        anchors,
     );
     let options = tiny_solver::OptimizerOptions {
         max_iteration: config.max_iterations,
