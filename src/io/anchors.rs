@@ -177,3 +177,65 @@ pub fn load_anchors(path: &Path, default_sigma: (f64, f64)) -> Result<Vec<Anchor
     }
     Ok(anchors)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(name: &str, text: &str) -> Result<Vec<Anchor>, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        load_anchors(&path, (0.01, 0.02)).map_err(|e| e.to_string())
+    }
+
+    /// A WPILib layout as `survey` writes it reads back, each tag's facing from its quaternion.
+    #[test]
+    fn a_wpilib_layout_gives_positions_and_facings() {
+        let (s, c) = (0.5f64 * 1.2).sin_cos();
+        let json = format!(
+            r#"{{"tags": [{{"ID": 4, "pose": {{"translation": {{"x": 1.5, "y": -2.0, "z": 0.4}},
+               "rotation": {{"quaternion": {{"W": {c}, "X": 0.0, "Y": 0.0, "Z": {s}}}}}}}}}],
+               "field": {{"length": 3.0, "width": 2.0}}}}"#
+        );
+        let a = load("layout.json", &json).unwrap();
+        assert_eq!(a.len(), 1);
+        assert_eq!(a[0].tag.id, 4);
+        assert_eq!(a[0].position_m, [1.5, -2.0, 0.4]);
+        assert!((a[0].yaw_rad.unwrap() - 1.2).abs() < 1e-12);
+        assert_eq!((a[0].sigma_m, a[0].sigma_rad), (0.01, 0.02));
+    }
+
+    /// Bad anchor files are refused, naming the file and the tag or line.
+    #[test]
+    fn bad_anchor_files_are_refused_saying_why() {
+        for (name, text, expect) in [
+            (
+                "a.yaml",
+                "anchors:\n  - {id: 1, x_m: 0, y_m: 0}\n  - {id: 1, x_m: 1, y_m: 0}\n",
+                "tag36h11 1 is listed twice",
+            ),
+            (
+                "a.yaml",
+                "anchors:\n  - {id: 1, x_m: .nan, y_m: 0}\n",
+                "not a finite number",
+            ),
+            (
+                "a.yaml",
+                "anchors:\n  - {id: 1, x_m: 0, y_m: 0, sigma_m: 0}\n",
+                "sigmas must be positive",
+            ),
+            (
+                "a.yaml",
+                "anchors:\n  - {id: 1, x_m: 0, y_m: 0, colour: red}\n",
+                "a.yaml:2",
+            ),
+            ("a.yaml", "anchors: []\n", "no anchors listed"),
+            ("a.json", "{\"tags\": [{\"ID\": 1}]}", "a.json:1"),
+        ] {
+            let err = load(name, text).unwrap_err();
+            assert!(err.contains(name), "{err}");
+            assert!(err.contains(expect), "{name} {text:?}: {err}");
+        }
+    }
+}
