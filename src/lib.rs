@@ -72,6 +72,7 @@
 //!         force: false,
 //!         recording: RecordingRequest::none(),
 //!         anchors: Default::default(), // the frame is the robot's start
+//!         estimate_mounting: false,
 //!     },
 //!     &Silent,
 //! )?;

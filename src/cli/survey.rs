@@ -48,6 +48,11 @@ pub struct SurveyArgs {
     /// face, instead of at the robot's start.
     #[arg(long, value_name = "ID")]
     origin_tag: Option<u32>,
+    /// Estimate the camera's mounting error on the robot (x, y and yaw of robot_from_left, from
+    /// the sightings and the robot's turns), correct the survey with it, report it with sigmas in
+    /// report.json (`mounting.*`) and write the corrected rig as camchain_mounting.yaml.
+    #[arg(long)]
+    estimate_mounting: bool,
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
@@ -169,6 +174,7 @@ impl SurveyArgs {
                 force: self.force,
                 recording: self.rerun.request()?,
                 anchors,
+                estimate_mounting: self.estimate_mounting,
             },
             &Bars::new(quiet),
         )?;

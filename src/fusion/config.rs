@@ -89,6 +89,10 @@ pub struct FuseConfig {
     pub visual_odometry: bool,
     /// χ² gate of a visual turn against the filter, 1 dof (10.83: 99.9%).
     pub visual_gate_chi2: f64,
+    /// Estimate the camera's planar mounting error (x, y and yaw of `robot_from_left` in the
+    /// robot frame) in the offline graph from the sightings and the odometry's turns, and correct
+    /// the survey with it (ours: off; `survey --estimate-mounting`).
+    pub estimate_mounting: bool,
 }
 
 /// A fusion setting out of range.
@@ -202,6 +206,7 @@ impl Default for FuseConfig {
             hold_tail_to_walls: true,
             visual_odometry: true,
             visual_gate_chi2: 10.83,
+            estimate_mounting: false,
         }
     }
 }

@@ -54,7 +54,8 @@ pub use localize::{
 };
 pub use observations::Observations;
 pub use offline::{
-    run_offline, run_offline_anchored, OdometryCalibration, OfflineKept, OfflineResult,
+    estimate_mounting, run_offline, run_offline_anchored, MountingEstimate, OdometryCalibration,
+    OfflineKept, OfflineResult, MOUNTING_STRETCH_M,
 };
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use streaming::{PairError, PairUpdate, StereoLocalizer};

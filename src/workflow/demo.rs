@@ -73,6 +73,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
             force: request.force,
             recording: request.recording.clone(),
             anchors: Default::default(),
+            estimate_mounting: false,
         },
         &dir,
         progress,

@@ -107,12 +107,26 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for BetweenFactor {
 impl<T: sna::RealField> tiny_solver::factors::Factor<T> for TagFactor {
     fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
         let (p, l) = (&params[0], &params[1]);
+        // The sighting in the robot frame; with a third variable, the camera's mounting error
+        // `m = (x, y, yaw)` moves it: the tag is at `m ∘ z` from the robot.
+        let [zx, zy, zt] = self.measured.map(constant::<T>);
+        let [mx, my, mt] = match params.get(2) {
+            Some(m) => {
+                let (ms, mc) = (m[2].clone().sin(), m[2].clone().cos());
+                [
+                    m[0].clone() + mc.clone() * zx.clone() - ms.clone() * zy.clone(),
+                    m[1].clone() + ms * zx + mc * zy,
+                    zt + m[2].clone(),
+                ]
+            }
+            None => [zx, zy, zt],
+        };
         let (s, c) = (p[2].clone().sin(), p[2].clone().cos());
         let dx = l[0].clone() - p[0].clone();
         let dy = l[1].clone() - p[1].clone();
-        let rx = c.clone() * dx.clone() + s.clone() * dy.clone() - constant::<T>(self.measured[0]);
-        let ry = -s * dx + c * dy - constant::<T>(self.measured[1]);
-        let rt = angle(l[2].clone() - p[2].clone() - constant::<T>(self.measured[2]));
+        let rx = c.clone() * dx.clone() + s.clone() * dy.clone() - mx;
+        let ry = -s * dx + c * dy - my;
+        let rt = angle(l[2].clone() - p[2].clone() - mt);
         whiten(&self.sqrt_info, [rx, ry, rt])
     }
 }

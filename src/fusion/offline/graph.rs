@@ -21,7 +21,7 @@ pub(super) type Vector = sna::DVector<f64>;
 pub(super) const CALIBRATION: &str = "odometry_calibration";
 /// Prior sigmas of the odometry calibration `[a, c, s]`: 5% turn scale, 0.02 rad/m heading drift,
 /// 2% distance scale (weak: wheel errors of a few percent at most).
-const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
+pub(super) const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
 /// Prior sigmas of the odometry calibration when an earlier survey of the same robot gives it:
 /// about what one survey's estimate scatters by (turn scale 0.0066-0.0106 for 0.0100 over the
 /// office's and museum's sample runs, heading drift -0.0059 to -0.0082 for -0.0067 rad/m).
@@ -32,6 +32,12 @@ const START_SQRT_INFO: f64 = 1e3;
 /// ... and when anchors are given (1 m, 1 rad: the anchors fix the frame; this only keeps the
 /// start near where their first fit put it).
 const START_SQRT_INFO_ANCHORED: f64 = 1.0;
+
+/// Name of the camera mounting error variable (`config.estimate_mounting`).
+pub(super) const MOUNTING: &str = "mounting";
+/// Prior sigmas of the mounting error `[x, y, yaw]`: 0.3 m, 0.3 m, 0.3 rad (weak: a tape
+/// measure does better; the prior only keeps an unobserved direction from wandering).
+pub(super) const MOUNTING_PRIOR_SIGMA: [f64; 3] = [0.3, 0.3, 0.3];
 
 /// Name of keyframe `i`'s pose variable.
 pub(super) fn pose_name(i: usize) -> String {
@@ -51,7 +57,7 @@ pub(super) struct Graph {
     pub(super) factors: usize,
     /// The sighting factors again, with their variables, to judge a solution by
     /// ([`Graph::sightings_consistent`]).
-    pub(super) sightings: Vec<(String, String, TagFactor)>,
+    pub(super) sightings: Vec<(Vec<String>, TagFactor)>,
 }
 
 /// A sighting is consistent with a solution when its whitened residual's squared norm is below
@@ -68,11 +74,15 @@ impl Graph {
         use tiny_solver::factors::Factor;
         let mut consistent = 0;
         let mut chi2 = 0.0;
-        for (pose, landmark, factor) in &self.sightings {
-            let (Some(p), Some(l)) = (values.get(pose), values.get(landmark)) else {
+        for (variables, factor) in &self.sightings {
+            let Some(params) = variables
+                .iter()
+                .map(|v| values.get(v).cloned())
+                .collect::<Option<Vec<_>>>()
+            else {
                 continue;
             };
-            let r: sna::DVector<f64> = factor.residual_func(&[p.clone(), l.clone()]);
+            let r: sna::DVector<f64> = factor.residual_func(&params);
             let d2 = r.norm_squared();
             chi2 += d2;
             consistent += (d2 <= SIGHTING_CHI2_99) as usize;
@@ -148,6 +158,16 @@ pub(super) fn build(
     };
     graph.add(3, &[&pose_name(0)], Box::new(start), false, config);
     add_odometry(&mut graph, obs, keyframes, config);
+    if config.estimate_mounting && !keyframes.of_sighting.is_empty() {
+        graph
+            .init
+            .insert(MOUNTING.to_owned(), sna::DVector::zeros(3));
+        let prior = PriorFactor {
+            measured: vec![0.0; 3],
+            sqrt_info: MOUNTING_PRIOR_SIGMA.iter().map(|s| 1.0 / s).collect(),
+        };
+        graph.add(3, &[MOUNTING], Box::new(prior), false, config);
+    }
     add_sightings(&mut graph, obs, keyframes, online, config);
     add_turns(&mut graph, keyframes, visual, config);
     if config.corner_factors {
@@ -261,16 +281,19 @@ fn add_sightings(
             measured: [z.x, z.y, z.z],
             sqrt_info: sqrt_information(&r),
         };
-        let vars = [pose_name(kf), landmark_name(l)];
+        let mut vars = vec![pose_name(kf), landmark_name(l)];
+        if config.estimate_mounting {
+            vars.push(MOUNTING.to_owned());
+        }
         graph.sightings.push((
-            vars[0].clone(),
-            vars[1].clone(),
+            vars.clone(),
             TagFactor {
                 measured: factor.measured,
                 sqrt_info: factor.sqrt_info,
             },
         ));
-        graph.add(3, &[&vars[0], &vars[1]], Box::new(factor), true, config);
+        let names: Vec<&str> = vars.iter().map(String::as_str).collect();
+        graph.add(3, &names, Box::new(factor), true, config);
     }
 }
 
@@ -344,4 +367,30 @@ fn add_anchor_priors(
         any = true;
     }
     any
+}
+
+/// The marginal covariance of variable `name` (of `dim` numbers) at `values`: the inverse of the
+/// problem's information (JᵀJ of its whitened residuals) restricted to it, through the sparse
+/// Cholesky the solver itself uses; `None` when the information is singular.
+pub(super) fn marginal_covariance(
+    problem: &tiny_solver::Problem,
+    values: &HashMap<String, Vector>,
+    name: &str,
+    dim: usize,
+) -> Option<nalgebra::DMatrix<f64>> {
+    use tiny_solver::linear::sparse::SparseLinearSolver;
+    let blocks = problem.initialize_parameter_blocks(values);
+    let columns = problem.get_variable_name_to_col_idx_dict(&blocks);
+    let first = *columns.get(name)?;
+    let total: usize = columns
+        .keys()
+        .map(|k| blocks[k].tangent_size() - blocks[k].fixed_variables.len())
+        .sum();
+    let structure = problem.build_symbolic_structure(&blocks, total, &columns);
+    let (_, jacobian) = problem.compute_residual_and_jacobian(&blocks, &columns, &structure);
+    let jtj = jacobian.as_ref().transpose().to_col_major().ok()? * jacobian.as_ref();
+    let rhs = faer::Mat::<f64>::from_fn(total, dim, |r, c| f64::from(u8::from(r == first + c)));
+    let x = tiny_solver::linear::SparseCholeskySolver::new().solve_jtj(&rhs, &jtj)?;
+    let cov = nalgebra::DMatrix::from_fn(dim, dim, |r, c| x[(first + r, c)]);
+    cov.iter().all(|v| v.is_finite()).then_some(cov)
 }

@@ -6,10 +6,12 @@ mod factors;
 mod graph;
 mod interpolate;
 mod keyframes;
+mod mounting;
 
 use crate::fusion::{FuseConfig, Landmark, Observations, OnlineResult};
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
 use factors::corrected_increment;
+pub use mounting::{estimate_mounting, MOUNTING_STRETCH_M};
 use serde::{Deserialize, Serialize};
 
 /// The result of the offline pass.
@@ -38,6 +40,44 @@ pub struct OfflineResult {
     pub sightings: usize,
     /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
+    /// The camera's planar mounting error, when estimated
+    /// ([`FuseConfig::estimate_mounting`]) and the solution kept.
+    pub mounting: Option<MountingEstimate>,
+}
+
+/// The camera's planar mounting error the offline pass found: where the sightings must be moved
+/// in the robot frame to agree with the odometry, `m` with the tag at `m ∘ z` from the robot for a
+/// sighting `z`. The corrected mounting is `m ∘ robot_from_left` (x, y and yaw: height, roll and
+/// pitch do not show in a planar survey).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MountingEstimate {
+    /// `m`: x, y (metres) and yaw (radians) in the robot frame.
+    pub correction: Pose2,
+    /// Its marginal covariance; `None` when the graph cannot give one (singular information).
+    pub covariance: Option<nalgebra::Matrix3<f64>>,
+}
+
+impl MountingEstimate {
+    /// The sigmas of `(x, y, yaw)`, when known.
+    pub fn sigmas(&self) -> Option<[f64; 3]> {
+        self.covariance
+            .map(|c| [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt()))
+    }
+
+    /// `robot_from_left` corrected.
+    pub fn corrected(
+        &self,
+        robot_from_left: &nalgebra::Isometry3<f64>,
+    ) -> nalgebra::Isometry3<f64> {
+        let m = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::new(self.correction.x, self.correction.y, 0.0),
+            nalgebra::UnitQuaternion::from_axis_angle(
+                &nalgebra::Vector3::z_axis(),
+                self.correction.theta,
+            ),
+        );
+        m * robot_from_left
+    }
 }
 
 /// The estimate the offline pass returns.
@@ -152,6 +192,7 @@ pub fn run_offline_anchored(
             sightings_consistent: [0; 2],
             sightings: 0,
             odometry_calibration: None,
+            mounting: None,
         };
     };
     let visual = keyframes::turns_used(obs, config);
@@ -266,7 +307,16 @@ pub fn run_offline_anchored(
             l
         })
         .collect();
+    let mounting = values
+        .get(graph::MOUNTING)
+        .filter(|_| kept == OfflineKept::Solution)
+        .map(|v| MountingEstimate {
+            correction: Pose2::new(v[0], v[1], wrap_angle(v[2])),
+            covariance: graph::marginal_covariance(&graph.problem, &values, graph::MOUNTING, 3)
+                .map(|c| nalgebra::Matrix3::from_fn(|r, k| c[(r, k)])),
+        });
     OfflineResult {
+        mounting,
         trajectory: interpolate::corrected(obs.odometry, &keyframes.frames, &solved),
         landmarks,
         keyframes: keyframes.frames.len(),
