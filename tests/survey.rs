@@ -679,16 +679,8 @@ fn a_sonar_only_survey_without_a_world_scores_what_it_can_and_claims_nothing() {
     assert_ne!(meta, without, "run.yaml names its world");
     std::fs::write(run.join("run.yaml"), without).unwrap();
     let request = |out, calibration_from| stereotag::workflow::survey::SurveyRequest {
-        run_dir: &run,
-        out,
-        world: None,
-        config: None,
         calibration_from,
-        detect: DetectOptions::survey(Backend::ApriltagC),
-        force: false,
-        recording: RecordingRequest::none(),
-        anchors: Default::default(),
-        estimate_mounting: false,
+        ..stereotag::workflow::survey::SurveyRequest::new(&run, out)
     };
     let out = dir.path().join("survey");
     stereotag::workflow::survey::survey(&request(&out, None), &Silent).unwrap();
@@ -768,16 +760,8 @@ fn an_anchored_survey_is_solved_in_the_anchors_frame() {
     let survey = |out: &Path, anchoring| {
         stereotag::workflow::survey::survey(
             &stereotag::workflow::survey::SurveyRequest {
-                run_dir: &run,
-                out,
-                world: None,
-                config: None,
-                calibration_from: None,
-                detect: DetectOptions::survey(Backend::ApriltagC),
-                force: false,
-                recording: RecordingRequest::none(),
                 anchors: anchoring,
-                estimate_mounting: false,
+                ..stereotag::workflow::survey::SurveyRequest::new(&run, out)
             },
             &Silent,
         )
@@ -889,16 +873,8 @@ fn a_wrong_mounting_is_estimated_and_corrected() {
         let out = dir.path().join(out);
         stereotag::workflow::survey::survey(
             &stereotag::workflow::survey::SurveyRequest {
-                run_dir: &run,
-                out: &out,
-                world: None,
-                config: None,
-                calibration_from: None,
-                detect: DetectOptions::survey(Backend::ApriltagC),
-                force: false,
-                recording: RecordingRequest::none(),
-                anchors: Default::default(),
                 estimate_mounting,
+                ..stereotag::workflow::survey::SurveyRequest::new(&run, &out)
             },
             &Silent,
         )

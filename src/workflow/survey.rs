@@ -50,6 +50,26 @@ pub struct SurveyRequest<'a> {
     pub estimate_mounting: bool,
 }
 
+impl<'a> SurveyRequest<'a> {
+    /// A survey of `run_dir` into `out` at the defaults: the world run.yaml names, the default
+    /// fusion settings, the C library at the survey's detector settings, no recording, in the
+    /// frame of the run's start; change any field after.
+    pub fn new(run_dir: &'a Path, out: &'a Path) -> Self {
+        Self {
+            run_dir,
+            out,
+            world: None,
+            config: None,
+            calibration_from: None,
+            detect: DetectOptions::survey(crate::visual::tags::Backend::ApriltagC),
+            force: false,
+            recording: RecordingRequest::none(),
+            anchors: Anchoring::default(),
+            estimate_mounting: false,
+        }
+    }
+}
+
 /// The frame a survey is solved in: the robot's start (the default), known tag poses
 /// (`--anchors`), or a tag's (`--origin-tag`).
 #[derive(Debug, Clone, PartialEq)]
