@@ -388,8 +388,11 @@ fn stream_localise(survey: &Path, run_dir: &Path) -> (Vec<stereotag::geometry::S
                     pose: now.pose,
                 });
                 let gt = pose_at(truth, t_s).unwrap();
-                let e2 = (now.pose.x - gt.x).powi(2) + (now.pose.y - gt.y).powi(2);
-                nees.push(e2 / (2.0 * now.position_sigma_m().powi(2)));
+                let c = &now.covariance;
+                nees.push(stereotag::metrics::position_nees(
+                    [now.pose.x - gt.x, now.pose.y - gt.y],
+                    [c[(0, 0)], c[(0, 1)], c[(1, 1)]],
+                ));
             }
             1 => {
                 localizer.range(&run.sonar[i]);

@@ -19,8 +19,13 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 pub struct LocalizeResult {
     /// Filtered pose at each odometry time.
     pub trajectory: Vec<StampedPose>,
-    /// Position sigma at each odometry time, metres.
+    /// Position sigma at each odometry time (worst direction), metres.
     pub sigma_m: Vec<f64>,
+    /// Position covariance at each odometry time, `[xx, xy, yy]` in square metres.
+    pub position_covariance: Vec<[f64; 3]>,
+    /// Whether the pose was known at each odometry time: false from an unknown start until the
+    /// first surveyed tag is seen.
+    pub located: Vec<bool>,
     /// Distance travelled since the last fused sighting at each odometry time, metres.
     pub since_sighting_m: Vec<f64>,
     /// Sightings fused.
@@ -628,6 +633,8 @@ impl LocalizeResult {
         Self {
             trajectory: Vec::with_capacity(n),
             sigma_m: Vec::with_capacity(n),
+            position_covariance: Vec::with_capacity(n),
+            located: Vec::with_capacity(n),
             since_sighting_m: Vec::with_capacity(n),
             accepted: Vec::new(),
             rejected: Vec::new(),
@@ -664,6 +671,10 @@ impl LocalizeResult {
             pose: now.pose,
         });
         self.sigma_m.push(now.position_sigma_m());
+        let c = &now.covariance;
+        self.position_covariance
+            .push([c[(0, 0)], c[(0, 1)], c[(1, 1)]]);
+        self.located.push(now.located);
         self.since_sighting_m.push(now.since_sighting_m);
     }
 }

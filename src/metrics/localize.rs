@@ -97,30 +97,67 @@ pub fn localization_metrics(
             "ate_m.localized".into(),
             ate_m(&result.trajectory, t).into(),
         );
-        let (mean, worst) = sigma_consistency(result, t);
-        metrics.insert("nees.position_mean".into(), mean.into());
-        metrics.insert("error_over_sigma.max".into(), worst.into());
+        let c = sigma_consistency(result, t);
+        metrics.insert("nees.position_mean".into(), c.nees_located.into());
+        metrics.insert("nees.position_mean_from_start".into(), c.nees_all.into());
+        metrics.insert("error_over_sigma.max".into(), c.worst.into());
+        if let Some(first) = result.located.iter().position(|&l| l) {
+            metrics.insert(
+                "located.from_t_s".into(),
+                result.trajectory[first].t_s.into(),
+            );
+            metrics.insert(
+                "ate_m.located".into(),
+                ate_m(&result.trajectory[first..], t).into(),
+            );
+        }
     }
     metrics
 }
 
-/// How well the reported position sigma covers the error (no alignment: the survey's frame is
-/// the truth's), from the first instant: the mean of `e² / (2 σ²)` (the 2D NEES with the
-/// worst-direction sigma, so at most the full NEES: about 1 or below when honest) and the
-/// largest `e / σ`.
-fn sigma_consistency(result: &LocalizeResult, truth: &[StampedPose]) -> (f64, f64) {
-    let (mut sum, mut n, mut worst) = (0.0, 0usize, 0.0f64);
-    for (p, sigma) in result.trajectory.iter().zip(&result.sigma_m) {
+/// The position NEES per degree of freedom of an `error` (x, y, metres) under a position
+/// covariance `[xx, xy, yy]`: `eᵀ P⁻¹ e / 2`, about 1 on average when the covariance is honest.
+pub fn position_nees(error: [f64; 2], covariance: [f64; 3]) -> f64 {
+    let ([ex, ey], [xx, xy, yy]) = (error, covariance);
+    let det = (xx * yy - xy * xy).max(1e-18);
+    (yy * ex * ex - 2.0 * xy * ex * ey + xx * ey * ey) / det / 2.0
+}
+
+/// How well the reported position covariance covers the error (no alignment: the survey's frame
+/// is the truth's).
+struct Consistency {
+    /// Mean position NEES per degree of freedom (`eᵀ P⁻¹ e / 2`: about 1 when honest, below when
+    /// cautious) over the samples where the pose is known.
+    nees_located: f64,
+    /// The same from the first instant (an unknown start's guess, with its huge covariance,
+    /// counts near 0).
+    nees_all: f64,
+    /// The largest `e / σ` from the first instant, with the worst-direction sigma.
+    worst: f64,
+}
+
+fn sigma_consistency(result: &LocalizeResult, truth: &[StampedPose]) -> Consistency {
+    let (mut all, mut n_all, mut located, mut n_located, mut worst) =
+        (0.0, 0usize, 0.0, 0usize, 0.0f64);
+    for (i, p) in result.trajectory.iter().enumerate() {
         let Some(gt) = pose_at(truth, p.t_s) else {
             continue;
         };
-        let e = (p.pose.x - gt.x).hypot(p.pose.y - gt.y);
-        let s = sigma.max(1e-9);
-        sum += e * e / (2.0 * s * s);
-        n += 1;
-        worst = worst.max(e / s);
+        let (ex, ey) = (p.pose.x - gt.x, p.pose.y - gt.y);
+        let nees = position_nees([ex, ey], result.position_covariance[i]);
+        all += nees;
+        n_all += 1;
+        if result.located[i] {
+            located += nees;
+            n_located += 1;
+        }
+        worst = worst.max(ex.hypot(ey) / result.sigma_m[i].max(1e-9));
     }
-    (sum / n.max(1) as f64, worst)
+    Consistency {
+        nees_located: located / n_located.max(1) as f64,
+        nees_all: all / n_all.max(1) as f64,
+        worst,
+    }
 }
 
 /// What the localisation had to work with, for its report.

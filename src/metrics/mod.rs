@@ -7,7 +7,8 @@ pub mod survey;
 pub mod trajectory;
 
 pub use localize::{
-    error_growth, localization_metrics, GrowthBin, LocalizationCounts, GROWTH_BANDS_M,
+    error_growth, localization_metrics, position_nees, GrowthBin, LocalizationCounts,
+    GROWTH_BANDS_M,
 };
 pub use survey::{score_sonar_map, score_survey, survey_metrics, SonarScores};
 pub use trajectory::{align_se2, ate_m};
