@@ -380,6 +380,28 @@ fn map_window(map: &OccupancyMap, extra: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
     )
 }
 
+/// Points of a path drawn as one polyline (consecutive pieces share their end point).
+const POLYLINE_PIECE: usize = 16;
+
+/// The points of a path as the picture draws them: a point less than 2 pixels from the last one
+/// kept is left out (the last point is always kept). A run's path has a pose every centimetre or
+/// so, several to a pixel, and the thick line's joins cost as much as its segments.
+fn distinct_pixels(points: impl Iterator<Item = Point>) -> Vec<Point> {
+    let mut out: Vec<Point> = Vec::new();
+    let mut last_dropped = None;
+    for p in points {
+        match out.last() {
+            Some(q) if (p - *q).x.abs().max((p - *q).y.abs()) < 2 => last_dropped = Some(p),
+            _ => {
+                out.push(p);
+                last_dropped = None;
+            }
+        }
+    }
+    out.extend(last_dropped);
+    out
+}
+
 /// A picture of an occupancy map: each cell from white (free) to black (occupied), unknown cells
 /// blue-grey, at [`MAP_PX_PER_M`] with axes in metres, a 1 m scale bar, a legend, and `overlay`
 /// drawn over it.
@@ -419,10 +441,18 @@ pub fn map_picture(map: &OccupancyMap, title: &str, overlay: &Overlay<'_>) -> Rg
         );
     }
     for path in &overlay.paths {
-        let points: Vec<Point> = path.points.iter().map(|&p| plot.px(p)).collect();
-        let _ = Polyline::new(&points)
-            .into_styled(PrimitiveStyle::with_stroke(rgb(path.colour), 2))
-            .draw(&mut plot.canvas);
+        let points = distinct_pixels(path.points.iter().map(|&p| plot.px(p)));
+        // In short pieces: a thick polyline is filled scanline by scanline over its bounding box,
+        // each scanline against every segment, so a whole run's path in one costs its rows times
+        // its segments.
+        let mut start = 0;
+        while start + 1 < points.len() {
+            let end = (start + POLYLINE_PIECE).min(points.len());
+            let _ = Polyline::new(&points[start..end])
+                .into_styled(PrimitiveStyle::with_stroke(rgb(path.colour), 2))
+                .draw(&mut plot.canvas);
+            start = end - 1;
+        }
     }
     for mark in &overlay.marks {
         let centre = plot.px(mark.at_m);
