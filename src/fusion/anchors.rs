@@ -167,7 +167,10 @@ mod tests {
             size_spread: 0.0,
             position_m: [x, y, 0.3],
             yaw_rad: yaw,
+            pitch_rad: 0.0,
+            roll_rad: 0.0,
             covariance_m2: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-4]],
+            orientation_sigma_rad: [0.01; 3],
             observations: 3,
             matched_corner: None,
         }

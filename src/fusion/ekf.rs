@@ -77,7 +77,14 @@ impl Ekf {
             .enumerate()
             .map(|(slot, key)| {
                 let (xy, cov) = self.landmark_xy_cov(slot);
-                landmark_from(key, xy, self.x[3 + 3 * slot + 2], &cov, &extras[slot])
+                let yaw = 3 + 3 * slot + 2;
+                landmark_from(
+                    key,
+                    xy,
+                    (self.x[yaw], self.p[(yaw, yaw)]),
+                    &cov,
+                    &extras[slot],
+                )
             })
             .collect()
     }

@@ -43,12 +43,44 @@ pub struct Landmark {
     pub position_m: [f64; 3],
     /// Direction the tag faces, radians from the world x axis.
     pub yaw_rad: f64,
+    /// How far the tag's face is turned up from the vertical, radians (the mean of the
+    /// sightings; 0 in files older than it). With `yaw_rad` and `roll_rad`, the tag's full
+    /// orientation: [`crate::world::Tag::rotation`].
+    #[serde(default)]
+    pub pitch_rad: f64,
+    /// How far the tag is turned about its normal, radians (the mean of the sightings).
+    #[serde(default)]
+    pub roll_rad: f64,
     /// Covariance of the centre, m² (x, y from the filter; z from the spread of the sightings).
     pub covariance_m2: [[f64; 3]; 3],
+    /// Sigmas of roll, pitch and yaw, radians (yaw from the filter; roll and pitch from the
+    /// spread of the sightings; 0 in files older than it).
+    #[serde(default)]
+    pub orientation_sigma_rad: [f64; 3],
     /// Sightings fused.
     pub observations: usize,
     /// The Hough corner matched, if any.
     pub matched_corner: Option<CornerMatch>,
+}
+
+impl Landmark {
+    /// `world_from_tag`'s rotation (see [`crate::world::Tag::rotation`]).
+    pub fn rotation(&self) -> nalgebra::Rotation3<f64> {
+        crate::world::tag_rotation(self.roll_rad, self.pitch_rad, self.yaw_rad)
+    }
+
+    /// The pose's 6x6 covariance over `(x, y, z, roll, pitch, yaw)`: the centre's, and the
+    /// orientation's sigmas (taken as independent of the centre and of each other).
+    pub fn pose_covariance(&self) -> [[f64; 6]; 6] {
+        let mut c = [[0.0; 6]; 6];
+        for (i, row) in self.covariance_m2.iter().enumerate() {
+            c[i][..3].copy_from_slice(row);
+        }
+        for (k, sigma) in self.orientation_sigma_rad.iter().enumerate() {
+            c[3 + k][3 + k] = sigma * sigma;
+        }
+        c
+    }
 }
 
 /// Sightings of one id that disagree with its landmark.
@@ -102,21 +134,55 @@ pub(crate) struct Extras {
     pub(crate) z_sq: f64,
     pub(crate) size_sum: f64,
     pub(crate) size_sq: f64,
+    /// Sum of the weights of the sightings' orientations (`1 / yaw_sigma²`: a tag's pitch and
+    /// roll come from the depths of its corners, as its yaw does).
+    pub(crate) weight: f64,
+    pub(crate) pitch_sum: f64,
+    pub(crate) pitch_sq: f64,
+    /// Weighted sums of the roll's cosine and sine (a circular mean: a tag may be turned by any
+    /// angle).
+    pub(crate) roll_cos: f64,
+    pub(crate) roll_sin: f64,
     pub(crate) n: usize,
     pub(crate) corner: Option<CornerMatch>,
 }
 
-/// A landmark from the filter's estimate of it and the running sums of its sightings.
+impl Extras {
+    /// Adds a fused sighting.
+    pub(crate) fn add(&mut self, s: &crate::visual::sightings::TagSighting) {
+        let z = s.position_in_robot_m[2];
+        self.z_sum += z;
+        self.z_sq += z * z;
+        self.size_sum += s.size_m;
+        self.size_sq += s.size_m * s.size_m;
+        let w = 1.0 / s.yaw_sigma_rad.max(1e-3).powi(2);
+        self.weight += w;
+        self.pitch_sum += w * s.pitch_rad;
+        self.pitch_sq += w * s.pitch_rad * s.pitch_rad;
+        self.roll_cos += w * s.roll_rad.cos();
+        self.roll_sin += w * s.roll_rad.sin();
+        self.n += 1;
+    }
+}
+
+/// A landmark from the filter's estimate of it (position, yaw and their covariance) and the
+/// running sums of its sightings.
 pub(crate) fn landmark_from(
     key: &TagId,
     xy: Vector2<f64>,
-    yaw: f64,
+    (yaw, var_yaw): (f64, f64),
     cov: &Matrix2<f64>,
     extra: &Extras,
 ) -> Landmark {
     let n = extra.n.max(1) as f64;
     let z = extra.z_sum / n;
     let var_z = (extra.z_sq / n - z * z).max(0.0) / n + 1e-6;
+    let w = extra.weight.max(1e-12);
+    let pitch = extra.pitch_sum / w;
+    let var_pitch = (extra.pitch_sq / w - pitch * pitch).max(0.0) / n + 1e-6;
+    // The circular spread of the rolls: -2 ln R, R the mean resultant length.
+    let resultant = extra.roll_cos.hypot(extra.roll_sin) / w;
+    let var_roll = (-2.0 * resultant.clamp(1e-12, 1.0).ln()).max(0.0) / n + 1e-6;
     Landmark {
         id: key.id,
         family: key.family,
@@ -126,11 +192,14 @@ pub(crate) fn landmark_from(
             / (extra.size_sum / n).max(1e-9),
         position_m: [xy.x, xy.y, z],
         yaw_rad: wrap_angle(yaw),
+        pitch_rad: pitch,
+        roll_rad: extra.roll_sin.atan2(extra.roll_cos),
         covariance_m2: [
             [cov[(0, 0)], cov[(0, 1)], 0.0],
             [cov[(1, 0)], cov[(1, 1)], 0.0],
             [0.0, 0.0, var_z],
         ],
+        orientation_sigma_rad: [var_roll.sqrt(), var_pitch.sqrt(), var_yaw.max(0.0).sqrt()],
         observations: extra.n,
         matched_corner: extra.corner,
     }

@@ -333,13 +333,7 @@ fn fuse_sighting(
             slot
         }
     };
-    let e = &mut extras[slot];
-    let zr = sighting.position_in_robot_m[2];
-    e.z_sum += zr;
-    e.z_sq += zr * zr;
-    e.size_sum += sighting.size_m;
-    e.size_sq += sighting.size_m * sighting.size_m;
-    e.n += 1;
+    extras[slot].add(sighting);
     result.accepted.push(index);
     true
 }

@@ -117,6 +117,8 @@ pub(crate) fn square_run(
                 covariance_m2: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
                 yaw_in_robot_rad: wrap_angle(tag[2] - p.pose.theta),
                 yaw_sigma_rad: 0.01,
+                pitch_rad: 0.0,
+                roll_rad: 0.0,
                 corners_px: None,
             });
         }

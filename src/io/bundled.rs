@@ -22,6 +22,7 @@ macro_rules! bundle {
 pub const FILES: &[(&str, &[u8])] = &[
     bundle!("samples/office/world.yaml"),
     bundle!("samples/museum/world.yaml"),
+    bundle!("samples/apartment/world.yaml"),
     bundle!("samples/willow/world.yaml"),
     bundle!("samples/willow/willow_crop.yaml"),
     bundle!("samples/willow/willow_crop.pgm"),

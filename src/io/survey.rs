@@ -20,6 +20,26 @@ pub struct LandmarkRecord {
     pub landmark: Landmark,
     /// Where the world file planned the tag, if known.
     pub planned_position_m: Option<[f64; 3]>,
+    /// The tag's orientation as a unit quaternion `[x, y, z, w]` (`world_from_tag`, x the
+    /// outward normal, z up the printed tag): yaw, pitch and roll together.
+    #[serde(default)]
+    pub orientation_xyzw: [f64; 4],
+    /// The pose's covariance over `(x, y, z, roll, pitch, yaw)`, metres and radians.
+    #[serde(default)]
+    pub covariance_6x6: [[f64; 6]; 6],
+}
+
+impl LandmarkRecord {
+    /// The record of a landmark, with where the world planned it.
+    pub fn new(landmark: Landmark, planned_position_m: Option<[f64; 3]>) -> Self {
+        let q = nalgebra::UnitQuaternion::from_rotation_matrix(&landmark.rotation());
+        Self {
+            orientation_xyzw: [q.i, q.j, q.k, q.w],
+            covariance_6x6: landmark.pose_covariance(),
+            landmark,
+            planned_position_m,
+        }
+    }
 }
 
 /// The whole `landmarks.json`.
@@ -57,7 +77,8 @@ pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
             .position_m
             .iter()
             .chain(l.covariance_m2.iter().flatten())
-            .chain(std::iter::once(&l.yaw_rad))
+            .chain([&l.yaw_rad, &l.pitch_rad, &l.roll_rad])
+            .chain(&l.orientation_sigma_rad)
             .chain(std::iter::once(&l.size_m));
         if numbers.into_iter().any(|v| !v.is_finite()) {
             return Err(IoError::content(
@@ -120,12 +141,12 @@ pub fn save_wpilib_layout(
         .map(|l| {
             max_x = max_x.max(l.position_m[0]);
             max_y = max_y.max(l.position_m[1]);
-            let (s, c) = (0.5 * l.yaw_rad).sin_cos();
+            let q = nalgebra::UnitQuaternion::from_rotation_matrix(&l.rotation());
             serde_json::json!({
                 "ID": l.id,
                 "pose": {
                     "translation": {"x": l.position_m[0], "y": l.position_m[1], "z": l.position_m[2]},
-                    "rotation": {"quaternion": {"W": c, "X": 0.0, "Y": 0.0, "Z": s}}
+                    "rotation": {"quaternion": {"W": q.w, "X": q.i, "Y": q.j, "Z": q.k}}
                 }
             })
         })
@@ -346,10 +367,7 @@ pub fn save_survey(
     landmarks.sort_by(|a, b| (&a.family, a.id).cmp(&(&b.family, b.id)));
     let records = landmarks
         .iter()
-        .map(|l| LandmarkRecord {
-            landmark: l.clone(),
-            planned_position_m: planned(l),
-        })
+        .map(|l| LandmarkRecord::new(l.clone(), planned(l)))
         .collect();
     super::save_landmarks(
         &dir.join("landmarks.json"),

@@ -176,6 +176,11 @@ fn check_placements(path: &Path, file: &WorldFile) -> Result<(), IoError> {
     for (i, t) in file.tags.iter().enumerate() {
         finite(path, &format!("tags[{i}].position_m"), &t.position_m)?;
         finite(path, &format!("tags[{i}].yaw_rad"), &[t.yaw_rad])?;
+        finite(
+            path,
+            &format!("tags[{i}].pitch_rad, roll_rad"),
+            &[t.pitch_rad, t.roll_rad],
+        )?;
         if !(t.size_m.is_finite() && t.size_m > 0.0) {
             return Err(IoError::content(
                 path,

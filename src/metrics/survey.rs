@@ -136,6 +136,23 @@ fn landmark_errors(survey: &Survey, world: &World, align: Pose2) -> Vec<f64> {
     errors
 }
 
+/// The angle between each landmark's orientation and its tag's in the world, degrees, sorted.
+fn orientation_errors_deg(survey: &Survey, world: &World) -> Vec<f64> {
+    let mut errors: Vec<f64> = survey
+        .landmarks
+        .iter()
+        .filter_map(|l| {
+            let tag = world
+                .tags
+                .iter()
+                .find(|t| t.id == l.id && t.family == l.family)?;
+            Some(l.rotation().angle_to(&tag.rotation()).to_degrees())
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    errors
+}
+
 /// The landmarks' median and largest error; and, as diagnostics, the median and the offline
 /// ATE after the best rigid alignment of the offline trajectory with the truth (the shift and
 /// turn of the whole survey, its anchoring, taken out).
@@ -145,6 +162,14 @@ fn landmark_metrics(survey: &Survey, run: &RunDataset, world: &World) -> BTreeMa
     if let Some(median) = median_sorted(&errors) {
         m.insert("landmarks.median_error_m".into(), median);
         m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
+    }
+    let turned = orientation_errors_deg(survey, world);
+    if let Some(median) = median_sorted(&turned) {
+        m.insert("landmarks.median_orientation_error_deg".into(), median);
+        m.insert(
+            "landmarks.max_orientation_error_deg".into(),
+            turned[turned.len() - 1],
+        );
     }
     let Some(truth) = run.ground_truth.as_deref() else {
         return m;

@@ -274,13 +274,16 @@ impl Renderer {
             })
             .map(WallSpan::new)
             .collect();
-        // Tags seen from above are segments across their width (quiet zone included).
+        // Tags seen from above: the diagonals of their square (quiet zone included), a segment
+        // across the width of a tag on a wall.
         let tags_in_view = (0..tags.len())
             .filter(|&k| {
                 let t = &tags[k];
                 let half = 0.5 * t.total_cells as f64 * t.cell_m;
-                let (a, b) = (t.centre - t.right * half, t.centre + t.right * half);
-                wedges.sees((a.x, a.y), (b.x, b.y))
+                [t.right + t.up, t.right - t.up].iter().any(|d| {
+                    let (a, b) = (t.centre - d * half, t.centre + d * half);
+                    wedges.sees((a.x, a.y), (b.x, b.y))
+                })
             })
             .collect();
         let mut scene = Scene::new(walls, tags, tags_in_view, config.ceiling_m);

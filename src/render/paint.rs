@@ -11,6 +11,8 @@ pub(super) struct TagPaint {
     pub(super) centre: Vector3<f64>,
     pub(super) normal: Vector3<f64>,
     pub(super) right: Vector3<f64>,
+    /// Up the printed tag (the world's up for a tag on a wall).
+    pub(super) up: Vector3<f64>,
     /// Cell size, metres (the black square is `width_at_border` cells).
     pub(super) cell_m: f64,
     /// `1 / cell_m`.
@@ -54,12 +56,12 @@ pub(super) fn tag_paint(tag: &Tag) -> Result<TagPaint, RenderError> {
                 img[(y * tw + x) as usize];
         }
     }
-    let (s, c) = tag.yaw_rad.sin_cos();
-    let normal = Vector3::new(c, s, 0.0);
+    let r = tag.rotation();
     Ok(TagPaint {
         centre: Vector3::from(tag.position_m),
-        normal,
-        right: Vector3::new(-s, c, 0.0),
+        normal: r * Vector3::x(),
+        right: r * Vector3::y(),
+        up: r * Vector3::z(),
         cell_m: tag.size_m / image.black_square_cells as f64,
         cells_per_m: image.black_square_cells as f64 / tag.size_m,
         total_cells: total,
@@ -72,7 +74,7 @@ impl TagPaint {
     /// top-left of the black square (tag frame (-1, 1), (1, 1), (1, -1), (-1, -1), y down).
     pub(super) fn corners(&self, size_m: f64) -> [Vector3<f64>; 4] {
         let h = 0.5 * size_m;
-        let down = Vector3::new(0.0, 0.0, -1.0);
+        let down = -self.up;
         let face = self.centre + self.normal * TAG_STANDOFF_M;
         [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)]
             .map(|(x, y)| face + self.right * (x * h) + down * (y * h))
@@ -99,7 +101,7 @@ impl TagPaint {
         let q = (origin - self.centre) * den + dir * num;
         let half = 0.5 * self.total_cells as f64 * den;
         let col = q.dot(&self.right) * self.cells_per_m + half;
-        let row = -q.z * self.cells_per_m + half;
+        let row = -q.dot(&self.up) * self.cells_per_m + half;
         let total = self.total_cells as f64 * den;
         if col < 0.0 || row < 0.0 || col >= total || row >= total {
             return None;
@@ -130,7 +132,7 @@ impl TagPaint {
         let t = num / den;
         let p = origin + dir * t - self.centre;
         let half = 0.5 * self.total_cells as f64 * self.cell_m + margin_rad * t / den;
-        p.dot(&self.right).abs() <= half && p.z.abs() <= half
+        p.dot(&self.right).abs() <= half && p.dot(&self.up).abs() <= half
     }
 }
 

@@ -14,6 +14,23 @@ use serde::Serialize;
 /// perfect-odometry office run went from 3 cm to 10 cm, so the yaw stays weakly weighted.
 pub const YAW_SIGMA_PER_DEPTH_SIGMA: f64 = 2.0 * std::f64::consts::SQRT_2;
 
+/// The level part of a tag's normal below which its yaw is taken as unknown (about 87 degrees
+/// of tilt): the yaw's sigma is divided by the level part, floored here.
+const MIN_LEVEL_NORMAL: f64 = 0.05;
+
+/// `robot_from_tag`'s rotation in stereotag's tag frame (x the outward normal, y right, z up)
+/// from a stereo tag's `left_from_tag` in the AprilTag library's frame (x right, y down, z into
+/// the wall).
+fn robot_from_tag(
+    robot_from_left: nalgebra::UnitQuaternion<f64>,
+    tag: &StereoTag,
+) -> nalgebra::Rotation3<f64> {
+    let m = &tag.rotation_left_from_tag;
+    let column = |k: usize| Vector3::new(m[0][k], m[1][k], m[2][k]);
+    let ours = Matrix3::from_columns(&[-column(2), column(0), -column(1)]);
+    robot_from_left.to_rotation_matrix() * nalgebra::Rotation3::from_matrix_unchecked(ours)
+}
+
 /// A tag's four corners in the left and the right image, pixels (AprilTag C order).
 pub type PairCorners = ([[f64; 2]; 4], [[f64; 2]; 4]);
 
@@ -38,6 +55,11 @@ pub struct TagSighting {
     pub yaw_in_robot_rad: f64,
     /// One sigma of that direction, radians.
     pub yaw_sigma_rad: f64,
+    /// How far the tag's face is turned up from the vertical, radians (the robot stands level,
+    /// so this is the tag's pitch in the world; see [`crate::world::Tag::rotation`]).
+    pub pitch_rad: f64,
+    /// How far the tag is turned about its normal, radians.
+    pub roll_rad: f64,
     /// The detected corners (left, right), pixels, when the sighting came from images.
     pub corners_px: Option<PairCorners>,
 }
@@ -58,7 +80,12 @@ impl TagSighting {
         // The yaw error is the depth difference of opposite corners over the tag size, scaled by
         // the centre's depth sigma; see [`YAW_SIGMA_PER_DEPTH_SIGMA`].
         let largest = cov_left.symmetric_eigenvalues().max().max(0.0).sqrt();
-        let yaw_sigma = YAW_SIGMA_PER_DEPTH_SIGMA * largest / tag.size_m.max(1e-3);
+        // The yaw is the direction of the normal's level part, which shrinks as the tag tilts:
+        // a tag on the ceiling gives no yaw at all.
+        let level = n.x.hypot(n.y).max(MIN_LEVEL_NORMAL);
+        let yaw_sigma = YAW_SIGMA_PER_DEPTH_SIGMA * largest / tag.size_m.max(1e-3) / level;
+        let [roll, pitch, _] =
+            crate::world::tag_roll_pitch_yaw(&robot_from_tag(robot_from_left.rotation, tag));
         Self {
             t_s,
             frame,
@@ -69,6 +96,8 @@ impl TagSighting {
             covariance_m2: std::array::from_fn(|i| std::array::from_fn(|j| cov[(i, j)])),
             yaw_in_robot_rad: n.y.atan2(n.x),
             yaw_sigma_rad: yaw_sigma,
+            pitch_rad: pitch,
+            roll_rad: roll,
             corners_px: Some((tag.corners_px, tag.right_corners_px)),
         }
     }

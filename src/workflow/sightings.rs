@@ -544,6 +544,8 @@ mod tests {
             covariance_m2: [[0.0; 3]; 3],
             yaw_in_robot_rad: 0.0,
             yaw_sigma_rad: 0.1,
+            pitch_rad: 0.0,
+            roll_rad: 0.0,
             corners_px: None,
         };
         let mut seen = RunSightings {

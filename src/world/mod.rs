@@ -40,9 +40,40 @@ pub struct Tag {
     pub position_m: [f64; 3],
     /// Direction the tag faces (its outward normal), radians from the world x axis.
     pub yaw_rad: f64,
+    /// How far the tag's face is turned up from the vertical, radians: 0 on a wall, 0.52 for a
+    /// tag leaning back 30 degrees, pi/2 on the floor facing up, -pi/2 on the ceiling.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub pitch_rad: f64,
+    /// How far the tag is turned about its normal, radians (counter-clockwise as one faces it).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub roll_rad: f64,
     /// The room corner the tag marks, if it marks one.
     #[serde(default)]
     pub corner_m: Option<[f64; 2]>,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+impl Tag {
+    /// `world_from_tag`'s rotation, in the tag frame stereotag uses throughout (x the outward
+    /// normal, y to the right as one faces the tag, z up the printed tag): yaw about the world's
+    /// z, then pitch (the normal raised by `pitch_rad`), then roll about the normal.
+    pub fn rotation(&self) -> nalgebra::Rotation3<f64> {
+        tag_rotation(self.roll_rad, self.pitch_rad, self.yaw_rad)
+    }
+}
+
+/// `world_from_tag`'s rotation from a tag's roll, pitch and yaw (see [`Tag::rotation`]).
+pub fn tag_rotation(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> nalgebra::Rotation3<f64> {
+    nalgebra::Rotation3::from_euler_angles(roll_rad, -pitch_rad, yaw_rad)
+}
+
+/// A tag's roll, pitch and yaw from `world_from_tag`'s rotation (see [`Tag::rotation`]).
+pub fn tag_roll_pitch_yaw(rotation: &nalgebra::Rotation3<f64>) -> [f64; 3] {
+    let (roll, pitch, yaw) = rotation.euler_angles();
+    [roll, -pitch, yaw]
 }
 
 fn default_family() -> TagFamily {
