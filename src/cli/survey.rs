@@ -213,9 +213,10 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
                 let d =
                     nalgebra::Vector3::from(l.position_m) - nalgebra::Vector3::from(t.position_m);
                 tracing::info!(
-                    "  tag {:>3}: planned ({:.3}, {:.3}, {:.3}) surveyed ({:.3}, {:.3}, {:.3}) m, displacement {:.1} mm",
+                    "  tag {:>3}: planned ({:.3}, {:.3}, {:.3}) surveyed ({:.3}, {:.3}, {:.3}) m, displacement {:.1} mm, turned {:.1} deg",
                     l.id, t.position_m[0], t.position_m[1], t.position_m[2],
-                    l.position_m[0], l.position_m[1], l.position_m[2], d.norm() * 1e3
+                    l.position_m[0], l.position_m[1], l.position_m[2], d.norm() * 1e3,
+                    l.rotation().angle_to(&t.rotation()).to_degrees()
                 );
             }
         }

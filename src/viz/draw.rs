@@ -249,6 +249,28 @@ pub(super) fn log_landmark(rec: &rerun::RecordingStream, l: &Landmark) -> Result
             .with_colors([palette::FUSED])
             .with_radii([0.04f32]),
     )?;
+    // The tag's square as surveyed, and its face's normal: its orientation in 3D.
+    let r = l.rotation();
+    let centre = nalgebra::Vector3::from(l.position_m);
+    let h = 0.5 * l.size_m;
+    let corner = |y: f64, z: f64| f32s((centre + r * nalgebra::Vector3::new(0.0, y, z)).into());
+    rec.log_static(
+        format!("{path}/square"),
+        &rerun::LineStrips3D::new([[
+            corner(-h, -h),
+            corner(h, -h),
+            corner(h, h),
+            corner(-h, h),
+            corner(-h, -h),
+        ]])
+        .with_colors([palette::FUSED]),
+    )?;
+    rec.log_static(
+        format!("{path}/normal"),
+        &rerun::Arrows3D::from_vectors([f32s((r * nalgebra::Vector3::x() * 0.15).into())])
+            .with_origins([f32s(l.position_m)])
+            .with_colors([palette::FUSED]),
+    )?;
     rec.log_static(
         format!("{path}/covariance"),
         &rerun::Ellipsoids3D::from_centers_and_half_sizes([f32s(l.position_m)], [radii])
