@@ -36,7 +36,7 @@ fn office_with_ground_truth_poses_maps_the_walls() {
     let gt = map_trajectory(
         &run.sonar_log(),
         run.trajectory(PoseSource::GroundTruth).unwrap(),
-        &loaded.mapping,
+        loaded.mapping.as_ref().expect("the world sets its mapping"),
     )
     .unwrap();
     let gt_scores = score_sonar_map(&gt, run, &loaded.world);
@@ -87,7 +87,7 @@ fn office_with_ground_truth_poses_maps_the_walls() {
     let odo = map_trajectory(
         &run.sonar_log(),
         run.trajectory(PoseSource::Odometry).unwrap(),
-        &loaded.mapping,
+        loaded.mapping.as_ref().expect("the world sets its mapping"),
     )
     .unwrap();
     let odo_scores = score_sonar_map(&odo, run, &loaded.world);
@@ -123,7 +123,7 @@ fn every_sample_world_loads_and_starts_free() {
 fn museum_has_five_tags_and_pillars() {
     let loaded = load_world(&common::sample("museum/world.yaml")).unwrap();
     assert!(loaded.world.tags.len() >= 5);
-    assert_eq!(loaded.mapping.hough.threshold, 50);
-    assert_eq!(loaded.mapping.grid.width_cells, 120);
+    assert_eq!(loaded.mapping.as_ref().unwrap().hough.threshold, 50);
+    assert_eq!(loaded.mapping.as_ref().unwrap().grid.width_cells, 120);
     assert!((loaded.simulation.exploration.follow_distance_m - 0.35).abs() < 1e-12);
 }

@@ -86,9 +86,10 @@ pub struct WorldFile {
     /// Simulation settings for this place.
     #[serde(default)]
     pub simulation: SimConfig,
-    /// Mapping settings for this place.
+    /// Mapping settings for this place (none: a run simulated in it gets its grid fitted to its
+    /// path, as a real log does).
     #[serde(default)]
-    pub mapping: MappingConfig,
+    pub mapping: Option<MappingConfig>,
 }
 
 /// A world with the settings its file gives.
@@ -102,8 +103,8 @@ pub struct LoadedWorld {
     pub world: World,
     /// Simulation settings (the robot's online grid is `mapping.grid`).
     pub simulation: SimConfig,
-    /// Mapping settings.
-    pub mapping: MappingConfig,
+    /// Mapping settings, if the file gives them.
+    pub mapping: Option<MappingConfig>,
 }
 
 fn finite(path: &Path, key: &str, values: &[f64]) -> Result<(), IoError> {
@@ -226,14 +227,19 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
         ));
     }
     check_placements(path, &file)?;
-    file.mapping
-        .grid
-        .validate()
-        .map_err(|e| IoError::content(path, format!("`mapping.grid`: {e}")))?;
+    if let Some(m) = &file.mapping {
+        m.grid
+            .validate()
+            .map_err(|e| IoError::content(path, format!("`mapping.grid`: {e}")))?;
+    }
     let start = Pose2::new(file.start.x_m, file.start.y_m, file.start.theta_rad);
     let world = World::new(walls, file.tags, file.targets, file.people, start);
     let mut simulation = file.simulation;
-    simulation.grid = file.mapping.grid.clone();
+    simulation.grid = file
+        .mapping
+        .as_ref()
+        .map(|m| m.grid.clone())
+        .unwrap_or_default();
     let name = file.name.unwrap_or_else(|| {
         path.file_stem()
             .map(|s| s.to_string_lossy().into_owned())

@@ -143,7 +143,7 @@ fn simulate_into(
             .to_string_lossy()
             .into_owned(),
     );
-    output.run.meta.mapping = Some(loaded.mapping.clone());
+    output.run.meta.mapping = loaded.mapping.clone();
     if let (Some(pictures), Some(rig)) = (
         request
             .pictures
