@@ -19,7 +19,10 @@ fn museum_readings() -> (
     let mut config = loaded.simulation.clone();
     config.exploration.duration_s = 1800.0;
     let out = stereotag::sim::simulate(&loaded.world, &config, |_| {}).expect("simulation");
-    (out.run, loaded.mapping.expect("the museum sets its mapping"))
+    (
+        out.run,
+        loaded.mapping.expect("the museum sets its mapping"),
+    )
 }
 
 fn per_reading(c: &mut Criterion) {

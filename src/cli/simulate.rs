@@ -48,7 +48,8 @@ pub struct Simulate {
     /// Follow this path instead of exploring: a pose CSV (`t_s,x_m,y_m,theta_rad`), e.g. a real
     /// log's ground_truth.csv (`stereotag import`) or a path drawn on a floor plan. The sonar,
     /// the odometry (with its wheel errors) and the pictures are simulated along it; the run
-    /// lasts as long as the path.
+    /// lasts as long as the path. The robot drives it as wheels can: never sideways, steering
+    /// back to it when a pose lies off to its side (ground_truth.csv is where it went).
     #[arg(long, value_name = "POSES.csv", conflicts_with_all = ["duration_s", "paper_exploration"])]
     along: Option<PathBuf>,
     /// Replace the output directory if it exists.
