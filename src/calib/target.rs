@@ -62,9 +62,17 @@ impl TagBoardTarget {
             .unwrap_or_else(|| (0..self.tag_cols * self.tag_rows).collect())
     }
 
+    /// The position of tag `tag` on the board, if it is on it.
+    fn position_of(&self, tag: u32) -> Option<u32> {
+        match &self.ids {
+            Some(ids) => ids.iter().position(|&t| t == tag).map(|p| p as u32),
+            None => (tag < self.tag_cols * self.tag_rows).then_some(tag),
+        }
+    }
+
     /// Where corner `id` (tag id × 4 + k) sits on the board, if its tag is on it.
     pub fn board_point(&self, id: u32) -> Option<[f64; 3]> {
-        let position = self.layout().iter().position(|&t| t == id / 4)? as u32;
+        let position = self.position_of(id / 4)?;
         Some(crate::calib::aprilgrid_board_point(
             position * 4 + id % 4,
             self.tag_cols,
