@@ -209,7 +209,7 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
     }
     if let Some(w) = world {
         for l in &s.landmarks {
-            if let Some(t) = w.tags.iter().find(|t| t.id == l.id && t.family == l.family) {
+            if let Some(t) = w.tag(l.family, l.id) {
                 let d =
                     nalgebra::Vector3::from(l.position_m) - nalgebra::Vector3::from(t.position_m);
                 tracing::info!(

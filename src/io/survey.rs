@@ -360,7 +360,7 @@ pub fn save_survey(
     )?;
     let planned = |l: &Landmark| {
         world
-            .and_then(|w| w.tags.iter().find(|t| t.id == l.id && t.family == l.family))
+            .and_then(|w| w.tag(l.family, l.id))
             .map(|t| t.position_m)
     };
     let mut landmarks = s.landmarks.clone();

@@ -115,42 +115,37 @@ pub fn score_survey(
     Ok(m)
 }
 
-/// The distance of each landmark from its tag in the world, after moving the survey by
-/// `align`, sorted.
-fn landmark_errors(survey: &Survey, world: &World, align: Pose2) -> Vec<f64> {
+/// `error` of each landmark against its tag in the world, sorted.
+fn sorted_errors(
+    survey: &Survey,
+    world: &World,
+    error: impl Fn(&crate::fusion::Landmark, &crate::world::Tag) -> f64,
+) -> Vec<f64> {
     let mut errors: Vec<f64> = survey
         .landmarks
         .iter()
-        .filter_map(|l| {
-            let tag = world
-                .tags
-                .iter()
-                .find(|t| t.id == l.id && t.family == l.family)?;
-            let p = align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
-            let d = nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
-                - nalgebra::Vector3::from(tag.position_m);
-            Some(d.norm())
-        })
+        .filter_map(|l| Some(error(l, world.tag(l.family, l.id)?)))
         .collect();
     errors.sort_by(f64::total_cmp);
     errors
 }
 
+/// The distance of each landmark from its tag in the world, after moving the survey by
+/// `align`, sorted.
+fn landmark_errors(survey: &Survey, world: &World, align: Pose2) -> Vec<f64> {
+    sorted_errors(survey, world, |l, tag| {
+        let p = align.transform_point(nalgebra::Point2::new(l.position_m[0], l.position_m[1]));
+        (nalgebra::Vector3::new(p.x, p.y, l.position_m[2])
+            - nalgebra::Vector3::from(tag.position_m))
+        .norm()
+    })
+}
+
 /// The angle between each landmark's orientation and its tag's in the world, degrees, sorted.
 fn orientation_errors_deg(survey: &Survey, world: &World) -> Vec<f64> {
-    let mut errors: Vec<f64> = survey
-        .landmarks
-        .iter()
-        .filter_map(|l| {
-            let tag = world
-                .tags
-                .iter()
-                .find(|t| t.id == l.id && t.family == l.family)?;
-            Some(l.rotation().angle_to(&tag.rotation()).to_degrees())
-        })
-        .collect();
-    errors.sort_by(f64::total_cmp);
-    errors
+    sorted_errors(survey, world, |l, tag| {
+        l.rotation().angle_to(&tag.rotation()).to_degrees()
+    })
 }
 
 /// The landmarks' median and largest error; and, as diagnostics, the median and the offline

@@ -208,6 +208,11 @@ const VERTEX_MERGE_M: f64 = 0.02;
 const COLLINEAR_RAD: f64 = 0.26; // 15 degrees
 
 impl World {
+    /// The tag of `family` and `id`, if the world has it.
+    pub fn tag(&self, family: TagFamily, id: u32) -> Option<&Tag> {
+        self.tags.iter().find(|t| t.id == id && t.family == family)
+    }
+
     /// A world from its parts; the true corners are derived from the walls.
     pub fn new(
         walls: Vec<Wall>,
