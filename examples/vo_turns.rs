@@ -12,7 +12,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let rig = io::load_rig(&dir.join("rig.yaml"))?;
     let gt = run.ground_truth.clone().ok_or("no truth")?;
     let csv = std::fs::read_to_string(&args[2])?;
-    let cfg = VoConfig::default();
+    let mut cfg = VoConfig::default();
+    if let Ok(v) = std::env::var("SLIP") {
+        cfg.slip_sigma = (v.parse()?, 0.0);
+    }
     for line in csv.lines().skip(1) {
         let f: Vec<f64> = line
             .split(',')
@@ -42,8 +45,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &prior,
             &cfg,
         )?;
-        println!("{a:.2}-{b:.2} err {:.3} deg turn {:.1} deg inliers {} tracked {} rms {:.2} px sigma {:.3} deg",
-            (m.motion.theta - truth.theta).to_degrees(), truth.theta.to_degrees(), m.inliers, m.tracked, m.rms_px, m.covariance[(2,2)].sqrt().to_degrees());
+        println!("{a:.2}-{b:.2} err {:.3} deg turn {:.1} deg prior err {:.3} deg, {:.3} {:.3} m; truth {:.3} {:.3} m; vo {:.3} {:.3} inliers {} tracked {} rms {:.2} px sigma {:.3} deg",
+            (m.motion.theta - truth.theta).to_degrees(), truth.theta.to_degrees(),
+            (prior.theta - truth.theta).to_degrees(), prior.x - truth.x, prior.y - truth.y, truth.x, truth.y, m.motion.x, m.motion.y, m.inliers, m.tracked, m.rms_px, m.covariance[(2,2)].sqrt().to_degrees());
     }
     Ok(())
 }

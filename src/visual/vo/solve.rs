@@ -126,30 +126,35 @@ pub(super) fn solve_planar(
     let travel = prior.x.hypot(prior.y);
     let forward_sigma = config.forward_sigma.0 + config.forward_sigma.1 * travel;
     let slip_sigma = config.slip_sigma.0 + config.slip_sigma.1 * travel;
-    // The share of the turn the wheels' chord points off their first heading (a half on an arc;
-    // straight steps take the wheels' chord direction as it is).
+    // The chord's angle off the direction of travel (ahead of the robot when it drove forward,
+    // behind it when it backed up; the sideways offset is then `-x tan(angle)`), as the wheels
+    // give it, and how much of a correction to their turn moves it: on an arc half of it, after
+    // a turn on the spot all of it, and exactly `chord / turn` when the wheels misjudge every
+    // turn by one scale. An S-bend's chord owes little to its small net turn, so the share is
+    // held to what a correction spread along the path can do (0 to 1); a straight step takes the
+    // wheels' chord as it is.
+    let backward = if prior.x < 0.0 { -1.0 } else { 1.0 };
     let chord = prior.y.atan2(prior.x.abs().max(1e-9));
     let share = if prior.theta.abs() > 1e-3 {
-        chord / prior.theta
+        (backward * chord / prior.theta).clamp(0.0, 1.0) * backward
     } else {
         0.0
     };
-    let straight_offset = if prior.theta.abs() > 1e-3 { 0.0 } else { chord };
     let mut sigma_px = 0.5f64;
     let with_prior = |jtj: &mut Matrix3<f64>, jtr: &mut Vector3<f64>, m: &Pose2, sigma_px: f64| {
         let w = (sigma_px / forward_sigma).powi(2);
         jtj[(0, 0)] += w;
         jtr[0] += w * (m.x - prior.x);
-        // Sideways: y = x tan(share theta), the chord `share` of the turn off the first heading.
+        // Sideways: y = |x| tan(angle), the wheels' chord moved by its share of the correction.
         let (angle, w) = (
-            share * m.theta + straight_offset,
+            chord + share * (m.theta - prior.theta),
             (sigma_px / slip_sigma).powi(2),
         );
-        let r = m.y - m.x * angle.tan();
+        let r = m.y - backward * m.x * angle.tan();
         let j = Vector3::new(
-            -angle.tan(),
+            -backward * angle.tan(),
             1.0,
-            -share * m.x / (angle.cos() * angle.cos()),
+            -backward * share * m.x / (angle.cos() * angle.cos()),
         );
         *jtj += w * j * j.transpose();
         *jtr += w * j * r;
