@@ -201,6 +201,13 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
         s.offline.keyframes,
         s.offline.factors,
     );
+    let closing: usize = s.online.resolves.iter().map(|r| r.loop_sightings).sum();
+    if closing > 0 {
+        tracing::info!(
+            "{closing} re-sightings the filter's gate turned away closed a loop: the graph of the run so far explained them within the odometry's noise ({} loop hypotheses tested)",
+            s.online.loop_tests
+        );
+    }
     for c in &s.online.conflicts {
         tracing::warn!(
             "tag {} ({}): {} — landmark at ({:.2}, {:.2}) m but {} sightings from t = {:.1} s put it at ({:.2}, {:.2}) m; not fused",

@@ -65,6 +65,12 @@ pub struct FuseConfig {
     /// as an incremental smoother does; the filter then predicts with calibrated odometry
     /// (ours: on; needs `calibrate_odometry`).
     pub online_resolve: bool,
+    /// Try a re-sighting the filter gates out as a loop closure: solve the graph of the run so
+    /// far with it and fuse it when that solution explains it within the odometry's noise (tag
+    /// ids are unique, so however far the odometry drifted a re-seen tag closes a loop unless no
+    /// such trajectory exists); only what fails is reported as moved (ours: on; needs
+    /// `online_resolve`).
+    pub loop_test: bool,
     /// Constant part of a sonar range's sigma when localising against surveyed walls, m (ours:
     /// 1 cm, the simulated sonar's).
     pub sonar_sigma_m: f64,
@@ -198,6 +204,7 @@ impl Default for FuseConfig {
             max_iterations: 50,
             calibrate_odometry: true,
             online_resolve: true,
+            loop_test: true,
             sonar_sigma_m: 0.01,
             sonar_sigma_frac: 0.01,
             wall_sigma_m: 0.02,

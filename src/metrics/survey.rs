@@ -248,6 +248,16 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
         "online.resolves".into(),
         survey.online.resolves.len() as f64,
     );
+    m.insert("online.loop_tests".into(), survey.online.loop_tests as f64);
+    m.insert(
+        "sightings.loop_closing".into(),
+        survey
+            .online
+            .resolves
+            .iter()
+            .map(|r| r.loop_sightings)
+            .sum::<usize>() as f64,
+    );
     m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
     m.insert(
         "landmarks.matched_corners".into(),

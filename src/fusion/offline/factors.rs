@@ -6,6 +6,7 @@ use nalgebra::Matrix3;
 use tiny_solver::na as sna;
 
 /// Whitened SE(2) between-factor: `r = S · (p0⁻¹ ∘ p1 ⊖ measured)`.
+#[derive(Clone)]
 pub(super) struct BetweenFactor {
     pub(super) measured: [f64; 3],
     pub(super) sqrt_info: [[f64; 3]; 3],
@@ -31,6 +32,7 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for TurnFactor {
 }
 
 /// Whitened tag factor: `r = S · (h(pose, landmark) − z)`.
+#[derive(Clone)]
 pub(super) struct TagFactor {
     pub(super) measured: [f64; 3],
     pub(super) sqrt_info: [[f64; 3]; 3],

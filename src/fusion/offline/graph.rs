@@ -58,6 +58,10 @@ pub(super) struct Graph {
     /// The sighting factors again, with their variables, to judge a solution by
     /// ([`Graph::sightings_consistent`]).
     pub(super) sightings: Vec<(Vec<String>, TagFactor)>,
+    /// Which sighting (its index in the observations) each of `sightings` is.
+    pub(super) sighting_index: Vec<usize>,
+    /// The odometry factors again, with their variables ([`Graph::odometry_chi2`]).
+    pub(super) odometry: Vec<(Vec<String>, BetweenFactor)>,
 }
 
 /// A sighting is consistent with a solution when its whitened residual's squared norm is below
@@ -71,24 +75,50 @@ impl Graph {
         &self,
         values: &HashMap<String, sna::DVector<f64>>,
     ) -> (usize, f64) {
-        use tiny_solver::factors::Factor;
-        let mut consistent = 0;
-        let mut chi2 = 0.0;
-        for (variables, factor) in &self.sightings {
-            let Some(params) = variables
+        let d2 = squared_norms(&self.sightings, values);
+        (
+            d2.iter().filter(|&&d| d <= SIGHTING_CHI2_99).count(),
+            d2.iter().sum(),
+        )
+    }
+
+    /// The sightings (their indices in the observations) inconsistent with `values`
+    /// ([`SIGHTING_CHI2_99`]).
+    pub(super) fn sightings_inconsistent(
+        &self,
+        values: &HashMap<String, sna::DVector<f64>>,
+    ) -> Vec<usize> {
+        squared_norms(&self.sightings, values)
+            .iter()
+            .zip(&self.sighting_index)
+            .filter(|(&d, _)| d > SIGHTING_CHI2_99)
+            .map(|(_, &k)| k)
+            .collect()
+    }
+
+    /// The odometry factors' summed squared whitened residuals under `values` (chi-square with
+    /// three degrees of freedom a factor when the odometry's noise is as modelled).
+    pub(super) fn odometry_chi2(&self, values: &HashMap<String, sna::DVector<f64>>) -> f64 {
+        squared_norms(&self.odometry, values).iter().sum()
+    }
+}
+
+/// Each factor's squared whitened residual under `values` (factors whose variables are missing
+/// are left out).
+fn squared_norms<F: tiny_solver::factors::Factor<f64>>(
+    factors: &[(Vec<String>, F)],
+    values: &HashMap<String, sna::DVector<f64>>,
+) -> Vec<f64> {
+    factors
+        .iter()
+        .filter_map(|(variables, factor)| {
+            let params = variables
                 .iter()
                 .map(|v| values.get(v).cloned())
-                .collect::<Option<Vec<_>>>()
-            else {
-                continue;
-            };
-            let r: sna::DVector<f64> = factor.residual_func(&params);
-            let d2 = r.norm_squared();
-            chi2 += d2;
-            consistent += (d2 <= SIGHTING_CHI2_99) as usize;
-        }
-        (consistent, chi2)
-    }
+                .collect::<Option<Vec<_>>>()?;
+            Some(factor.residual_func(&params).norm_squared())
+        })
+        .collect()
 }
 
 impl Graph {
@@ -128,6 +158,8 @@ pub(super) fn build(
         init: HashMap::new(),
         factors: 0,
         sightings: Vec::new(),
+        sighting_index: Vec::new(),
+        odometry: Vec::new(),
     };
     for (i, kf) in keyframes.frames.iter().enumerate() {
         graph.init.insert(
@@ -247,6 +279,9 @@ fn add_odometry(
             turn_rad: signed_turn,
             path_m: path,
         };
+        graph
+            .odometry
+            .push((vars.iter().map(|v| v.to_string()).collect(), factor.clone()));
         graph.add(3, &vars, Box::new(factor), false, config);
     }
 }
@@ -285,13 +320,8 @@ fn add_sightings(
         if config.estimate_mounting {
             vars.push(MOUNTING.to_owned());
         }
-        graph.sightings.push((
-            vars.clone(),
-            TagFactor {
-                measured: factor.measured,
-                sqrt_info: factor.sqrt_info,
-            },
-        ));
+        graph.sightings.push((vars.clone(), factor.clone()));
+        graph.sighting_index.push(k);
         let names: Vec<&str> = vars.iter().map(String::as_str).collect();
         graph.add(3, &names, Box::new(factor), true, config);
     }

@@ -38,6 +38,15 @@ pub struct OfflineResult {
     pub sightings_consistent: [usize; 2],
     /// Sightings in the graph.
     pub sightings: usize,
+    /// The sightings (indices into the observations) inconsistent (chi-square 99%) with the
+    /// estimate returned.
+    pub inconsistent: Vec<usize>,
+    /// The odometry factors' summed squared whitened residuals where the solver started and in
+    /// the estimate returned (chi-square with `3 × odometry_factors` degrees of freedom when the
+    /// odometry's noise is as modelled).
+    pub odometry_chi2: [f64; 2],
+    /// Odometry factors in the graph.
+    pub odometry_factors: usize,
     /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
     /// The camera's planar mounting error, when estimated
@@ -191,6 +200,9 @@ pub fn run_offline_anchored(
             cost: [0.0; 2],
             sightings_consistent: [0; 2],
             sightings: 0,
+            inconsistent: Vec::new(),
+            odometry_chi2: [0.0; 2],
+            odometry_factors: 0,
             odometry_calibration: None,
             mounting: None,
         };
@@ -326,6 +338,12 @@ pub fn run_offline_anchored(
         cost: [start_cost, end_cost],
         sightings_consistent: [start_consistent, end_consistent],
         sightings: graph.sightings.len(),
+        inconsistent: graph.sightings_inconsistent(&values),
+        odometry_chi2: [
+            graph.odometry_chi2(&graph.init),
+            graph.odometry_chi2(&values),
+        ],
+        odometry_factors: graph.odometry.len(),
         odometry_calibration: values
             .get(graph::CALIBRATION)
             .filter(|_| kept == OfflineKept::Solution && config.calibrate_odometry)
