@@ -78,8 +78,9 @@ const RESOLVE_MIN_TRAVEL_M: f64 = 5.0;
 /// museum's 165 m, 0.17 s in all; with 0.1 instead of 0.25 there are fourteen, 0.31 s, for an
 /// online ATE within 1 cm of this one's on the office and museum sample runs).
 const RESOLVE_SHARE: f64 = 0.25;
-/// Travel before a landmark whose loop hypothesis failed is tried again, metres (a moved tag is
-/// seen many times in a row; each test is a solve of the run so far).
+/// Travel before a landmark whose loop hypothesis failed is tried again, metres; doubled after
+/// each further failure (a moved tag is seen again and again, and each test solves the run so
+/// far: a tag seen for 500 m after it was moved costs about eight tests, not 250).
 const LOOP_RETEST_TRAVEL_M: f64 = 2.0;
 
 /// Runs the online filter over a run: odometry predicts, sightings and visual turns update as
@@ -143,7 +144,9 @@ struct OnlineFilter<'a> {
     /// Re-sightings of known landmarks gated out since the last odometry sample.
     gated: Vec<usize>,
     /// Travel at which each landmark's loop hypothesis last failed.
-    loop_failed_at: std::collections::HashMap<TagId, f64>,
+    /// Per landmark whose loop hypothesis failed: the travel from which it is tried again and
+    /// the gap before the next try after that.
+    loop_retry: std::collections::HashMap<TagId, (f64, f64)>,
 }
 
 impl<'a> OnlineFilter<'a> {
@@ -182,7 +185,7 @@ impl<'a> OnlineFilter<'a> {
             travel: 0.0,
             travel_at_solve: 0.0,
             gated: Vec::new(),
-            loop_failed_at: std::collections::HashMap::new(),
+            loop_retry: std::collections::HashMap::new(),
         }
     }
 
@@ -288,20 +291,18 @@ impl<'a> OnlineFilter<'a> {
     /// most 1% of all sightings unexplained, and bends the odometry no more than its noise
     /// allows (its whitened residuals under the chi-square 99% point of their degrees of
     /// freedom). Then the filter goes on from that solution with the sightings fused; else they
-    /// stay gated out, for [`find_conflicts`] to report as a moved tag or a duplicate id.
+    /// stay gated out, the landmark is tried again after [`LOOP_RETEST_TRAVEL_M`] (doubling),
+    /// and what never passes is left to [`find_conflicts`] to report as a moved tag or a
+    /// duplicate id.
     fn test_loop(&mut self, i: usize, t_s: f64) {
         let sightings = self.obs.sightings;
         let travel = self.travel;
-        let failed_at = &self.loop_failed_at;
+        let retry = &self.loop_retry;
         let tags: std::collections::BTreeSet<TagId> = self
             .gated
             .iter()
             .map(|&k| sightings[k].key())
-            .filter(|tag| {
-                failed_at
-                    .get(tag)
-                    .is_none_or(|&at| travel - at >= LOOP_RETEST_TRAVEL_M)
-            })
+            .filter(|tag| retry.get(tag).is_none_or(|&(from_m, _)| travel >= from_m))
             .collect();
         if tags.is_empty() {
             return;
@@ -321,7 +322,6 @@ impl<'a> OnlineFilter<'a> {
         hypothesis
             .accepted
             .sort_by(|&a, &b| sightings[a].t_s.total_cmp(&sightings[b].t_s));
-        // A failed hypothesis is not news: the solve's own warnings stay quiet.
         // First with the Huber kernel, which reaches a large correction from far away; then,
         // when the kernel left the loop open as an outlier, by least squares (the hypothesis is
         // that every sighting holds). A failed hypothesis is not news: the solves' own warnings
@@ -348,7 +348,11 @@ impl<'a> OnlineFilter<'a> {
         }
         let Some(solved) = closed else {
             for tag in tags {
-                self.loop_failed_at.insert(tag, travel);
+                let gap = self
+                    .loop_retry
+                    .get(&tag)
+                    .map_or(LOOP_RETEST_TRAVEL_M, |&(_, gap)| 2.0 * gap);
+                self.loop_retry.insert(tag, (travel + gap, gap));
             }
             return;
         };
@@ -359,6 +363,9 @@ impl<'a> OnlineFilter<'a> {
             solved.odometry_chi2[1],
             solved.odometry_factors
         );
+        for tag in &tags {
+            self.loop_retry.remove(tag);
+        }
         for &k in &joining {
             if let Some(slot) = self.ekf.slot(&sightings[k].key()) {
                 self.extras[slot].add(&sightings[k]);
