@@ -4,7 +4,8 @@
 Reads a ROS map (map.yaml + map.pgm, as `stereotag map` writes them) and the path
 (ground_truth.csv: t_s,x_m,y_m,theta_rad), casts a ray ahead of the robot every metre of the path,
 and keeps the places where it meets a straight stretch of wall (0.8 m, free in front) 1.2-3 m ahead
-within 25 degrees of the wall's normal.
+within 25 degrees of the wall's normal; where that gives fewer places the renderer shows than
+tags wanted, rays 20 degrees to either side of the heading are tried as well.
 It keeps those the renderer shows from the pose that faced them (`stereotag render`: a traced
 wall can stand in front of a tag placed on the map's cells), takes COUNT spread along the path (by
 distance travelled, at least 4 m apart) and writes WORLD_OUT: the HEADER file (name, start, map,
@@ -77,13 +78,26 @@ def main():
 
     path = [(float(r["t_s"]), float(r["x_m"]), float(r["y_m"]), float(r["theta_rad"]))
             for r in csv.DictReader(open(truth_csv))]
-    candidates, travelled, last = [], 0.0, None
-    for t, x, y, th in path:
-        if last is not None:
-            travelled += math.hypot(x - last[0], y - last[1])
-        last = (x, y)
-        if candidates and travelled - candidates[-1][0] < 1.0:
-            continue
+
+    def faced(offsets_deg):
+        """Places on straight walls met by rays from the path, at these angles off the heading,
+        one a metre of travel at most."""
+        candidates, travelled, last = [], 0.0, None
+        for t, x, y, heading in path:
+            if last is not None:
+                travelled += math.hypot(x - last[0], y - last[1])
+            last = (x, y)
+            if candidates and travelled - candidates[-1][0] < 1.0:
+                continue
+            for off in offsets_deg:
+                th = heading + math.radians(off)
+                place = wall_ahead(x, y, th)
+                if place is not None:
+                    candidates.append((travelled, place, (x, y, heading)))
+                    break
+        return candidates
+
+    def wall_ahead(x, y, th):
         d, free = 0.0, None
         while d < 3.0:
             px, py = x + d * math.cos(th), y + d * math.sin(th)
@@ -95,30 +109,32 @@ def main():
             free = (px, py, d)
             d += 0.01
         if free is None or d >= 3.0 or free[2] < 1.2:
-            continue
+            return None
         n = wall_normal(free[0], free[1], np.array([x - free[0], y - free[1]]))
         if n is None:
-            continue
+            return None
         # A straight stretch of wall +-0.4 m along: occupied just behind the face, free in front.
         along = np.array([-n[1], n[0]])
         hit = np.array(free[:2])
-        flat = True
         for k in np.arange(-0.4, 0.41, 0.1):
             behind, front = cell(*(hit + k * along - 0.15 * n)), cell(*(hit + k * along + 0.2 * n))
             if behind is None or front is None or not occupied[behind] or occupied[front]:
-                flat = False
-                break
-        if not flat:
-            continue
+                return None
         incidence = math.degrees(math.acos(max(-1.0, min(1.0, -(n @ [math.cos(th), math.sin(th)])))))
         if incidence > 25.0:
-            continue
-        tag = (free[0] + 0.06 * n[0], free[1] + 0.06 * n[1], math.atan2(n[1], n[0]))
-        candidates.append((travelled, tag, (x, y, th)))
+            return None
+        return (free[0] + 0.06 * n[0], free[1] + 0.06 * n[1], math.atan2(n[1], n[0]))
+
+    # Straight ahead first; where that finds fewer places the renderer shows than tags wanted
+    # (a building of long corridors), rays 20 degrees to either side as well.
+    candidates = faced([0.0])
+    seen = rendered(candidates, header, binary, world_out) if candidates else []
+    if len(seen) < count:
+        candidates = faced([0.0, -20.0, 20.0])
+        seen = rendered(candidates, header, binary, world_out) if candidates else []
     if not candidates:
         sys.exit("no wall faced along the path")
     total = candidates[-1][0]
-    seen = rendered(candidates, header, binary, world_out)
     chosen = []
     for k in range(count):
         want = total * (k + 0.5) / count
