@@ -108,9 +108,9 @@ pub fn run_online(
         }
         filter.advance(sample.pose);
         filter.record(sample.t_s);
-        if !filter.gated.is_empty() && filter.loop_test_on() {
-            filter.test_loop(i, sample.t_s);
-        } else if filter.resolve_due(seen_again) {
+        let closed =
+            !filter.gated.is_empty() && filter.loop_test_on() && filter.test_loop(i, sample.t_s);
+        if !closed && filter.resolve_due(seen_again) {
             filter.resolve(i, sample.t_s);
         }
         filter.gated.clear();
@@ -271,6 +271,7 @@ impl<'a> OnlineFilter<'a> {
     /// Re-solves the graph of the run up to odometry sample `i` (at `t_s`) and goes on from its
     /// pose, landmarks and odometry calibration.
     fn resolve(&mut self, i: usize, t_s: f64) {
+        self.travel_at_solve = self.travel;
         let so_far = OnlineResult {
             landmarks: self.ekf.landmarks(&self.extras),
             ..self.result.clone()
@@ -293,8 +294,8 @@ impl<'a> OnlineFilter<'a> {
     /// freedom). Then the filter goes on from that solution with the sightings fused; else they
     /// stay gated out, the landmark is tried again after [`LOOP_RETEST_TRAVEL_M`] (doubling),
     /// and what never passes is left to [`find_conflicts`] to report as a moved tag or a
-    /// duplicate id.
-    fn test_loop(&mut self, i: usize, t_s: f64) {
+    /// duplicate id. True when a loop closed (a failed test leaves a due re-solve due).
+    fn test_loop(&mut self, i: usize, t_s: f64) -> bool {
         let sightings = self.obs.sightings;
         let travel = self.travel;
         let retry = &self.loop_retry;
@@ -305,7 +306,7 @@ impl<'a> OnlineFilter<'a> {
             .filter(|tag| retry.get(tag).is_none_or(|&(from_m, _)| travel >= from_m))
             .collect();
         if tags.is_empty() {
-            return;
+            return false;
         }
         self.result.loop_tests += 1;
         let (joining, still_out): (Vec<usize>, Vec<usize>) = self
@@ -354,7 +355,7 @@ impl<'a> OnlineFilter<'a> {
                     .map_or(LOOP_RETEST_TRAVEL_M, |&(_, gap)| 2.0 * gap);
                 self.loop_retry.insert(tag, (travel + gap, gap));
             }
-            return;
+            return false;
         };
         tracing::debug!(
             "t = {t_s:.1} s: {} re-sighting(s) of tag(s) {:?} close a loop (odometry chi-square {:.0} for {} factors)",
@@ -374,16 +375,16 @@ impl<'a> OnlineFilter<'a> {
         self.result.accepted = hypothesis.accepted;
         self.result.rejected = still_out;
         self.adopt(&solved, t_s, joining.len());
+        true
     }
 
     /// The graph of the run up to odometry sample `i`, solved from `so_far`.
     fn solve_up_to(
-        &mut self,
+        &self,
         i: usize,
         so_far: &OnlineResult,
         config: &FuseConfig,
     ) -> super::OfflineResult {
-        self.travel_at_solve = self.travel;
         let up_to_now = Observations {
             odometry: &self.obs.odometry[..=i],
             ..*self.obs
@@ -396,6 +397,7 @@ impl<'a> OnlineFilter<'a> {
         let (Some(c), Some(now)) = (solved.odometry_calibration, solved.trajectory.last()) else {
             return;
         };
+        self.travel_at_solve = self.travel;
         let was = self.ekf.pose();
         self.result.resolves.push(OnlineResolve {
             t_s,
