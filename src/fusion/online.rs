@@ -143,7 +143,6 @@ struct OnlineFilter<'a> {
     travel_at_solve: f64,
     /// Re-sightings of known landmarks gated out since the last odometry sample.
     gated: Vec<usize>,
-    /// Travel at which each landmark's loop hypothesis last failed.
     /// Per landmark whose loop hypothesis failed: the travel from which it is tried again and
     /// the gap before the next try after that.
     loop_retry: std::collections::HashMap<TagId, (f64, f64)>,
@@ -663,12 +662,10 @@ mod tests {
         }
     }
 
-    /// A tag moved by 1 m after the first lap while the odometry drifts 3%: still reported as
-    /// moved, its loop hypothesis rejected.
-    #[test]
-    fn a_moved_tag_is_caught_while_the_odometry_drifts() {
-        let (odom, truth, mut sightings, _) = square_run(0.03, 2);
-        let lap_end = odom[odom.len() / 2].t_s;
+    /// Tag 1 of [`square_run`] moved by 1 m along x, to (4, 5), after the first lap: its
+    /// sightings from then on are of the moved tag, seen from the true poses.
+    fn move_tag_1_after_the_first_lap(truth: &[StampedPose], sightings: &mut [TagSighting]) {
+        let lap_end = truth[truth.len() / 2].t_s;
         for s in sightings
             .iter_mut()
             .filter(|s| s.id == 1 && s.t_s > lap_end)
@@ -679,6 +676,14 @@ mod tests {
                 .transform_point(nalgebra::Point2::new(4.0, 5.0));
             s.position_in_robot_m = [moved.x, moved.y, 0.5];
         }
+    }
+
+    /// A tag moved by 1 m after the first lap while the odometry drifts 3%: still reported as
+    /// moved, its loop hypothesis rejected.
+    #[test]
+    fn a_moved_tag_is_caught_while_the_odometry_drifts() {
+        let (odom, truth, mut sightings, _) = square_run(0.03, 2);
+        move_tag_1_after_the_first_lap(&truth, &mut sightings);
         let online = run_online(
             &obs(&odom, &sightings, &[]),
             &[],
@@ -696,19 +701,8 @@ mod tests {
 
     #[test]
     fn a_moved_tag_is_reported_not_fused() {
-        let (odom, _, mut sightings, _) = square_run(0.0, 2);
-        // Tag 1 is moved by 1 m along x after the first lap.
-        let lap_end = odom[odom.len() / 2].t_s;
-        for s in sightings
-            .iter_mut()
-            .filter(|s| s.id == 1 && s.t_s > lap_end)
-        {
-            let truth = odom.iter().find(|p| p.t_s == s.t_s).unwrap().pose;
-            let moved = truth
-                .inverse()
-                .transform_point(nalgebra::Point2::new(4.0, 5.0));
-            s.position_in_robot_m = [moved.x, moved.y, 0.5];
-        }
+        let (odom, truth, mut sightings, _) = square_run(0.0, 2);
+        move_tag_1_after_the_first_lap(&truth, &mut sightings);
         let online = run_online(
             &obs(&odom, &sightings, &[]),
             &[],

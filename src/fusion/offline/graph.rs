@@ -75,7 +75,7 @@ impl Graph {
         &self,
         values: &HashMap<String, sna::DVector<f64>>,
     ) -> (usize, f64) {
-        let d2 = squared_norms(&self.sightings, values);
+        let d2: Vec<f64> = squared_norms(&self.sightings, values).flatten().collect();
         (
             d2.iter().filter(|&&d| d <= SIGHTING_CHI2_99).count(),
             d2.iter().sum(),
@@ -89,9 +89,8 @@ impl Graph {
         values: &HashMap<String, sna::DVector<f64>>,
     ) -> Vec<usize> {
         squared_norms(&self.sightings, values)
-            .iter()
             .zip(&self.sighting_index)
-            .filter(|(&d, _)| d > SIGHTING_CHI2_99)
+            .filter(|(d, _)| d.is_some_and(|d| d > SIGHTING_CHI2_99))
             .map(|(_, &k)| k)
             .collect()
     }
@@ -99,26 +98,23 @@ impl Graph {
     /// The odometry factors' summed squared whitened residuals under `values` (chi-square with
     /// three degrees of freedom a factor when the odometry's noise is as modelled).
     pub(super) fn odometry_chi2(&self, values: &HashMap<String, sna::DVector<f64>>) -> f64 {
-        squared_norms(&self.odometry, values).iter().sum()
+        squared_norms(&self.odometry, values).flatten().sum()
     }
 }
 
-/// Each factor's squared whitened residual under `values` (factors whose variables are missing
-/// are left out).
-fn squared_norms<F: tiny_solver::factors::Factor<f64>>(
-    factors: &[(Vec<String>, F)],
-    values: &HashMap<String, sna::DVector<f64>>,
-) -> Vec<f64> {
-    factors
-        .iter()
-        .filter_map(|(variables, factor)| {
-            let params = variables
-                .iter()
-                .map(|v| values.get(v).cloned())
-                .collect::<Option<Vec<_>>>()?;
-            Some(factor.residual_func(&params).norm_squared())
-        })
-        .collect()
+/// Each factor's squared whitened residual under `values`, in the factors' order (`None` where
+/// a variable is missing).
+fn squared_norms<'a, F: tiny_solver::factors::Factor<f64>>(
+    factors: &'a [(Vec<String>, F)],
+    values: &'a HashMap<String, sna::DVector<f64>>,
+) -> impl Iterator<Item = Option<f64>> + 'a {
+    factors.iter().map(|(variables, factor)| {
+        let params = variables
+            .iter()
+            .map(|v| values.get(v).cloned())
+            .collect::<Option<Vec<_>>>()?;
+        Some(factor.residual_func(&params).norm_squared())
+    })
 }
 
 impl Graph {
