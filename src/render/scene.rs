@@ -1,6 +1,7 @@
 //! The scene a ray meets: floor, ceiling, walls up to their height and tags, the nearest
 //! surface shaded with its texture and light.
 
+use super::first_walls::FirstWalls;
 use super::walls_grid::Occlusion;
 use super::*;
 use crate::camera::Camera;
@@ -63,6 +64,9 @@ pub(super) struct Scene {
     /// Leave out of the detail mask the wall edges that walls reaching the ceiling hide (with
     /// the grid, for worlds of many walls: most of their walls are behind others).
     pub(super) occlusion_mask: bool,
+    /// Per still camera, the wall each wedge of its rays meets first where that is proven (with
+    /// the grid; see [`super::first_walls`]).
+    pub(super) first_walls: Vec<FirstWalls>,
     pub(super) tags: Vec<TagPaint>,
     /// The tags that can be in view (indices into `tags`).
     pub(super) tags_in_view: Vec<usize>,
@@ -101,16 +105,40 @@ impl Scene {
             occlusion_mask,
             walk_grid: true,
             grid,
+            first_walls: Vec::new(),
             tags,
             tags_in_view,
             ceiling_m,
         }
     }
 
+    /// Proves the first walls of the wedges of rays of cameras standing still at these poses,
+    /// whose rays lie within the given angles of their axes (with the grid only: a world of few
+    /// walls tests them all).
+    pub(super) fn prove_first_walls(&mut self, views: &[(Isometry3<f64>, f64)]) {
+        let Some(grid) = self.grid.as_ref().filter(|_| self.walk_grid) else {
+            return;
+        };
+        self.first_walls = views
+            .iter()
+            .filter_map(|(pose, off_axis_rad)| {
+                FirstWalls::new(
+                    grid,
+                    &self.walls,
+                    self.ceiling_m,
+                    &pose.translation.vector,
+                    &(pose.rotation * Vector3::z()),
+                    *off_axis_rad,
+                )
+            })
+            .collect();
+    }
+
     /// The scene without its wall grid: every wall tested for every ray (for comparisons).
     #[cfg(test)]
     pub(super) fn without_grid(mut self) -> Self {
         self.walk_grid = false;
+        self.first_walls.clear();
         self
     }
 
@@ -130,28 +158,14 @@ impl Scene {
             best = (Fraction { num, den: dir.z }, Surface::Ceiling);
         }
         if dir.x * dir.x + dir.y * dir.y > 1e-24 {
-            match self.grid.as_ref().filter(|_| self.walk_grid) {
-                None => {
-                    for (k, w) in self.walls.iter().enumerate() {
-                        if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
-                            best = (t, Surface::Wall(k));
-                        }
-                    }
+            let proven = self.first_walls.iter().find_map(|f| f.lookup(origin, dir));
+            if let Some(k) = proven {
+                let w = &self.walls[k];
+                if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
+                    best = (t, Surface::Wall(k));
                 }
-                // Cell by cell, nearest first: a wall's hit is taken in the cell that holds it
-                // (its parameter before the cell's exit; its walls in increasing index, so
-                // overlapping walls resolve as one by one), and the walk stops at the first cell
-                // that leaves something nearer than its exit.
-                Some(grid) => grid.walk((origin.x, origin.y), (dir.x, dir.y), |cell| {
-                    for w in grid.walls(cell) {
-                        if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
-                            if t.num <= cell.exit_t * t.den {
-                                best = (t, Surface::Wall(w.k as usize));
-                            }
-                        }
-                    }
-                    best.0.num > cell.exit_t * best.0.den
-                }),
+            } else {
+                self.walk(origin, dir, &mut best);
             }
         }
         for &k in &self.tags_in_view {
@@ -160,6 +174,34 @@ impl Scene {
             }
         }
         (best.0.value(), best.1)
+    }
+
+    /// The nearest wall along a ray nearer than `best`, walking the grid (or testing every wall
+    /// without one).
+    fn walk(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, best: &mut (Fraction, Surface)) {
+        match self.grid.as_ref().filter(|_| self.walk_grid) {
+            None => {
+                for (k, w) in self.walls.iter().enumerate() {
+                    if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
+                        *best = (t, Surface::Wall(k));
+                    }
+                }
+            }
+            // Cell by cell, nearest first: a wall's hit is taken in the cell that holds it (its
+            // parameter before the cell's exit; its walls in increasing index, so overlapping
+            // walls resolve as one by one), and the walk stops at the first cell that leaves
+            // something nearer than its exit.
+            Some(grid) => grid.walk((origin.x, origin.y), (dir.x, dir.y), |cell| {
+                for w in grid.walls(cell) {
+                    if let Some(t) = wall_hit((w.a, w.e, w.height_m), origin, dir, best.0) {
+                        if t.num <= cell.exit_t * t.den {
+                            *best = (t, Surface::Wall(w.k as usize));
+                        }
+                    }
+                }
+                best.0.num > cell.exit_t * best.0.den
+            }),
+        }
     }
 
     /// Albedo of a surface at a point on it.
@@ -261,6 +303,8 @@ impl PixelTracer for Scene {
             .as_ref()
             .filter(|_| self.occlusion_mask)
             .map(|g| Occlusion::new(g, self.ceiling_m, (eye.x, eye.y)));
+        // The ends, each traced once: the walls of a polyline (a traced map's) share theirs.
+        let mut ends = std::collections::HashSet::new();
         for wall in &self.walls {
             let far = (wall.a.0 + wall.e.0, wall.a.1 + wall.e.1);
             if occlusion
@@ -271,8 +315,9 @@ impl PixelTracer for Scene {
             }
             let a = Vector3::new(wall.a.0, wall.a.1, 0.0);
             let b = a + Vector3::new(wall.e.0, wall.e.1, 0.0);
-            let up = Vector3::new(0.0, 0.0, wall.height_m.min(self.ceiling_m));
-            for (p, q) in [(a, b), (a + up, b + up), (a, a + up), (b, b + up)] {
+            let height_m = wall.height_m.min(self.ceiling_m);
+            let up = Vector3::new(0.0, 0.0, height_m);
+            for (p, q) in [(a, b), (a + up, b + up)] {
                 match occlusion.as_mut() {
                     None => view.trace(&p, &q, &mut |x, y| mask.mark_around(x, y)),
                     Some(occlusion) => view.trace_points(&p, &q, &mut |x, y, c| {
@@ -281,6 +326,14 @@ impl PixelTracer for Scene {
                             mask.mark_around(x, y);
                         }
                     }),
+                }
+            }
+            for end in [a, b] {
+                let key = (end.x.to_bits(), end.y.to_bits(), height_m.to_bits());
+                // An end is hidden or not at every height alike.
+                if ends.insert(key) && !occlusion.as_mut().is_some_and(|o| o.hidden((end.x, end.y)))
+                {
+                    view.trace(&end, &(end + up), &mut |x, y| mask.mark_around(x, y));
                 }
             }
         }
