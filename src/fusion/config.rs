@@ -90,6 +90,10 @@ pub struct FuseConfig {
     /// Hold the survey's trajectory after its last sighting to the walls mapped before it
     /// ([`super::localize::hold_tail_to_walls`]; ours: on).
     pub hold_tail_to_walls: bool,
+    /// Solve the offline graph a second time with range factors off the walls mapped from its
+    /// first solution, so that the walls hold the trajectory between tag sightings
+    /// ([`super::run_offline_walls`]; ours: off).
+    pub walls_between_tags: bool,
     /// Fuse the turns the cameras measure between frames ([`crate::visual::vo`]) with the odometry,
     /// online and offline (ours: on; they are used when the run's pictures give them).
     pub visual_odometry: bool,
@@ -211,6 +215,7 @@ impl Default for FuseConfig {
             sonar_gate_chi2: 6.63,
             sonar_max_range_sigma_m: 0.2,
             hold_tail_to_walls: true,
+            walls_between_tags: false,
             visual_odometry: true,
             visual_gate_chi2: 10.83,
             estimate_mounting: false,

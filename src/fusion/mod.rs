@@ -54,8 +54,8 @@ pub use localize::{
 };
 pub use observations::Observations;
 pub use offline::{
-    estimate_mounting, run_offline, run_offline_anchored, MountingEstimate, OdometryCalibration,
-    OfflineKept, OfflineResult, MOUNTING_STRETCH_M,
+    estimate_mounting, run_offline, run_offline_anchored, run_offline_walls, MountingEstimate,
+    OdometryCalibration, OfflineKept, OfflineResult, MOUNTING_STRETCH_M,
 };
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use streaming::{PairError, PairUpdate, StereoLocalizer};

@@ -4,8 +4,8 @@
 
 use crate::dataset::RunDataset;
 use crate::fusion::{
-    associate, hold_tail_to_walls, run_offline_anchored, run_online, FuseConfig, Landmark,
-    Observations, OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
+    associate, hold_tail_to_walls, run_offline_anchored, run_offline_walls, run_online, FuseConfig,
+    Landmark, Observations, OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
 };
 use crate::progress::timed;
 use crate::sonar::grid::{GridError, OccupancyMap};
@@ -82,6 +82,11 @@ pub fn survey(
     let mut offline = timed("fuse_offline", times, || {
         run_offline_anchored(&obs, &online, fuse, None, settings.anchors)
     });
+    if fuse.walls_between_tags {
+        offline = timed("fuse_walls", times, || {
+            walls_pass(run, &obs, &online, offline, settings)
+        })?;
+    }
     if fuse.hold_tail_to_walls {
         timed("fuse_tail", times, || {
             hold_tail(run, sightings, visual, &online, &mut offline, mapping, fuse)
@@ -112,6 +117,50 @@ pub fn survey(
         visual: visual.to_vec(),
         timings_s,
         frame_from_odometry: None,
+    })
+}
+
+/// [`run_offline_walls`] after a first offline pass, with the walls of all the run's readings
+/// placed along its trajectory.
+fn walls_pass(
+    run: &RunDataset,
+    obs: &Observations<'_>,
+    online: &OnlineResult,
+    offline: OfflineResult,
+    settings: &SurveySettings<'_>,
+) -> Result<OfflineResult, GridError> {
+    let layout = &run.meta.robot.sonar;
+    let readings = run.placed_readings(&offline.trajectory);
+    let grid = counting_map(layout, &readings, settings.mapping)?;
+    let walls = layout_walls(layout, &readings, &grid);
+    let sonar = SonarInput {
+        readings: &run.sonar,
+        layout,
+        walls: &walls,
+    };
+    let held = run_offline_walls(
+        obs,
+        online,
+        &offline,
+        settings.fuse,
+        settings.anchors,
+        &sonar,
+    );
+    tracing::info!(
+        "walls between tags: {} ranges off {} walls; the solution {} ({} of {} sightings consistent, {} before)",
+        held.wall_ranges,
+        walls.len(),
+        match held.kept {
+            crate::fusion::OfflineKept::Solution => "is kept",
+            _ => "explains fewer sightings and is not kept",
+        },
+        held.sightings_consistent[1],
+        held.sightings,
+        offline.sightings_consistent[1]
+    );
+    Ok(match held.kept {
+        crate::fusion::OfflineKept::Solution => held,
+        _ => offline,
     })
 }
 

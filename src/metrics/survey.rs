@@ -278,6 +278,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
     );
     m.insert("offline.keyframes".into(), survey.offline.keyframes as f64);
     m.insert("offline.factors".into(), survey.offline.factors as f64);
+    m.insert(
+        "offline.wall_ranges".into(),
+        survey.offline.wall_ranges as f64,
+    );
     if let Some(c) = survey.offline.odometry_calibration {
         m.insert(
             "offline.odometry_turn_scale_error".into(),

@@ -38,6 +38,49 @@ pub(super) struct TagFactor {
     pub(super) sqrt_info: [[f64; 3]; 3],
 }
 
+/// Whitened range off a wall face from a keyframe's pose: the reading was taken at `delta` (in the
+/// keyframe's frame, from the odometry) from the keyframe, by a sensor at `sensor` (x, y, bearing in
+/// the robot frame); the face is the line `n . p = offset` with `n` at `normal_rad`.
+/// `r = (d / cos(phi) − measured) · sqrt_info` with `d = n . q − offset` (`q`: the sensor's
+/// position) and `phi` the ray's angle off the face's normal for a laser (0 for a sonar's cone,
+/// whose echo comes back along the normal).
+pub(super) struct WallRangeFactor {
+    pub(super) delta: [f64; 3],
+    pub(super) sensor: [f64; 3],
+    pub(super) normal_rad: f64,
+    pub(super) offset_m: f64,
+    pub(super) ray: bool,
+    pub(super) measured: f64,
+    pub(super) sqrt_info: f64,
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for WallRangeFactor {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let p = &params[0];
+        let (s, c) = (p[2].clone().sin(), p[2].clone().cos());
+        let [dx, dy, dt] = self.delta.map(constant::<T>);
+        // The robot when the reading was taken, then the sensor.
+        let rx = p[0].clone() + c.clone() * dx.clone() - s.clone() * dy.clone();
+        let ry = p[1].clone() + s * dx + c * dy;
+        let rt = p[2].clone() + dt;
+        let (rs, rc) = (rt.clone().sin(), rt.clone().cos());
+        let [ox, oy, bearing] = self.sensor.map(constant::<T>);
+        let qx = rx + rc.clone() * ox.clone() - rs.clone() * oy.clone();
+        let qy = ry + rs * ox + rc * oy;
+        let (ns, nc) = self.normal_rad.sin_cos();
+        let d = constant::<T>(nc) * qx + constant::<T>(ns) * qy - constant::<T>(self.offset_m);
+        let range = if self.ray {
+            let phi = rt + bearing - constant::<T>(self.normal_rad + std::f64::consts::PI);
+            d / phi.cos()
+        } else {
+            d
+        };
+        sna::DVector::from_vec(vec![
+            (range - constant::<T>(self.measured)) * constant::<T>(self.sqrt_info),
+        ])
+    }
+}
+
 /// Whitened prior on a vector variable (first pose; corner priors on landmark x, y).
 pub(super) struct PriorFactor {
     pub(super) measured: Vec<f64>,

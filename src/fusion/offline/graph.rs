@@ -3,7 +3,9 @@
 //! the calibration's prior, the first pose's, the odometry between keyframes, the tag
 //! sightings, the visual turns, the corner priors.
 
-use super::factors::{sqrt_information, BetweenFactor, PriorFactor, TagFactor, TurnFactor};
+use super::factors::{
+    sqrt_information, BetweenFactor, PriorFactor, TagFactor, TurnFactor, WallRangeFactor,
+};
 use super::keyframes::Keyframes;
 use super::OdometryCalibration;
 use crate::fusion::measurement::{odometry_covariance, sighting_measurement};
@@ -202,6 +204,85 @@ pub(super) fn build(
         add_corner_priors(&mut graph, online, config);
     }
     graph
+}
+
+/// A range is put in the graph only when the starting values place it this close to the range
+/// expected off the face in its beam, metres: 0.3 m (a wall pass starts from a solved survey;
+/// further off, the face is likelier the wrong one).
+pub(super) const WALL_RANGE_GATE_M: f64 = 0.3;
+/// At most this many of a layout's sensors give ranges to the graph, evenly spread (a laser's
+/// hundreds of beams add little over a few dozen and cost much).
+const WALL_RANGE_SENSORS: usize = 32;
+
+/// Range factors off the walls of `sonar` (held fixed): per keyframe interval and sensor, the
+/// first reading that the starting values place against a face in its beam within
+/// [`WALL_RANGE_GATE_M`] of its expected range, tied to the keyframe before it by the odometry
+/// between them; robust (Huber), each with the sonar's sigma and the wall's. Returns how many.
+pub(super) fn add_wall_ranges(
+    graph: &mut Graph,
+    obs: &Observations<'_>,
+    keyframes: &Keyframes,
+    sonar: &crate::fusion::SonarInput<'_>,
+    config: &FuseConfig,
+) -> usize {
+    let frames = &keyframes.frames;
+    // The odometry corrected with the calibration the starting values hold (a turn in place of
+    // a few percent off swings a sensor off the robot's centre by centimetres).
+    let calibration = graph.init.get(CALIBRATION).map(|c| OdometryCalibration {
+        turn_scale_error: c[0],
+        heading_drift_rad_per_m: c[1],
+        distance_scale_error: c[2],
+    });
+    let odometry = calibration.map_or_else(|| obs.odometry.to_vec(), |c| c.apply(obs.odometry));
+    let sensors = sonar.layout.sensors.len();
+    let every = sensors.div_ceil(WALL_RANGE_SENSORS).max(1);
+    let mut used = std::collections::HashSet::new();
+    let mut added = 0;
+    for reading in sonar.readings {
+        if reading.sensor % every != 0 {
+            continue;
+        }
+        let j = frames.partition_point(|kf| kf.t_s <= reading.t_s);
+        let (Some(j), Some(sensor)) = (j.checked_sub(1), sonar.layout.sensors.get(reading.sensor))
+        else {
+            continue;
+        };
+        if used.contains(&(j, reading.sensor)) {
+            continue;
+        }
+        let (Some(from), Some(to), Some(start)) = (
+            crate::geometry::pose_at(&odometry, frames[j].t_s),
+            crate::geometry::pose_at(&odometry, reading.t_s),
+            graph.init.get(&pose_name(j)),
+        ) else {
+            continue;
+        };
+        let delta = from.between(&to);
+        let at = Pose2::new(start[0], start[1], start[2]).compose(&delta);
+        let Some(m) = crate::fusion::wall_in_beam(sonar, reading, at) else {
+            continue;
+        };
+        if (m.range_m - m.expected_m).abs() > WALL_RANGE_GATE_M {
+            continue;
+        }
+        let wall = &sonar.walls[m.wall];
+        let sigma = ((config.sonar_sigma_m + config.sonar_sigma_frac * m.range_m).powi(2)
+            + config.wall_sigma_m.powi(2))
+        .sqrt();
+        let factor = WallRangeFactor {
+            delta: [delta.x, delta.y, delta.theta],
+            sensor: [sensor.x_m, sensor.y_m, sensor.bearing_rad],
+            normal_rad: wall.normal_rad,
+            offset_m: wall.offset_m,
+            ray: sonar.layout.beam == crate::sonar::BeamModel::Ray,
+            measured: m.range_m,
+            sqrt_info: 1.0 / sigma,
+        };
+        graph.add(1, &[&pose_name(j)], Box::new(factor), true, config);
+        used.insert((j, reading.sensor));
+        added += 1;
+    }
+    added
 }
 
 /// The odometry calibration's variable and its prior.
