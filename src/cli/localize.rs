@@ -125,6 +125,13 @@ fn print_summary(output: &LocalizeOutput) {
             stereotag::fusion::RELOCALISE_AFTER
         );
     }
+    if !result.wall_fixed_t_s.is_empty() {
+        tracing::info!(
+            "the pose was taken from the walls {} times (first at t = {:.1} s): the filter was too unsure of it to match ranges one at a time",
+            result.wall_fixed_t_s.len(),
+            result.wall_fixed_t_s[0]
+        );
+    }
     if !walls.is_empty() {
         tracing::info!(
             "{} sonar ranges fused against {} surveyed walls ({} gated out)",

@@ -94,6 +94,11 @@ pub struct FuseConfig {
     /// first solution, so that the walls hold the trajectory between tag sightings
     /// ([`super::run_offline_walls`]; ours: off).
     pub walls_between_tags: bool,
+    /// When localising, take the pose from the walls when the filter is too unsure of it to
+    /// match ranges with walls one at a time (its position sigma above
+    /// `sonar_max_range_sigma_m`): the last ranges matched with the surveyed walls over poses
+    /// around the estimate, taken only when one pose clearly explains most of them (ours: on).
+    pub wall_relocalise: bool,
     /// Fuse the turns the cameras measure between frames ([`crate::visual::vo`]) with the odometry,
     /// online and offline (ours: on; they are used when the run's pictures give them).
     pub visual_odometry: bool,
@@ -216,6 +221,7 @@ impl Default for FuseConfig {
             sonar_max_range_sigma_m: 0.2,
             hold_tail_to_walls: true,
             walls_between_tags: false,
+            wall_relocalise: true,
             visual_odometry: true,
             visual_gate_chi2: 10.83,
             estimate_mounting: false,

@@ -5,6 +5,7 @@
 use crate::fusion::ekf::Ekf;
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::sighting_measurement;
+use crate::fusion::wall_fix::{RangeWindow, FIX_SIGMA_M, FIX_SIGMA_RAD};
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
@@ -44,6 +45,8 @@ pub struct LocalizeResult {
     pub visual_fused: usize,
     /// Visual turns gated out.
     pub visual_rejected: usize,
+    /// Times the pose was taken from the walls ([`FuseConfig::wall_relocalise`]), seconds.
+    pub wall_fixed_t_s: Vec<f64>,
 }
 
 /// Gated-out sightings in a row, each putting the robot where the others do (within
@@ -286,6 +289,7 @@ pub fn localize_from(
         }
         out.record(&filter.estimate());
     }
+    out.wall_fixed_t_s = filter.wall_fixes().to_vec();
     out
 }
 
@@ -372,6 +376,10 @@ pub struct Localizer {
     cloned_from_t_s: Option<f64>,
     /// Whether the pose is known (false from an unknown start until a sighting gives it).
     located: bool,
+    /// The latest ranges, for finding the pose from the walls.
+    window: RangeWindow,
+    /// Times the pose was taken from the walls, seconds.
+    wall_fixes: Vec<f64>,
 }
 
 impl Localizer {
@@ -391,6 +399,8 @@ impl Localizer {
             lost: Vec::new(),
             cloned_from_t_s: None,
             located: false,
+            window: RangeWindow::default(),
+            wall_fixes: Vec::new(),
         }
     }
 
@@ -566,12 +576,55 @@ impl Localizer {
                 return None;
             }
         }
+        if self.config.wall_relocalise {
+            self.fix_from_walls(reading);
+        }
+        let layout = self.layout.as_ref()?;
         let sonar = SonarInput {
             readings: &[],
             layout,
             walls: &self.walls,
         };
         fuse_range(&mut self.ekf, reading, &sonar, &self.config)
+    }
+
+    /// Keeps `reading` for matching with the walls, and takes the pose from them when the
+    /// filter is too unsure of it to match ranges one at a time and one pose clearly explains
+    /// the latest ranges ([`super::wall_fix`]).
+    fn fix_from_walls(&mut self, reading: &SonarReading) {
+        let (Some(layout), Some((t_s, odom))) = (self.layout.as_ref(), self.last) else {
+            return;
+        };
+        self.window.push(odom, reading, layout);
+        let now = self.estimate();
+        if now.position_sigma_m() <= self.config.sonar_max_range_sigma_m || !self.window.due(odom) {
+            return;
+        }
+        let reach = (
+            3.0 * now.position_sigma_m(),
+            3.0 * now.covariance[(2, 2)].max(0.0).sqrt(),
+        );
+        if let Some(fix) = self.window.fix(odom, now.pose, reach, &self.walls, layout) {
+            tracing::debug!(
+                "pose taken from the walls at t = {t_s:.1} s: {} of {} ranges agree",
+                fix.inliers,
+                fix.ranges
+            );
+            // The fix replaces the pose: a heading copied for a turn under way is let go.
+            self.drop_turn();
+            let (sm, sr) = (FIX_SIGMA_M, FIX_SIGMA_RAD);
+            self.ekf
+                .x
+                .copy_from_slice(&[fix.pose.x, fix.pose.y, fix.pose.theta]);
+            self.ekf.p =
+                DMatrix::from_diagonal(&DVector::from_vec(vec![sm * sm, sm * sm, sr * sr]));
+            self.wall_fixes.push(t_s);
+        }
+    }
+
+    /// Times the pose was taken from the walls ([`FuseConfig::wall_relocalise`]), seconds.
+    pub fn wall_fixes(&self) -> &[f64] {
+        &self.wall_fixes
     }
 
     /// The pose now, with its covariance.
@@ -643,6 +696,7 @@ impl LocalizeResult {
             relocalised_t_s: Vec::new(),
             visual_fused: 0,
             visual_rejected: 0,
+            wall_fixed_t_s: Vec::new(),
         }
     }
 
@@ -859,6 +913,108 @@ mod tests {
         let survey_start = run(Start::Survey);
         let (p, gt) = (survey_start.trajectory[0].pose, truth[0].pose);
         assert!((p.x - gt.x).hypot(p.y - gt.y) > 3.0 && survey_start.sigma_m[0] < 0.01);
+    }
+
+    /// A filter started 0.7 m and 10 degrees off with a 1 m sigma (too unsure to match ranges
+    /// with walls one at a time) and no tag in view takes its pose from the walls of a 5 m x 4 m
+    /// room once its ranges pin it down, and then stays on; without the fix it stays off.
+    #[test]
+    fn an_unsure_filter_takes_its_pose_from_the_walls() {
+        use crate::sonar::SonarSensor;
+        let face = |normal_deg: f64, offset_m: f64, from_m: [f64; 2], to_m: [f64; 2]| WallSegment {
+            normal_rad: normal_deg.to_radians(),
+            offset_m,
+            from_m,
+            to_m,
+            readings: 100,
+            rms_m: 0.01,
+        };
+        let walls = vec![
+            face(90.0, 0.0, [0.0, 0.0], [5.0, 0.0]),
+            face(180.0, -5.0, [5.0, 0.0], [5.0, 4.0]),
+            face(270.0, -4.0, [5.0, 4.0], [0.0, 4.0]),
+            face(0.0, 0.0, [0.0, 4.0], [0.0, 0.0]),
+        ];
+        let layout = SonarLayout {
+            name: "ring".into(),
+            beam: BeamModel::Cone,
+            cone_rad: 30f64.to_radians(),
+            max_range_m: 5.0,
+            sensors: [-90.0f64, -45.0, 0.0, 45.0, 90.0, 180.0]
+                .iter()
+                .map(|b| SonarSensor {
+                    x_m: 0.2 * b.to_radians().cos(),
+                    y_m: 0.2 * b.to_radians().sin(),
+                    bearing_rad: b.to_radians(),
+                })
+                .collect(),
+        };
+        // An ellipse around the room's middle, odometry perfect; each sonar hears the nearest
+        // face square to its cone.
+        let (mut odometry, mut readings) = (Vec::new(), Vec::new());
+        for k in 0..=400 {
+            let (t_s, a) = (0.1 * k as f64, 0.02 * k as f64);
+            let pose = Pose2::new(
+                2.5 + 1.2 * a.cos(),
+                2.0 + 0.8 * a.sin(),
+                a + std::f64::consts::FRAC_PI_2,
+            );
+            odometry.push(StampedPose { t_s, pose });
+            for (i, sensor) in layout.sensors.iter().enumerate() {
+                let at = pose.compose(&sensor.robot_from_sensor());
+                let range = walls
+                    .iter()
+                    .filter_map(|w| w.expected_range([at.x, at.y], at.theta, 0.26, 0.05))
+                    .min_by(f64::total_cmp);
+                readings.push(SonarReading {
+                    t_s,
+                    sensor: i,
+                    range_m: range.map(|r| r + 0.003 * ((k * 7 + i) % 5) as f64 - 0.006),
+                });
+            }
+        }
+        let truth = odometry.clone();
+        let start = Start::Given {
+            pose: odometry[0].pose.compose(&Pose2::new(0.5, -0.5, 0.17)),
+            sigma_m: 1.0,
+            sigma_rad: 0.3,
+        };
+        let sonar = SonarInput {
+            readings: &readings,
+            layout: &layout,
+            walls: &walls,
+        };
+        let run = |wall_relocalise| {
+            let config = FuseConfig {
+                wall_relocalise,
+                ..FuseConfig::default()
+            };
+            localize_from(&obs(&odometry, &[], &[]), &[], Some(sonar), &config, start)
+        };
+        let end_error = |r: &LocalizeResult| {
+            let (end, gt) = (
+                r.trajectory.last().unwrap().pose,
+                truth.last().unwrap().pose,
+            );
+            (end.x - gt.x).hypot(end.y - gt.y)
+        };
+        let fixed = run(true);
+        assert!(!fixed.wall_fixed_t_s.is_empty());
+        assert!(end_error(&fixed) < 0.05, "{}", end_error(&fixed));
+        // The fix's sigma covers its error from then on.
+        for ((p, sigma), gt) in fixed.trajectory.iter().zip(&fixed.sigma_m).zip(&truth) {
+            if p.t_s > fixed.wall_fixed_t_s[0] {
+                let error = (p.pose.x - gt.pose.x).hypot(p.pose.y - gt.pose.y);
+                assert!(
+                    error < 3.0 * sigma,
+                    "at {} s: {error} m, sigma {sigma}",
+                    p.t_s
+                );
+            }
+        }
+        let unfixed = run(false);
+        assert!(unfixed.wall_fixed_t_s.is_empty());
+        assert!(end_error(&unfixed) > 0.3, "{}", end_error(&unfixed));
     }
 
     /// The face a range is matched with: the nearest one in the beam, none without an echo.

@@ -39,6 +39,7 @@ mod streaming;
 mod survey;
 #[cfg(test)]
 pub(crate) mod testing;
+mod wall_fix;
 
 pub use crate::visual::sightings::{PairCorners, TagSighting, YAW_SIGMA_PER_DEPTH_SIGMA};
 pub use anchors::{

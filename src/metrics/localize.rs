@@ -78,6 +78,7 @@ pub fn localization_metrics(
     metrics.insert("ranges.fused".into(), result.ranges_fused().into());
     metrics.insert("ranges.gated_out".into(), result.ranges_gated_out().into());
     metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
+    metrics.insert("wall_fixes".into(), result.wall_fixed_t_s.len().into());
     metrics.insert("visual.turns".into(), counts.visual_turns.into());
     metrics.insert("visual.fused".into(), result.visual_fused.into());
     metrics.insert("visual.gated_out".into(), result.visual_rejected.into());

@@ -1,0 +1,313 @@
+//! The pose from the walls alone, for a localiser too unsure of its pose to match ranges with
+//! walls one at a time (a far tag's fix, an uncertain start): the recent ranges, placed relative
+//! to now by the odometry, are matched with the surveyed walls over a grid of poses around the
+//! estimate, coarse then fine; a fix is taken only when most ranges agree with it and no other
+//! pose of the grid explains them nearly as well (a corridor, whose walls say nothing about
+//! where along it the robot is, gives none).
+//!
+//! A range is explained at a pose by how near its echo's arc (the range across the beam's cone,
+//! or the point down a laser's ray) comes to a surveyed wall: a sonar hears a wall square to its
+//! axis, one at the cone's edge and a corner alike, all of which touch the arc. The distance to
+//! the walls is looked up in a table over the walls' surroundings, built once.
+
+use crate::geometry::Pose2;
+use crate::sonar::walls::WallSegment;
+use crate::sonar::{SonarLayout, SonarReading};
+use rayon::prelude::*;
+use std::collections::VecDeque;
+
+/// Ranges kept, the latest: enough for walls in several directions.
+const WINDOW: usize = 48;
+/// A match is tried with at least this many ranges ...
+const MIN_RANGES: usize = 24;
+/// ... every this much travel, metres, or turn, radians (45 degrees: a robot looking around
+/// sees new walls without moving).
+const TRY_EVERY_M: f64 = 0.5;
+const TRY_EVERY_RAD: f64 = std::f64::consts::FRAC_PI_4;
+/// The search reaches this far around the estimate at most (or 3 sigma when less): metres, and
+/// radians (30 degrees).
+const MAX_REACH_M: f64 = 1.5;
+const MAX_REACH_RAD: f64 = 0.52;
+/// Coarse grid steps and the residual beyond which a range counts as unexplained there, metres.
+const COARSE_STEP_M: f64 = 0.1;
+const COARSE_STEP_RAD: f64 = 0.035;
+const COARSE_TRUNCATE_M: f64 = 0.2;
+/// Fine grid: steps over one coarse step around the best, and its residual cut.
+const FINE_STEP_M: f64 = 0.02;
+const FINE_STEP_RAD: f64 = 0.007;
+const FINE_TRUNCATE_M: f64 = 0.06;
+/// A range agrees with a pose when its residual is below this, metres; a fix needs this share of
+/// the ranges to agree.
+const INLIER_M: f64 = 0.05;
+const MIN_INLIER_SHARE: f64 = 0.8;
+/// A rival pose (further than this from the best, metres) must explain the ranges this many
+/// times worse, in summed truncated squares, for the best to be taken.
+const RIVAL_M: f64 = 0.4;
+const RIVAL_RATIO: f64 = 3.0;
+/// The fix's sigmas: metres and radians (the fine grid's steps and the ranges' noise, with room).
+pub(super) const FIX_SIGMA_M: f64 = 0.05;
+pub(super) const FIX_SIGMA_RAD: f64 = 0.026;
+
+/// Points of an echo's arc are taken this far apart across the cone: 5 degrees.
+const ARC_STEP_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+
+/// The latest ranges with an echo, each with the odometry pose when it was taken.
+#[derive(Debug, Clone, Default)]
+pub(super) struct RangeWindow {
+    ranges: VecDeque<(Pose2, SonarReading)>,
+    /// The odometry pose at the last try.
+    last_try: Option<Pose2>,
+    /// The distance to the walls, once needed.
+    field: Option<DistanceField>,
+}
+
+/// Distance to the nearest surveyed wall face, tabled on a grid over the walls and a sensor's
+/// reach around them (beyond it, and beyond [`FIELD_CAP_M`], the cap).
+#[derive(Debug, Clone)]
+struct DistanceField {
+    origin: (f64, f64),
+    cell_m: f64,
+    cols: usize,
+    rows: usize,
+    d: Vec<f32>,
+}
+
+/// Distances are tabled up to this, metres (more than any truncation used).
+const FIELD_CAP_M: f64 = 0.3;
+/// The table's cells: this size, or larger to hold at most [`FIELD_MAX_CELLS`].
+const FIELD_CELL_M: f64 = 0.02;
+const FIELD_MAX_CELLS: f64 = 4.0e6;
+
+impl DistanceField {
+    fn new(walls: &[WallSegment], reach_m: f64) -> Self {
+        let (mut lo, mut hi) = (
+            (f64::INFINITY, f64::INFINITY),
+            (f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        for w in walls {
+            for p in [w.from_m, w.to_m] {
+                lo = (lo.0.min(p[0]), lo.1.min(p[1]));
+                hi = (hi.0.max(p[0]), hi.1.max(p[1]));
+            }
+        }
+        if !(lo.0.is_finite() && hi.0.is_finite()) {
+            return Self {
+                origin: (0.0, 0.0),
+                cell_m: 1.0,
+                cols: 0,
+                rows: 0,
+                d: Vec::new(),
+            };
+        }
+        let margin = reach_m + FIELD_CAP_M;
+        let (w, h) = (hi.0 - lo.0 + 2.0 * margin, hi.1 - lo.1 + 2.0 * margin);
+        let cell_m = FIELD_CELL_M.max((w * h / FIELD_MAX_CELLS).sqrt());
+        let (cols, rows) = ((w / cell_m).ceil() as usize, (h / cell_m).ceil() as usize);
+        let origin = (lo.0 - margin, lo.1 - margin);
+        let mut d = vec![FIELD_CAP_M as f32; cols * rows];
+        // Each wall writes the cells within the cap of it.
+        let span = (FIELD_CAP_M / cell_m).ceil() as isize + 1;
+        for wall in walls {
+            let (a, b) = (wall.from_m, wall.to_m);
+            let length = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let samples = (length / cell_m).ceil().max(1.0) as usize;
+            for k in 0..=samples {
+                let u = k as f64 / samples as f64;
+                let p = (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]));
+                let (c0, r0) = (
+                    ((p.0 - origin.0) / cell_m) as isize,
+                    ((p.1 - origin.1) / cell_m) as isize,
+                );
+                for r in (r0 - span).max(0)..=(r0 + span).min(rows as isize - 1) {
+                    for c in (c0 - span).max(0)..=(c0 + span).min(cols as isize - 1) {
+                        let centre = (
+                            origin.0 + (c as f64 + 0.5) * cell_m,
+                            origin.1 + (r as f64 + 0.5) * cell_m,
+                        );
+                        let dist = distance_to_segment(centre, a, b) as f32;
+                        let cell = &mut d[r as usize * cols + c as usize];
+                        *cell = cell.min(dist);
+                    }
+                }
+            }
+        }
+        Self {
+            origin,
+            cell_m,
+            cols,
+            rows,
+            d,
+        }
+    }
+
+    /// The distance from `(x, y)` to the nearest wall, capped.
+    fn at(&self, x: f64, y: f64) -> f64 {
+        let (c, r) = (
+            (x - self.origin.0) / self.cell_m,
+            (y - self.origin.1) / self.cell_m,
+        );
+        if c < 0.0 || r < 0.0 || c >= self.cols as f64 || r >= self.rows as f64 {
+            return FIELD_CAP_M;
+        }
+        f64::from(self.d[r as usize * self.cols + c as usize])
+    }
+}
+
+/// Distance from `p` to the segment `a`-`b`.
+fn distance_to_segment(p: (f64, f64), a: [f64; 2], b: [f64; 2]) -> f64 {
+    let e = (b[0] - a[0], b[1] - a[1]);
+    let q = (p.0 - a[0], p.1 - a[1]);
+    let l2 = e.0 * e.0 + e.1 * e.1;
+    let u = if l2 > 0.0 {
+        ((q.0 * e.0 + q.1 * e.1) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (q.0 - u * e.0).hypot(q.1 - u * e.1)
+}
+
+/// A pose the walls give.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct WallFix {
+    pub(super) pose: Pose2,
+    /// Ranges that agree with it, of those matched.
+    pub(super) inliers: usize,
+    pub(super) ranges: usize,
+}
+
+impl RangeWindow {
+    /// Keeps a reading taken at odometry pose `odom` (one with an echo short of the sensor's
+    /// largest range).
+    pub(super) fn push(&mut self, odom: Pose2, reading: &SonarReading, layout: &SonarLayout) {
+        if reading
+            .range_m
+            .is_some_and(|r| r < layout.max_range_m - 1e-6)
+        {
+            if self.ranges.len() == WINDOW {
+                self.ranges.pop_front();
+            }
+            self.ranges.push_back((odom, *reading));
+        }
+    }
+
+    /// Whether a match is due at odometry pose `odom`: enough ranges, and travel since the last.
+    pub(super) fn due(&self, odom: Pose2) -> bool {
+        self.ranges.len() >= MIN_RANGES
+            && self.last_try.is_none_or(|p| {
+                (p.x - odom.x).hypot(p.y - odom.y) >= TRY_EVERY_M
+                    || crate::geometry::wrap_angle(p.theta - odom.theta).abs() >= TRY_EVERY_RAD
+            })
+    }
+
+    /// Matches the ranges with `walls` around `estimate` (the pose now, at odometry pose `odom`)
+    /// within `reach` (metres, radians: 3 sigma, capped); `None` without a clear fix.
+    pub(super) fn fix(
+        &mut self,
+        odom: Pose2,
+        estimate: Pose2,
+        reach: (f64, f64),
+        walls: &[WallSegment],
+        layout: &SonarLayout,
+    ) -> Option<WallFix> {
+        self.last_try = Some(odom);
+        let field = self
+            .field
+            .get_or_insert_with(|| DistanceField::new(walls, layout.max_range_m));
+        // Each echo's arc, as points in the frame of the robot now (odometry-relative).
+        let half = match layout.beam {
+            crate::sonar::BeamModel::Cone => 0.5 * layout.cone_rad,
+            crate::sonar::BeamModel::Ray => 0.0,
+        };
+        let steps = (half / ARC_STEP_RAD).ceil() as i32;
+        let arcs: Vec<Vec<(f64, f64)>> = self
+            .ranges
+            .iter()
+            .filter_map(|(o, r)| {
+                let sensor = layout.sensors.get(r.sensor)?;
+                let at = odom.between(o).compose(&sensor.robot_from_sensor());
+                let range = r.range_m?;
+                Some(
+                    (-steps..=steps)
+                        .map(|k| {
+                            let a = at.theta + half * k as f64 / steps.max(1) as f64;
+                            (at.x + range * a.cos(), at.y + range * a.sin())
+                        })
+                        .collect(),
+                )
+            })
+            .collect();
+        let field = &*field;
+        let cost = |pose: Pose2, truncate: f64| -> (f64, usize) {
+            let (s, c) = pose.theta.sin_cos();
+            let mut sum = 0.0;
+            let mut inliers = 0;
+            for arc in &arcs {
+                let residual = arc
+                    .iter()
+                    .map(|&(x, y)| field.at(pose.x + c * x - s * y, pose.y + s * x + c * y))
+                    .fold(f64::INFINITY, f64::min);
+                sum += residual.min(truncate).powi(2);
+                inliers += usize::from(residual < INLIER_M);
+            }
+            (sum, inliers)
+        };
+        let (reach_m, reach_rad) = (reach.0.min(MAX_REACH_M), reach.1.min(MAX_REACH_RAD));
+        let coarse = grid(
+            estimate,
+            (reach_m, reach_rad),
+            (COARSE_STEP_M, COARSE_STEP_RAD),
+        );
+        let scored: Vec<(Pose2, f64)> = coarse
+            .into_par_iter()
+            .map(|p| (p, cost(p, COARSE_TRUNCATE_M).0))
+            .collect();
+        let &(best, best_cost) = scored.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+        let rival = scored
+            .iter()
+            .filter(|(p, _)| (p.x - best.x).hypot(p.y - best.y) > RIVAL_M)
+            .map(|&(_, c)| c)
+            .fold(f64::INFINITY, f64::min);
+        // The ranges' own noise, so that a near-perfect best does not make every rival look far.
+        let floor = arcs.len() as f64 * (0.5 * INLIER_M).powi(2);
+        if rival < RIVAL_RATIO * best_cost.max(floor) {
+            tracing::debug!(
+                "no pose from the walls: {} ranges explained nearly as well {RIVAL_M} m apart (cost {best_cost:.4} and {rival:.4})",
+                arcs.len()
+            );
+            return None;
+        }
+        let (fine, (_, inliers)) = grid(
+            best,
+            (COARSE_STEP_M, COARSE_STEP_RAD),
+            (FINE_STEP_M, FINE_STEP_RAD),
+        )
+        .into_iter()
+        .map(|p| (p, cost(p, FINE_TRUNCATE_M)))
+        .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0))?;
+        (inliers as f64 >= MIN_INLIER_SHARE * arcs.len() as f64).then_some(WallFix {
+            pose: fine,
+            inliers,
+            ranges: arcs.len(),
+        })
+    }
+}
+
+/// Poses on a grid around `centre`: positions within `reach.0` and headings within `reach.1`, at
+/// `step` (metres, radians).
+fn grid(centre: Pose2, reach: (f64, f64), step: (f64, f64)) -> Vec<Pose2> {
+    let n = |reach: f64, step: f64| (reach / step).ceil() as i32;
+    let (nm, nr) = (n(reach.0, step.0), n(reach.1, step.1));
+    let mut out = Vec::new();
+    for i in -nm..=nm {
+        for j in -nm..=nm {
+            for k in -nr..=nr {
+                out.push(Pose2::new(
+                    centre.x + i as f64 * step.0,
+                    centre.y + j as f64 * step.0,
+                    centre.theta + k as f64 * step.1,
+                ));
+            }
+        }
+    }
+    out
+}
