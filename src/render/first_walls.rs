@@ -140,9 +140,10 @@ impl FirstWalls {
                 if hi < 0.0 || lo >= wedges as f64 {
                     continue;
                 }
-                for j in (lo.max(0.0) as usize)..=(hi.min(wedges as f64 - 1.0) as usize) {
-                    if first[j] != UNPROVEN && distance <= reach(j) {
-                        first[j] = UNPROVEN;
+                let (lo, hi) = (lo.max(0.0) as usize, hi.min(wedges as f64 - 1.0) as usize);
+                for (j, wall) in first.iter_mut().enumerate().take(hi + 1).skip(lo) {
+                    if *wall != UNPROVEN && distance <= reach(j) {
+                        *wall = UNPROVEN;
                     }
                 }
             }
@@ -170,7 +171,8 @@ impl FirstWalls {
         }
         let s = (dir.x * self.left.0 + dir.y * self.left.1) / ahead;
         let x = (s - self.s0) * self.inverse_step;
-        if !(x >= 0.0) {
+        // Also refuses NaN.
+        if x.is_nan() || x < 0.0 {
             return None;
         }
         match self.first.get(x as usize) {

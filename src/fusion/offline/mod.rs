@@ -197,9 +197,9 @@ pub fn run_offline_anchored(
 /// The offline pass again, with the walls holding the trajectory between tag sightings: started
 /// from `solved` (a pass without walls over the same observations), every keyframe interval gets
 /// a range factor per sensor off the face of `sonar.walls` in its beam (walls mapped from
-/// `solved`'s trajectory, held fixed; see [`graph::add_wall_ranges`]), and the graph is solved
-/// again. Kept, as any offline solution, only when it explains at least as many sightings as
-/// `solved` does.
+/// `solved`'s trajectory, held fixed; tied to the keyframe before by the odometry, robust,
+/// gated at 0.3 m), and the graph is solved again. Kept, as any offline solution, only when it
+/// explains at least as many sightings as `solved` does.
 pub fn run_offline_walls(
     obs: &Observations<'_>,
     online: &OnlineResult,
