@@ -71,6 +71,7 @@ impl Recorder {
         log_trajectories(rec, scene)?;
         log_sightings(rec, scene)?;
         log_ranges(rec, scene)?;
+        log_wall_fixes(rec, scene)?;
         log_errors(rec, scene)?;
         rec.reset_time();
         log_report(rec, scene)
@@ -124,6 +125,26 @@ fn log_sightings(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Res
                 .with_show_labels(false)
                 .with_colors([color])
                 .with_radii([0.025f32]),
+        )?;
+    }
+    Ok(())
+}
+
+/// Where the pose was taken from the walls (the filter too unsure of it to match ranges one at
+/// a time): the pose after the fix, at its time, in the surveyed walls' colour.
+fn log_wall_fixes(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let r = scene.result;
+    for &t in &r.wall_fixed_t_s {
+        let Some(pose) = pose_at(&r.trajectory, t) else {
+            continue;
+        };
+        rec.set_duration_secs("time", t);
+        rec.log(
+            "world/wall_fixes",
+            &rerun::Points3D::new([[pose.x as f32, pose.y as f32, SONAR_Z_M]])
+                .with_labels(["pose from the walls"])
+                .with_colors([palette::SURVEYED_WALL])
+                .with_radii([0.06f32]),
         )?;
     }
     Ok(())
@@ -228,7 +249,7 @@ fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
     let mut md = metrics_markdown("stereotag localize", scene.metrics);
     let colours = format!(
         "In the scene: odometry red{}, localized green{}; surveyed tags green dots, surveyed \
-         walls orange, the sonar ranges fused cyan (gated out red).\n\n",
+         walls orange, the sonar ranges fused cyan (gated out red){}.\n\n",
         if scene.calibrated_odometry.is_some() {
             ", calibrated with the survey yellow"
         } else {
@@ -238,6 +259,11 @@ fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
             ", ground truth grey"
         } else {
             ""
+        },
+        if scene.result.wall_fixed_t_s.is_empty() {
+            ""
+        } else {
+            "; an orange dot where the pose was taken from the walls"
         }
     );
     md.insert_str(md.find("| value").unwrap_or(0), &colours);
