@@ -222,7 +222,12 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
         }
         next = p.t_s + POSE_SAMPLE_S;
         rec.set_duration_secs("time", p.t_s);
-        rec.log("metrics/sigma_m", &rerun::Scalars::single(r.sigma_m[i]))?;
+        // Before an unknown start is located the pose is a guess with a building-sized sigma:
+        // neither is plotted, so that the scale shows the rest.
+        let located = r.located.get(i).copied().unwrap_or(true);
+        if located {
+            rec.log("metrics/sigma_m", &rerun::Scalars::single(r.sigma_m[i]))?;
+        }
         rec.log(
             "metrics/since_sighting_m",
             &rerun::Scalars::single(r.since_sighting_m[i]),
@@ -230,10 +235,12 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
         let Some(gt) = truth.and_then(|t| pose_at(t, p.t_s)) else {
             continue;
         };
-        rec.log(
-            "metrics/position_error_m/localized",
-            &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
-        )?;
+        if located {
+            rec.log(
+                "metrics/position_error_m/localized",
+                &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
+            )?;
+        }
         if let Some(o) = pose_at(tracked, p.t_s) {
             rec.log(
                 "metrics/position_error_m/odometry",
