@@ -70,31 +70,33 @@ pub(super) struct Graph {
 /// this: 11.34, the chi-square 99% point with 3 degrees of freedom.
 pub(super) const SIGHTING_CHI2_99: f64 = 11.34;
 
-impl Graph {
-    /// The sightings consistent with `values` ([`SIGHTING_CHI2_99`]) and their summed squared
-    /// whitened residuals.
-    pub(super) fn sightings_consistent(
-        &self,
-        values: &HashMap<String, sna::DVector<f64>>,
-    ) -> (usize, f64) {
-        let d2: Vec<f64> = squared_norms(&self.sightings, values).flatten().collect();
-        (
-            d2.iter().filter(|&&d| d <= SIGHTING_CHI2_99).count(),
-            d2.iter().sum(),
-        )
-    }
+/// How a graph's sightings agree with a solution ([`Graph::sighting_check`]).
+pub(super) struct SightingCheck {
+    /// Sightings consistent with it.
+    pub(super) consistent: usize,
+    /// The others (their indices in the observations).
+    pub(super) inconsistent: Vec<usize>,
+}
 
-    /// The sightings (their indices in the observations) inconsistent with `values`
-    /// ([`SIGHTING_CHI2_99`]).
-    pub(super) fn sightings_inconsistent(
+impl Graph {
+    /// How the sightings agree with `values` ([`SIGHTING_CHI2_99`]): how many are consistent,
+    /// and which (their indices in the observations) are not.
+    pub(super) fn sighting_check(
         &self,
         values: &HashMap<String, sna::DVector<f64>>,
-    ) -> Vec<usize> {
-        squared_norms(&self.sightings, values)
-            .zip(&self.sighting_index)
-            .filter(|(d, _)| d.is_some_and(|d| d > SIGHTING_CHI2_99))
-            .map(|(_, &k)| k)
-            .collect()
+    ) -> SightingCheck {
+        let mut check = SightingCheck {
+            consistent: 0,
+            inconsistent: Vec::new(),
+        };
+        for (d2, &k) in squared_norms(&self.sightings, values).zip(&self.sighting_index) {
+            match d2 {
+                Some(d2) if d2 <= SIGHTING_CHI2_99 => check.consistent += 1,
+                Some(_) => check.inconsistent.push(k),
+                None => {}
+            }
+        }
+        check
     }
 
     /// The odometry factors' summed squared whitened residuals under `values` (chi-square with

@@ -11,6 +11,7 @@ mod mounting;
 use crate::fusion::{FuseConfig, Landmark, Observations, OnlineResult};
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
 use factors::corrected_increment;
+use graph::SightingCheck;
 pub use mounting::{estimate_mounting, MOUNTING_STRETCH_M};
 use serde::{Deserialize, Serialize};
 
@@ -314,11 +315,13 @@ fn solve(
             .compute_cost(&graph.problem.initialize_parameter_blocks(values))
     };
     let start_cost = cost_of(&graph.init);
-    let start_consistent = graph.sightings_consistent(&graph.init).0;
-    let (kept, values, end_cost, end_consistent, converged) = match solution {
+    let start = graph.sighting_check(&graph.init);
+    let start_consistent = start.consistent;
+    let (kept, values, end_cost, end, converged) = match solution {
         Some(values) => {
             let end_cost = cost_of(&values);
-            let end_consistent = graph.sightings_consistent(&values).0;
+            let end = graph.sighting_check(&values);
+            let end_consistent = end.consistent;
             if end_consistent >= start_consistent && end_cost.is_finite() {
                 let once_more = tiny_solver::LevenbergMarquardtOptimizer::default().optimize(
                     &graph.problem,
@@ -331,33 +334,33 @@ fn solve(
                 let settled = once_more
                     .map(|v| cost_of(&v))
                     .is_some_and(|c| (end_cost - c).abs() <= 1e-6 * end_cost.max(1e-12));
-                (
-                    OfflineKept::Solution,
-                    values,
-                    end_cost,
-                    end_consistent,
-                    settled,
-                )
+                (OfflineKept::Solution, values, end_cost, end, settled)
             } else {
                 tracing::warn!(
                     "the offline pass keeps the online estimate: its solution explains {end_consistent} of {} sightings, the online estimate {start_consistent} (graph cost {start_cost:.1} -> {end_cost:.1})",
                     graph.sightings.len()
                 );
+                // The start is returned: its sightings are the ones to report.
                 let init = graph.init.clone();
-                (OfflineKept::Start, init, end_cost, end_consistent, false)
+                let end = SightingCheck {
+                    consistent: end_consistent,
+                    inconsistent: start.inconsistent.clone(),
+                };
+                (OfflineKept::Start, init, end_cost, end, false)
             }
         }
-        None if nothing => (
-            OfflineKept::Nothing,
-            graph.init.clone(),
-            start_cost,
-            start_consistent,
-            false,
-        ),
+        None if nothing => {
+            let init = graph.init.clone();
+            (OfflineKept::Nothing, init, start_cost, start, false)
+        }
         None => {
             tracing::warn!("the offline solver failed (NaN cost): the online estimate is kept");
             let init = graph.init.clone();
-            (OfflineKept::Start, init, f64::NAN, 0, false)
+            let end = SightingCheck {
+                consistent: 0,
+                inconsistent: start.inconsistent.clone(),
+            };
+            (OfflineKept::Start, init, f64::NAN, end, false)
         }
     };
     let solved: Vec<Pose2> = (0..keyframes.frames.len())
@@ -400,9 +403,9 @@ fn solve(
         converged,
         kept,
         cost: [start_cost, end_cost],
-        sightings_consistent: [start_consistent, end_consistent],
+        sightings_consistent: [start_consistent, end.consistent],
         sightings: graph.sightings.len(),
-        inconsistent: graph.sightings_inconsistent(&values),
+        inconsistent: end.inconsistent,
         odometry_chi2: [
             graph.odometry_chi2(&graph.init),
             graph.odometry_chi2(&values),
