@@ -131,8 +131,7 @@ fn walls_pass(
 ) -> Result<OfflineResult, GridError> {
     let layout = &run.meta.robot.sonar;
     let readings = run.placed_readings(&offline.trajectory);
-    let grid = counting_map(layout, &readings, settings.mapping)?;
-    let walls = layout_walls(layout, &readings, &grid);
+    let walls = walls_of(layout, &readings, settings.mapping)?;
     let sonar = SonarInput {
         readings: &run.sonar,
         layout,
@@ -192,8 +191,7 @@ fn hold_tail(
         .into_iter()
         .filter(|r| r.t_s <= last_t)
         .collect();
-    let grid = counting_map(layout, &readings, mapping)?;
-    let walls = layout_walls(layout, &readings, &grid);
+    let walls = walls_of(layout, &readings, mapping)?;
     offline.trajectory = hold_tail_to_walls(
         &run.odometry,
         visual,
@@ -208,4 +206,14 @@ fn hold_tail(
         fuse,
     );
     Ok(())
+}
+
+/// The wall faces of placed readings: their counting grid, then the layout's wall fit.
+fn walls_of(
+    layout: &crate::sonar::SonarLayout,
+    readings: &[crate::sonar::PlacedReading],
+    mapping: &MappingConfig,
+) -> Result<Vec<crate::sonar::walls::WallSegment>, GridError> {
+    let grid = counting_map(layout, readings, mapping)?;
+    Ok(layout_walls(layout, readings, &grid))
 }

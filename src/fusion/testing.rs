@@ -1,5 +1,5 @@
 //! Runs for the fusion tests: a square loop with biased odometry and a tag at each corner, a
-//! corridor along a wall.
+//! corridor along a wall, wall faces and the ranges a sonar ring hears off them.
 
 use crate::fusion::TagSighting;
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
@@ -152,4 +152,46 @@ pub(crate) fn obs<'a>(
         sightings,
         visual,
     }
+}
+
+/// A surveyed wall face: its normal (degrees), offset and ends.
+pub(crate) fn face(
+    normal_deg: f64,
+    offset_m: f64,
+    from_m: [f64; 2],
+    to_m: [f64; 2],
+) -> WallSegment {
+    WallSegment {
+        normal_rad: normal_deg.to_radians(),
+        offset_m,
+        from_m,
+        to_m,
+        readings: 100,
+        rms_m: 0.01,
+    }
+}
+
+/// The ranges each sonar of `layout` hears at each pose of `path`: the nearest of `faces` square
+/// to its cone (within 15 degrees, 5 cm inside the ends), with a deterministic noise of up to 8 mm.
+pub(crate) fn ranges_off_faces(
+    path: &[StampedPose],
+    layout: &crate::sonar::SonarLayout,
+    faces: &[WallSegment],
+) -> Vec<SonarReading> {
+    let mut readings = Vec::new();
+    for (k, p) in path.iter().enumerate() {
+        for (i, sensor) in layout.sensors.iter().enumerate() {
+            let at = p.pose.compose(&sensor.robot_from_sensor());
+            let range = faces
+                .iter()
+                .filter_map(|w| w.expected_range([at.x, at.y], at.theta, 0.26, 0.05))
+                .min_by(f64::total_cmp);
+            readings.push(SonarReading {
+                t_s: p.t_s,
+                sensor: i,
+                range_m: range.map(|r| r + 0.004 * (((k * 7 + i) % 5) as f64 - 2.0)),
+            });
+        }
+    }
+    readings
 }

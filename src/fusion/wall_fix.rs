@@ -10,9 +10,10 @@
 //! axis, one at the cone's edge and a corner alike, all of which touch the arc. The distance to
 //! the walls is looked up in a table over the walls' surroundings, built once.
 
-use crate::geometry::Pose2;
+use crate::geometry::{Pose2, Segment};
 use crate::sonar::walls::WallSegment;
 use crate::sonar::{SonarLayout, SonarReading};
+use nalgebra::Point2;
 use rayon::prelude::*;
 use std::collections::VecDeque;
 
@@ -105,29 +106,28 @@ impl DistanceField {
         let (cols, rows) = ((w / cell_m).ceil() as usize, (h / cell_m).ceil() as usize);
         let origin = (lo.0 - margin, lo.1 - margin);
         let mut d = vec![FIELD_CAP_M as f32; cols * rows];
-        // Each wall writes the cells within the cap of it.
-        let span = (FIELD_CAP_M / cell_m).ceil() as isize + 1;
+        // Each wall writes the cells of its bounding box grown by the cap, once each.
+        let cell_of =
+            |v: f64, lo: f64, n: usize| ((v - lo) / cell_m).clamp(0.0, n as f64 - 1.0) as usize;
         for wall in walls {
+            let segment = Segment::new(Point2::from(wall.from_m), Point2::from(wall.to_m));
             let (a, b) = (wall.from_m, wall.to_m);
-            let length = (b[0] - a[0]).hypot(b[1] - a[1]);
-            let samples = (length / cell_m).ceil().max(1.0) as usize;
-            for k in 0..=samples {
-                let u = k as f64 / samples as f64;
-                let p = (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]));
-                let (c0, r0) = (
-                    ((p.0 - origin.0) / cell_m) as isize,
-                    ((p.1 - origin.1) / cell_m) as isize,
-                );
-                for r in (r0 - span).max(0)..=(r0 + span).min(rows as isize - 1) {
-                    for c in (c0 - span).max(0)..=(c0 + span).min(cols as isize - 1) {
-                        let centre = (
-                            origin.0 + (c as f64 + 0.5) * cell_m,
-                            origin.1 + (r as f64 + 0.5) * cell_m,
-                        );
-                        let dist = distance_to_segment(centre, a, b) as f32;
-                        let cell = &mut d[r as usize * cols + c as usize];
-                        *cell = cell.min(dist);
-                    }
+            let (c0, c1) = (
+                cell_of(a[0].min(b[0]) - FIELD_CAP_M, origin.0, cols),
+                cell_of(a[0].max(b[0]) + FIELD_CAP_M, origin.0, cols),
+            );
+            let (r0, r1) = (
+                cell_of(a[1].min(b[1]) - FIELD_CAP_M, origin.1, rows),
+                cell_of(a[1].max(b[1]) + FIELD_CAP_M, origin.1, rows),
+            );
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    let centre = Point2::new(
+                        origin.0 + (c as f64 + 0.5) * cell_m,
+                        origin.1 + (r as f64 + 0.5) * cell_m,
+                    );
+                    let cell = &mut d[r * cols + c];
+                    *cell = cell.min(segment.distance_to(centre) as f32);
                 }
             }
         }
@@ -151,19 +151,6 @@ impl DistanceField {
         }
         f64::from(self.d[r as usize * self.cols + c as usize])
     }
-}
-
-/// Distance from `p` to the segment `a`-`b`.
-fn distance_to_segment(p: (f64, f64), a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = (b[0] - a[0], b[1] - a[1]);
-    let q = (p.0 - a[0], p.1 - a[1]);
-    let l2 = e.0 * e.0 + e.1 * e.1;
-    let u = if l2 > 0.0 {
-        ((q.0 * e.0 + q.1 * e.1) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (q.0 - u * e.0).hypot(q.1 - u * e.1)
 }
 
 /// A pose the walls give.

@@ -14,6 +14,8 @@
 
 use super::scene::WallSpan;
 use super::walls_grid::WallGrid;
+use crate::geometry::Segment;
+use nalgebra::Point2;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -85,10 +87,11 @@ impl FirstWalls {
             return None;
         }
         let e = (eye.x, eye.y);
-        if walls
-            .iter()
-            .any(|w| distance_to_segment(e, w.a, w.e) < EYE_CLEARANCE_M)
-        {
+        if walls.iter().any(|w| {
+            let a = Point2::new(w.a.0, w.a.1);
+            let segment = Segment::new(a, a + nalgebra::Vector2::new(w.e.0, w.e.1));
+            segment.distance_to(Point2::new(e.0, e.1)) < EYE_CLEARANCE_M
+        }) {
             return None;
         }
         let step = WEDGE_RAD.tan();
@@ -230,16 +233,4 @@ fn side_hit(grid: &WallGrid, eye: (f64, f64), dir: (f64, f64)) -> Option<SideHit
         best.is_none_or(|b| beyond(b.t) >= cell.exit_t)
     });
     best
-}
-
-/// Distance from `p` to the segment `a + u e`, `u` in [0, 1].
-fn distance_to_segment(p: (f64, f64), a: (f64, f64), e: (f64, f64)) -> f64 {
-    let (px, py) = (p.0 - a.0, p.1 - a.1);
-    let length2 = e.0 * e.0 + e.1 * e.1;
-    let u = if length2 > 0.0 {
-        ((px * e.0 + py * e.1) / length2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (px - u * e.0).hypot(py - u * e.1)
 }

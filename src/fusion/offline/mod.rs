@@ -536,8 +536,8 @@ mod tests {
     /// without, and keeps every sighting consistent.
     #[test]
     fn walls_hold_the_path_between_tags() {
-        use crate::sonar::walls::WallSegment;
-        use crate::sonar::{BeamModel, SonarLayout, SonarReading, SonarSensor};
+        use crate::fusion::testing::{face, ranges_off_faces};
+        use crate::sonar::{BeamModel, SonarLayout, SonarSensor};
         let (_, truth, sightings, _) = square_run(0.02, 2);
         let sightings: Vec<_> = sightings.into_iter().filter(|s| s.id % 2 == 0).collect();
         // Wheels 2% long and a heading that wanders (about 0.01 rad per sqrt(m), which the
@@ -558,19 +558,11 @@ mod tests {
                 pose,
             });
         }
-        let wall = |normal_deg: f64, offset_m: f64, from_m: [f64; 2], to_m: [f64; 2]| WallSegment {
-            normal_rad: normal_deg.to_radians(),
-            offset_m,
-            from_m,
-            to_m,
-            readings: 100,
-            rms_m: 0.01,
-        };
         let walls = [
-            wall(90.0, -0.5, [-0.5, -0.5], [5.5, -0.5]),
-            wall(180.0, -5.5, [5.5, -0.5], [5.5, 5.5]),
-            wall(270.0, -5.5, [5.5, 5.5], [-0.5, 5.5]),
-            wall(0.0, -0.5, [-0.5, 5.5], [-0.5, -0.5]),
+            face(90.0, -0.5, [-0.5, -0.5], [5.5, -0.5]),
+            face(180.0, -5.5, [5.5, -0.5], [5.5, 5.5]),
+            face(270.0, -5.5, [5.5, 5.5], [-0.5, 5.5]),
+            face(0.0, -0.5, [-0.5, 5.5], [-0.5, -0.5]),
         ];
         let layout = SonarLayout {
             name: "right".into(),
@@ -583,22 +575,7 @@ mod tests {
                 bearing_rad: -std::f64::consts::FRAC_PI_2,
             }],
         };
-        let readings: Vec<SonarReading> = truth
-            .iter()
-            .enumerate()
-            .map(|(k, p)| {
-                let at = p.pose.compose(&layout.sensors[0].robot_from_sensor());
-                let range = walls
-                    .iter()
-                    .filter_map(|w| w.expected_range([at.x, at.y], at.theta, 0.26, 0.05))
-                    .min_by(f64::total_cmp);
-                SonarReading {
-                    t_s: p.t_s,
-                    sensor: 0,
-                    range_m: range.map(|r| r + 0.004 * ((k * 7 % 5) as f64 - 2.0)),
-                }
-            })
-            .collect();
+        let readings = ranges_off_faces(&truth, &layout, &walls);
         let sonar = crate::fusion::SonarInput {
             readings: &readings,
             layout: &layout,
