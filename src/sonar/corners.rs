@@ -15,8 +15,11 @@
 //! jamb); one with the wall going on to both sides is dropped.
 
 use crate::sonar::grid::OccupancyMap;
-use crate::sonar::tangent::{cone_steps, LineVotes, ANGLE_STEP_DEG, DIST_STEP_M};
+use crate::sonar::tangent::{
+    cone_range, fast_atan2, steps_between, LineVotes, Strongest, ANGLE_STEP_DEG, DIST_STEP_M,
+};
 use crate::sonar::PlacedReading;
+use std::collections::HashMap;
 
 /// Tangent points farther than this from the candidate are ignored: 1.5 m.
 const SEARCH_RADIUS_M: f64 = 1.5;
@@ -50,33 +53,75 @@ pub struct LocalWall {
     pub votes: u32,
 }
 
-/// The tangent lines one reading votes for: `(normal in [0, pi), offset from centre, tangent
-/// point)` for each accumulator angle inside the cone whose tangent point lies within
-/// [`SEARCH_RADIUS_M`] of `centre`.
-fn tangents(
+/// Adds to `out` the tangent lines one reading votes for: for each accumulator angle inside the
+/// cone whose tangent point lies within [`SEARCH_RADIUS_M`] of `centre`, the line (normal in
+/// [0, pi), offset from the centre) and the point.
+fn push_tangents(
     r: &PlacedReading,
     half_cone_rad: f64,
     centre: (f64, f64),
-) -> impl Iterator<Item = (f64, f64, (f64, f64))> + '_ {
-    let step = ANGLE_STEP_DEG.to_radians();
+    out: &mut Vec<Tangent>,
+) {
     let (range, p) = (r.range_m.unwrap_or(f64::NAN), r.world_from_sensor);
-    let usable = range.is_finite() && range >= 0.0;
-    let steps = usable.then(|| cone_steps(p.theta, half_cone_rad));
-    steps.into_iter().flatten().filter_map(move |cs| {
-        let a = cs.k as f64 * step;
+    if !(range.is_finite() && range >= 0.0) {
+        return;
+    }
+    let step = ANGLE_STEP_DEG.to_radians();
+    for cs in steps_between(near_steps(r, range, half_cone_rad, centre)) {
         let (s, c) = (cs.sin, cs.cos);
         let t = (p.x + range * c, p.y + range * s);
-        if (t.0 - centre.0).hypot(t.1 - centre.1) > SEARCH_RADIUS_M {
-            return None;
+        let (dx, dy) = (t.0 - centre.0, t.1 - centre.1);
+        if dx * dx + dy * dy > SEARCH_RADIUS_M * SEARCH_RADIUS_M {
+            continue;
         }
         let mut offset = c * (t.0 - centre.0) + s * (t.1 - centre.1);
-        let mut normal = a.rem_euclid(std::f64::consts::TAU);
+        let mut normal = cs.wrapped;
         if normal >= std::f64::consts::PI {
             normal -= std::f64::consts::PI;
             offset = -offset;
         }
-        Some((normal, offset, t))
-    })
+        out.push(Tangent {
+            normal,
+            // `round` (the normal lies within rounding of a whole step, far from a half).
+            cell: (normal / step + 0.5) as usize,
+            offset,
+            point: t,
+        });
+    }
+}
+
+/// The steps of a reading's cone ([`cone_range`]) whose arc points may lie within
+/// [`SEARCH_RADIUS_M`] of `centre` (all that do, and a step more each side): by the law of
+/// cosines, the point at direction `a` does when `cos(a - phi) >= (D^2 + r^2 - R^2) / (2 r D)`,
+/// `phi` and `D` the direction and distance from the sensor to the centre. Only those are worth
+/// the exact test.
+fn near_steps(
+    r: &PlacedReading,
+    range: f64,
+    half_cone_rad: f64,
+    centre: (f64, f64),
+) -> std::ops::RangeInclusive<i64> {
+    let step = ANGLE_STEP_DEG.to_radians();
+    let p = r.world_from_sensor;
+    let cone = cone_range(p.theta, half_cone_rad);
+    let (dx, dy) = (centre.0 - p.x, centre.1 - p.y);
+    let d = dx.hypot(dy);
+    if !(range * d > 1e-9) {
+        return cone;
+    }
+    let q = (d * d + range * range - SEARCH_RADIUS_M * SEARCH_RADIUS_M) / (2.0 * range * d);
+    let half_window = q.clamp(-1.0, 1.0).acos();
+    // Past half a turn between the cone and the window, the window would wrap: take the cone.
+    if half_window + half_cone_rad + 2.0 * step >= std::f64::consts::PI {
+        return cone;
+    }
+    // The centre's direction seen from the beam's axis (to within 2e-5 rad: the step more each
+    // side covers it).
+    let (sin, cos) = p.theta.sin_cos();
+    let phi = p.theta + fast_atan2(cos * dy - sin * dx, cos * dx + sin * dy);
+    let lo = ((phi - half_window) / step).floor() as i64 - 1;
+    let hi = ((phi + half_window) / step).ceil() as i64 + 1;
+    (*cone.start()).max(lo)..=(*cone.end()).min(hi)
 }
 
 /// One reading's vote for a wall near the centre: the tangent line (normal in [0, pi), offset
@@ -84,26 +129,114 @@ fn tangents(
 #[derive(Debug, Clone, Copy)]
 struct Tangent {
     normal: f64,
+    /// The normal's nearest whole step (180 for a normal just short of pi).
+    cell: usize,
     offset: f64,
     point: (f64, f64),
 }
 
-/// The tangents of all readings within [`SEARCH_RADIUS_M`] of `centre`.
-fn tangents_near(
-    readings: &[PlacedReading],
+/// Side of an [`Arcs`] bucket: 1 m.
+const BUCKET_M: f64 = 1.0;
+
+/// The bucket of a point.
+fn bucket_of(p: (f64, f64)) -> (i64, i64) {
+    (
+        (p.0 / BUCKET_M).floor() as i64,
+        (p.1 / BUCKET_M).floor() as i64,
+    )
+}
+
+/// A run's readings with their arcs bucketed by where they lie, so that the readings whose arcs
+/// pass near a point are found without looking at the whole run: placing each Hough peak once
+/// read every reading, and a map's time grew with its peaks times its readings (44 µs a reading
+/// on a real building's log).
+#[derive(Debug, Clone)]
+pub struct Arcs<'a> {
+    readings: &'a [PlacedReading],
     half_cone_rad: f64,
-    centre: (f64, f64),
-) -> Vec<Tangent> {
-    readings
-        .iter()
-        .filter(|r| may_touch(r, centre))
-        .flat_map(|r| tangents(r, half_cone_rad, centre))
-        .map(|(normal, offset, point)| Tangent {
-            normal,
-            offset,
-            point,
-        })
-        .collect()
+    /// Indices of the readings whose arc's middle (the sensor plus the range along its axis)
+    /// lies in each bucket, ascending.
+    buckets: HashMap<(i64, i64), Vec<usize>>,
+    /// The farthest any point of an arc lies from the arc's middle, metres.
+    reach_m: f64,
+}
+
+impl<'a> Arcs<'a> {
+    /// Buckets the arcs of `readings` (cones of half-width `half_cone_rad`). Readings without a
+    /// usable echo touch nothing and are left out.
+    pub fn new(readings: &'a [PlacedReading], half_cone_rad: f64) -> Self {
+        // A point of the arc at angle a off the axis lies 2 r sin(a / 2) from its middle.
+        let chord = 2.0 * (0.5 * half_cone_rad.clamp(0.0, std::f64::consts::PI)).sin();
+        let mut buckets: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+        let mut reach_m = 0.0f64;
+        for (i, r) in readings.iter().enumerate() {
+            let Some(range) = r.range_m.filter(|x| x.is_finite() && *x >= 0.0) else {
+                continue;
+            };
+            let p = r.world_from_sensor;
+            let middle = (p.x + range * p.theta.cos(), p.y + range * p.theta.sin());
+            if middle.0.is_finite() && middle.1.is_finite() {
+                reach_m = reach_m.max(chord * range);
+                buckets.entry(bucket_of(middle)).or_default().push(i);
+            }
+        }
+        Self {
+            readings,
+            half_cone_rad,
+            buckets,
+            reach_m,
+        }
+    }
+
+    /// The readings.
+    pub fn readings(&self) -> &'a [PlacedReading] {
+        self.readings
+    }
+
+    /// Indices, ascending, of the readings among the first `upto` whose arcs may come within
+    /// [`SEARCH_RADIUS_M`] of `centre` (all that do, and some that do not).
+    fn near(&self, centre: (f64, f64), upto: usize) -> Vec<usize> {
+        let radius = SEARCH_RADIUS_M + self.reach_m;
+        let lo = bucket_of((centre.0 - radius, centre.1 - radius));
+        let hi = bucket_of((centre.0 + radius, centre.1 + radius));
+        let inside = |b: &(i64, i64)| (lo.0..=hi.0).contains(&b.0) && (lo.1..=hi.1).contains(&b.1);
+        let span = (hi.0.saturating_sub(lo.0) as u64 + 1)
+            .saturating_mul(hi.1.saturating_sub(lo.1) as u64 + 1);
+        let mut found = Vec::new();
+        let mut take = |ids: &Vec<usize>| {
+            found.extend_from_slice(&ids[..ids.partition_point(|&i| i < upto)]);
+        };
+        if span > self.buckets.len() as u64 {
+            // Far-reaching arcs (a long range): fewer buckets held than the box spans.
+            self.buckets
+                .iter()
+                .filter(|(b, _)| inside(b))
+                .for_each(|(_, ids)| take(ids));
+        } else {
+            for bx in lo.0..=hi.0 {
+                for by in lo.1..=hi.1 {
+                    if let Some(ids) = self.buckets.get(&(bx, by)) {
+                        take(ids);
+                    }
+                }
+            }
+        }
+        found.sort_unstable();
+        found
+    }
+
+    /// The tangents of the readings among the first `upto` within [`SEARCH_RADIUS_M`] of
+    /// `centre`, in the readings' order.
+    fn tangents_near(&self, centre: (f64, f64), upto: usize) -> Vec<Tangent> {
+        let mut out = Vec::new();
+        for i in self.near(centre, upto) {
+            let r = &self.readings[i];
+            if may_touch(r, centre) {
+                push_tangents(r, self.half_cone_rad, centre, &mut out);
+            }
+        }
+        out
+    }
 }
 
 /// Whether a reading's arc can reach within [`SEARCH_RADIUS_M`] of `centre`.
@@ -115,39 +248,84 @@ fn may_touch(r: &PlacedReading, centre: (f64, f64)) -> bool {
 }
 
 /// Walls near `centre`, strongest first, from the readings' tangent lines.
-pub fn local_walls(
-    readings: &[PlacedReading],
-    half_cone_rad: f64,
-    centre: (f64, f64),
-) -> Vec<LocalWall> {
-    walls_from(&tangents_near(readings, half_cone_rad, centre))
+pub fn local_walls(arcs: &Arcs<'_>, centre: (f64, f64)) -> Vec<LocalWall> {
+    walls_from(&arcs.tangents_near(centre, arcs.readings.len()))
+}
+
+/// The line grid of [`walls_from`] with the offsets summed per cell and the cells voted for, kept
+/// from one call to the next on each thread (a map places a few thousand peaks; a fresh grid
+/// each time was a tenth of its time).
+struct LocalGrid {
+    votes: LineVotes,
+    sum_offset: Vec<f64>,
+    touched: Vec<usize>,
+}
+
+impl LocalGrid {
+    fn new() -> Self {
+        let n_angle = (180.0 / ANGLE_STEP_DEG).round() as usize;
+        // Cells symmetric about zero offset, so flipping a line's side flips its cell.
+        let n_dist = (2.0 * (SEARCH_RADIUS_M + DIST_STEP_M) / DIST_STEP_M).ceil() as usize;
+        let reach = 0.5 * n_dist as f64 * DIST_STEP_M;
+        Self {
+            votes: LineVotes::new(n_angle, n_dist, reach),
+            sum_offset: vec![0.0; n_angle * n_dist],
+            touched: Vec::new(),
+        }
+    }
+
+    fn clear(&mut self) {
+        for &i in &self.touched {
+            self.votes.counts[i] = 0;
+            self.sum_offset[i] = 0.0;
+        }
+        self.touched.clear();
+    }
+}
+
+thread_local! {
+    static LOCAL_GRID: std::cell::RefCell<LocalGrid> = std::cell::RefCell::new(LocalGrid::new());
 }
 
 /// Walls, strongest first, from tangents found around one centre.
 fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
-    let n_angle = (180.0 / ANGLE_STEP_DEG).round() as usize;
-    // Cells symmetric about zero offset, so flipping a line's side flips its cell.
-    let n_dist = (2.0 * (SEARCH_RADIUS_M + DIST_STEP_M) / DIST_STEP_M).ceil() as usize;
-    let reach = 0.5 * n_dist as f64 * DIST_STEP_M;
-    let mut grid = LineVotes::new(n_angle, n_dist, reach);
-    let mut sum_offset = vec![0f64; n_angle * n_dist];
+    LOCAL_GRID.with(|grid| {
+        let mut grid = grid.borrow_mut();
+        let walls = walls_on(&mut grid, tangents);
+        grid.clear();
+        walls
+    })
+}
+
+/// [`walls_from`] on an empty grid.
+fn walls_on(local: &mut LocalGrid, tangents: &[Tangent]) -> Vec<LocalWall> {
+    let LocalGrid {
+        votes: grid,
+        sum_offset,
+        touched,
+    } = local;
+    let (n_angle, n_dist, reach) = (grid.n_angle, grid.n_dist, grid.reach_m);
     let step = ANGLE_STEP_DEG.to_radians();
     for t in tangents {
-        let k = (t.normal / step).round() as usize;
         // A normal that rounds to 180 degrees is the 0 degree cell, seen from the other side.
-        let (ia, offset) = if k >= n_angle {
-            (k - n_angle, -t.offset)
+        let (ia, offset) = if t.cell >= n_angle {
+            (t.cell - n_angle, -t.offset)
         } else {
-            (k, t.offset)
+            (t.cell, t.offset)
         };
         let id = (((offset + reach) / DIST_STEP_M) as usize).min(n_dist - 1);
-        grid.counts[ia * n_dist + id] += 1;
-        sum_offset[ia * n_dist + id] += offset;
+        let i = ia * n_dist + id;
+        if grid.counts[i] == 0 {
+            touched.push(i);
+        }
+        grid.counts[i] += 1;
+        sum_offset[i] += offset;
     }
     let mut walls: Vec<LocalWall> = Vec::new();
+    let mut strongest = Strongest::of_cells(grid, touched);
     while walls.len() < MAX_WALLS {
         // The most votes, the first cell with them on a tie.
-        let Some((best, v)) = grid.strongest() else {
+        let Some((best, v)) = strongest.next(&grid) else {
             break;
         };
         if v < MIN_WALL_VOTES {
@@ -200,9 +378,15 @@ fn walls_from(tangents: &[Tangent]) -> Vec<LocalWall> {
             if da > suppress && std::f64::consts::PI - da > suppress {
                 continue;
             }
-            for id in 0..n_dist {
-                if same_wall(a, grid.offset_m(id), normal, offset) {
-                    grid.counts[ia * n_dist + id] = 0;
+            // The offsets within reach of the wall's either way round, a cell more each side.
+            for centre in [offset, -offset] {
+                let cell = |o: f64| (o + reach) / DIST_STEP_M - 0.5;
+                let lo = (cell(centre - SUPPRESS_DIST_M).floor() as i64 - 1).max(0) as usize;
+                let hi = (cell(centre + SUPPRESS_DIST_M).ceil() as i64 + 1).min(n_dist as i64 - 1);
+                for id in lo..(hi + 1).max(0) as usize {
+                    if same_wall(a, grid.offset_m(id), normal, offset) {
+                        grid.counts[ia * n_dist + id] = 0;
+                    }
                 }
             }
         }
@@ -288,13 +472,15 @@ const ON_WALL_M: f64 = 0.15;
 /// walls that meet at 60 degrees or more, within 1 m of the peak, each seen within 1 m of the
 /// crossing and at least one ending there (seen no more than 15 cm past it), with an occupied
 /// grid cell within one cell of the crossing.
+/// Only the first `upto` readings of `arcs` are used (an online window sees the readings up to
+/// its end).
 pub fn place_peak(
-    readings: &[PlacedReading],
-    half_cone_rad: f64,
+    arcs: &Arcs<'_>,
+    upto: usize,
     centre: (f64, f64),
     map: &OccupancyMap,
 ) -> PeakPlace {
-    let tangents = tangents_near(readings, half_cone_rad, centre);
+    let tangents = arcs.tangents_near(centre, upto);
     let walls = walls_from(&tangents);
     if let Some((x, y)) = corner(&tangents, centre, map, &walls) {
         return PeakPlace::Corner(x, y);
@@ -459,13 +645,14 @@ mod tests {
         let mut grid = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 5.0).unwrap();
         grid.insert_all(&readings);
         let map = grid.map();
-        let place = place_peak(&readings, 15f64.to_radians(), (1.45, 1.98), &map);
+        let arcs = Arcs::new(&readings, 15f64.to_radians());
+        let place = place_peak(&arcs, readings.len(), (1.45, 1.98), &map);
         let PeakPlace::Corner(x, y) = place else {
             panic!("{place:?}")
         };
         assert!((x - 2.0).hypot(y - 2.0) < 0.03, "({x}, {y})");
         // A peak in the middle of the wall y = 2 is no feature.
-        let place = place_peak(&readings, 15f64.to_radians(), (0.6, 2.0), &map);
+        let place = place_peak(&arcs, readings.len(), (0.6, 2.0), &map);
         assert!(
             matches!(place, PeakPlace::MidWall | PeakPlace::Unknown),
             "{place:?}"
@@ -475,7 +662,7 @@ mod tests {
     #[test]
     fn a_wall_is_found_where_the_arcs_touch_it() {
         let readings = along_wall(2.0, 0.6, 0..40);
-        let walls = local_walls(&readings, 15f64.to_radians(), (1.0, 1.8));
+        let walls = local_walls(&Arcs::new(&readings, 15f64.to_radians()), (1.0, 1.8));
         assert!(!walls.is_empty());
         let w = walls[0];
         assert!(

@@ -237,6 +237,23 @@ impl GridGeometry {
         let (Some(lo), Some(hi)) = (lo, hi) else {
             return;
         };
+        // Whether a cell's centre lies outside the cone: by the cosine of its angle off the axis,
+        // and by the angle itself only when that cosine is within rounding of the cone's edge
+        // (so the cells are exactly those the angle gives; the arctangent per cell was a third
+        // of a map's grid time).
+        let (sin, cos) = p.theta.sin_cos();
+        let edge = half_cone_rad.cos();
+        let outside = |cx: f64, cy: f64, d: f64| {
+            if half_cone_rad >= std::f64::consts::PI {
+                return false;
+            }
+            let off_axis = (cos * cx + sin * cy) / d;
+            if (off_axis - edge).abs() > 1e-9 {
+                off_axis < edge
+            } else {
+                wrap_angle(cy.atan2(cx) - p.theta).abs() > half_cone_rad
+            }
+        };
         for row in lo.1..=hi.1 {
             let cy = self.origin_m[1] + (row as f64 + 0.5) * self.resolution_m - p.y;
             for col in lo.0..=hi.0 {
@@ -246,7 +263,7 @@ impl GridGeometry {
                     continue;
                 }
                 // Cells the sensor sits in are always inside the beam.
-                if d > band && wrap_angle(cy.atan2(cx) - p.theta).abs() > half_cone_rad {
+                if d > band && outside(cx, cy, d) {
                     continue;
                 }
                 let idx = row * self.width + col;

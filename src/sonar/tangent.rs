@@ -10,6 +10,9 @@
 //! sides of a line are one (normals in [0, π)), over a map a wall's face keeps the side it was
 //! seen from (normals all round).
 
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
 /// Angular cell of the accumulators: 1 degree (the cone is 30 degrees, a wall's direction is
 /// then fitted to the ranges).
 pub const ANGLE_STEP_DEG: f64 = 1.0;
@@ -26,18 +29,79 @@ pub struct ConeStep {
     pub sin: f64,
     /// `cos a`.
     pub cos: f64,
+    /// `a` in [0, 2 pi).
+    pub wrapped: f64,
 }
 
 /// The accumulator's directions inside the cone of half-width `half_cone_rad` around `beam_rad`,
 /// in increasing order.
 pub fn cone_steps(beam_rad: f64, half_cone_rad: f64) -> impl Iterator<Item = ConeStep> {
+    steps_between(cone_range(beam_rad, half_cone_rad))
+}
+
+/// The indices `k` of [`cone_steps`].
+pub fn cone_range(beam_rad: f64, half_cone_rad: f64) -> std::ops::RangeInclusive<i64> {
     let step = ANGLE_STEP_DEG.to_radians();
     let lo = ((beam_rad - half_cone_rad) / step).ceil() as i64;
     let hi = ((beam_rad + half_cone_rad) / step).floor() as i64;
-    (lo..=hi).map(move |k| {
-        let (sin, cos) = (k as f64 * step).sin_cos();
-        ConeStep { k, sin, cos }
+    lo..=hi
+}
+
+/// Steps whose sines and cosines are kept in a table: three turns either way (a beam's angle
+/// comes from a trajectory's heading, which need not be wrapped).
+const TABLE_STEPS: i64 = 3 * 360;
+
+/// The steps `ks` with their sines and cosines: looked up for the usual angles (each was
+/// computed as `(k * step).sin_cos()`, so the values are the same), computed beyond.
+pub fn steps_between(ks: std::ops::RangeInclusive<i64>) -> impl Iterator<Item = ConeStep> {
+    static TABLE: std::sync::OnceLock<Vec<ConeStep>> = std::sync::OnceLock::new();
+    let step = ANGLE_STEP_DEG.to_radians();
+    let at = move |k: i64| {
+        let a = k as f64 * step;
+        let (sin, cos) = a.sin_cos();
+        let wrapped = a.rem_euclid(std::f64::consts::TAU);
+        ConeStep {
+            k,
+            sin,
+            cos,
+            wrapped,
+        }
+    };
+    let table = TABLE.get_or_init(|| (-TABLE_STEPS..=TABLE_STEPS).map(at).collect());
+    ks.map(move |k| match usize::try_from(k + TABLE_STEPS) {
+        Ok(i) if i < table.len() => table[i],
+        _ => at(k),
     })
+}
+
+/// The largest error of [`fast_atan2`], radians (its polynomial's is 1e-5; this leaves room).
+pub const FAST_ATAN2_ERROR: f64 = 2e-5;
+
+/// `y.atan2(x)` to within [`FAST_ATAN2_ERROR`]: a polynomial in the ratio of the smaller
+/// coordinate to the larger, the octant restored after. Abramowitz and Stegun 4.4.49 (error
+/// 1e-5).
+pub fn fast_atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    if ax == 0.0 && ay == 0.0 {
+        return 0.0;
+    }
+    let t = ax.min(ay) / ax.max(ay);
+    let t2 = t * t;
+    let mut a = t
+        * (0.999_866_0
+            + t2 * (-0.330_299_5 + t2 * (0.180_141_0 + t2 * (-0.085_133_0 + t2 * 0.020_835_1))));
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    if y < 0.0 {
+        -a
+    } else {
+        a
+    }
 }
 
 /// A grid of votes for lines: `n_angle` cells of [`ANGLE_STEP_DEG`] of normal direction by
@@ -80,6 +144,51 @@ impl LineVotes {
     pub fn strongest(&self) -> Option<(usize, u32)> {
         let &v = self.counts.iter().max()?;
         Some((self.counts.iter().position(|&x| x == v).unwrap_or(0), v))
+    }
+}
+
+/// The strongest cell of a [`LineVotes`] grid whose counts only go down, found again after each
+/// change without a look at the whole grid: a heap of the cells' counts, a cell's entry renewed
+/// when it is found stale. Searching the whole grid again for each wall took a building's walls 0.1 s.
+pub struct Strongest(BinaryHeap<(u32, Reverse<usize>)>);
+
+impl Strongest {
+    /// The cells with votes of `votes`.
+    pub fn new(votes: &LineVotes) -> Self {
+        let cells = votes.counts.iter().enumerate();
+        Self(
+            cells
+                .filter(|(_, &c)| c > 0)
+                .map(|(i, &c)| (c, Reverse(i)))
+                .collect(),
+        )
+    }
+
+    /// The cells `cells` of `votes` (those with votes among them).
+    pub fn of_cells(votes: &LineVotes, cells: &[usize]) -> Self {
+        let counts = cells.iter().map(|&i| (votes.counts[i], i));
+        Self(
+            counts
+                .filter(|&(c, _)| c > 0)
+                .map(|(c, i)| (c, Reverse(i)))
+                .collect(),
+        )
+    }
+
+    /// The cell with the most votes now (the first of several, as [`LineVotes::strongest`]),
+    /// `None` when every count is zero. Counts may only have gone down since the last call.
+    pub fn next(&mut self, votes: &LineVotes) -> Option<(usize, u32)> {
+        while let Some(&(count, Reverse(i))) = self.0.peek() {
+            let now = votes.counts[i];
+            if now == count {
+                return Some((i, count));
+            }
+            self.0.pop();
+            if now > 0 {
+                self.0.push((now, Reverse(i)));
+            }
+        }
+        None
     }
 }
 

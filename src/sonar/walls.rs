@@ -11,7 +11,7 @@
 //! to its readings by least squares.
 
 use crate::sonar::grid::OccupancyMap;
-use crate::sonar::tangent::{cone_steps, LineVotes, ANGLE_STEP_DEG, DIST_STEP_M};
+use crate::sonar::tangent::{cone_steps, LineVotes, Strongest, ANGLE_STEP_DEG, DIST_STEP_M};
 use crate::sonar::PlacedReading;
 use serde::Serialize;
 use std::f64::consts::TAU;
@@ -215,10 +215,12 @@ pub fn map_walls(
     for e in &echoes {
         vote(&mut votes, e, half_cone_rad, 1);
     }
+    let mut strongest = Strongest::new(&votes);
+    let by_beam = BeamBins::new(&echoes);
     let mut used = vec![false; echoes.len()];
     let mut walls = Vec::new();
     for _ in 0..MAX_WALLS {
-        let Some((best, count)) = votes.strongest() else {
+        let Some((best, count)) = strongest.next(&votes) else {
             break;
         };
         if (count as usize) < MIN_READINGS {
@@ -228,7 +230,9 @@ pub fn map_walls(
         let normal = votes.angle_rad(best / votes.n_dist);
         let offset = votes.offset_m(best % votes.n_dist);
         // Readings whose cone holds the normal (within a cell) and whose range fits the line.
-        let support: Vec<usize> = (0..echoes.len())
+        let support: Vec<usize> = by_beam
+            .facing(normal, half_cone_rad + step)
+            .into_iter()
             .filter(|&i| !used[i] && supports(&echoes[i], normal, offset, half_cone_rad + step))
             .collect();
         // Whatever the outcome, these readings have voted: take their votes back, and the cell's
@@ -261,8 +265,43 @@ pub fn map_walls(
     kept
 }
 
-/// The part of a face's length that lies on occupied cells (within half a cell across it) or off
-/// the grid.
+/// Echoes binned by their beam's direction, one bin per accumulator angle: a wall's support is
+/// looked for among the echoes that can face it.
+struct BeamBins(Vec<Vec<usize>>);
+
+impl BeamBins {
+    fn new(echoes: &[Echo]) -> Self {
+        let n = (360.0 / ANGLE_STEP_DEG).round() as usize;
+        let mut bins = vec![Vec::new(); n];
+        for (i, e) in echoes.iter().enumerate() {
+            bins[Self::bin(e.beam, n)].push(i);
+        }
+        Self(bins)
+    }
+
+    fn bin(angle_rad: f64, n: usize) -> usize {
+        ((angle_rad.rem_euclid(TAU) / TAU * n as f64) as usize).min(n - 1)
+    }
+
+    /// Indices, ascending, of the echoes whose beam may lie within `half_rad` of looking against
+    /// `normal` (all that do, and some that do not).
+    fn facing(&self, normal: f64, half_rad: f64) -> Vec<usize> {
+        let n = self.0.len();
+        let axis = normal + std::f64::consts::PI;
+        let bins = (half_rad / TAU * n as f64).ceil() as usize + 1;
+        let mut found: Vec<usize> = if 2 * bins + 1 >= n {
+            (0..n).flat_map(|b| self.0[b].iter().copied()).collect()
+        } else {
+            let first = Self::bin(axis, n) + n - bins;
+            (first..=first + 2 * bins)
+                .flat_map(|b| self.0[b % n].iter().copied())
+                .collect()
+        };
+        found.sort_unstable();
+        found
+    }
+}
+
 /// The median sensor position (each coordinate's), `None` without echoes.
 fn median_position(echoes: &[Echo]) -> Option<[f64; 2]> {
     let median = |k: usize| {
@@ -274,6 +313,8 @@ fn median_position(echoes: &[Echo]) -> Option<[f64; 2]> {
     (!echoes.is_empty()).then(|| [median(0), median(1)])
 }
 
+/// The part of a face's length that lies on occupied cells (within half a cell across it) or off
+/// the grid.
 fn on_grid(w: &WallSegment, map: &OccupancyMap) -> f64 {
     let g = &map.geometry;
     let length = (w.to_m[0] - w.from_m[0]).hypot(w.to_m[1] - w.from_m[1]);
