@@ -106,7 +106,7 @@ fn near_steps(
     let cone = cone_range(p.theta, half_cone_rad);
     let (dx, dy) = (centre.0 - p.x, centre.1 - p.y);
     let d = dx.hypot(dy);
-    if !(range * d > 1e-9) {
+    if (range * d <= 1e-9) || (range * d).is_nan() {
         return cone;
     }
     let q = (d * d + range * range - SEARCH_RADIUS_M * SEARCH_RADIUS_M) / (2.0 * range * d);
@@ -325,7 +325,7 @@ fn walls_on(local: &mut LocalGrid, tangents: &[Tangent]) -> Vec<LocalWall> {
     let mut strongest = Strongest::of_cells(grid, touched);
     while walls.len() < MAX_WALLS {
         // The most votes, the first cell with them on a tie.
-        let Some((best, v)) = strongest.next(&grid) else {
+        let Some((best, v)) = strongest.next(grid) else {
             break;
         };
         if v < MIN_WALL_VOTES {

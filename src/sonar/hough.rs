@@ -581,7 +581,7 @@ mod tests {
             let r = 0.01 + (k % 97) as f64;
             let (y, x) = (r * a.sin(), r * a.cos());
             let e = crate::geometry::wrap_angle(fast_atan2(y, x) - y.atan2(x));
-            assert!(e.abs() < FAST_ATAN2_ERROR / 2.0, "{x} {y}: {e}");
+            assert!(e.abs() < FAST_ATAN2_ERROR, "{x} {y}: {e}");
         }
         let acc = Accumulator::new(&HoughConfig::default());
         for k in 0..20_000 {
