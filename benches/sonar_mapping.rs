@@ -1,5 +1,9 @@
 //! Speed of the sonar half: grid insertion and Hough voting per reading at 20 cm and 5 cm cells,
-//! and `map` on a simulated 30-minute museum run against the run's own duration.
+//! `map` on a simulated 30-minute museum run against the run's own duration, and how `map`'s time
+//! grows with the readings (issue 31, item 5): museum runs of 5, 15, 30 and 60 minutes and the
+//! two real building logs of `../shared/data/radish` (as sonar, ground-truth poses), each against
+//! the counting grid alone on the same readings (the reference: what inserting the readings
+//! costs). Criterion's throughput is readings per second; the per-reading figures are printed.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use std::hint::black_box;
@@ -127,5 +131,83 @@ fn whole_run(c: &mut Criterion) {
     );
 }
 
-criterion_group!(benches, per_reading, whole_run);
+/// A real CARMEN log of `../shared/data/radish`, imported as frontal sonar; `None` when the data
+/// is not there.
+fn radish_run(log: &str, dir: &Path) -> Option<stereotag::dataset::RunDataset> {
+    let path = Path::new("../shared/data/radish").join(log);
+    if !path.exists() {
+        println!("{} not found: the real logs are left out", path.display());
+        return None;
+    }
+    let out = dir.join(log);
+    let request = stereotag::workflow::import::CarmenRequest {
+        carmen: &path,
+        out: &out,
+        as_sonar: Some(SonarLayout::frontal5()),
+        force: true,
+    };
+    stereotag::workflow::import::import_carmen(&request).expect("the log imports");
+    Some(stereotag::io::load_run(&out).expect("the imported run loads"))
+}
+
+fn growth(c: &mut Criterion) {
+    let loaded =
+        stereotag::io::load_world(Path::new("samples/museum/world.yaml")).expect("museum sample");
+    let mut runs = Vec::new();
+    for minutes in [5, 15, 30, 60] {
+        let mut config = loaded.simulation.clone();
+        config.exploration.duration_s = minutes as f64 * 60.0;
+        let run = stereotag::sim::simulate(&loaded.world, &config, |_| {})
+            .expect("simulation")
+            .run;
+        let mapping = loaded.mapping.clone().expect("the museum sets its mapping");
+        runs.push((format!("museum {minutes} min"), run, mapping));
+    }
+    let tmp = tempfile::tempdir().expect("temporary directory");
+    for log in ["freiburg-079-corrected.log.gz", "aces-corrected.log.gz"] {
+        if let Some(run) = radish_run(log, tmp.path()) {
+            let mapping = run.meta.mapping.clone().unwrap_or_default();
+            runs.push((log.replace("-corrected.log.gz", ""), run, mapping));
+        }
+    }
+    let mut group = c.benchmark_group("map_growth");
+    group.sample_size(10);
+    for (name, run, mapping) in &runs {
+        let truth = run
+            .trajectory(PoseSource::GroundTruth)
+            .expect("the run has ground truth");
+        let readings = run.sonar.len();
+        group.throughput(criterion::Throughput::Elements(readings as u64));
+        group.bench_function(BenchmarkId::new("map", name), |b| {
+            b.iter(|| map_trajectory(&run.sonar_log(), truth, mapping).unwrap())
+        });
+        group.bench_function(
+            BenchmarkId::new("counting grid alone (reference)", name),
+            |b| {
+                b.iter(|| {
+                    stereotag::sonar::map::counting_map_along(&run.sonar_log(), truth, mapping)
+                        .unwrap()
+                })
+            },
+        );
+    }
+    group.finish();
+    for (name, run, mapping) in &runs {
+        let truth = run.trajectory(PoseSource::GroundTruth).unwrap();
+        let n = 5;
+        let start = std::time::Instant::now();
+        for _ in 0..n {
+            black_box(map_trajectory(&run.sonar_log(), truth, mapping).unwrap());
+        }
+        let secs = start.elapsed().as_secs_f64() / n as f64;
+        println!(
+            "{name}: {} readings, map {:.1} ms = {:.2} us a reading",
+            run.sonar.len(),
+            secs * 1e3,
+            secs * 1e6 / run.sonar.len() as f64
+        );
+    }
+}
+
+criterion_group!(benches, per_reading, whole_run, growth);
 criterion_main!(benches);
