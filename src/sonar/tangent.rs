@@ -74,7 +74,8 @@ pub fn steps_between(ks: std::ops::RangeInclusive<i64>) -> impl Iterator<Item = 
     })
 }
 
-/// The largest error of [`fast_atan2`], radians (its polynomial's is 1.2e-5 measured over a turn; this leaves room).
+/// The largest error of [`fast_atan2`], radians (its polynomial's is 1.2e-5 measured over a
+/// turn; this leaves room).
 pub const FAST_ATAN2_ERROR: f64 = 2e-5;
 
 /// `y.atan2(x)` to within [`FAST_ATAN2_ERROR`]: a polynomial in the ratio of the smaller

@@ -230,11 +230,9 @@ pub fn map_walls(
         let normal = votes.angle_rad(best / votes.n_dist);
         let offset = votes.offset_m(best % votes.n_dist);
         // Readings whose cone holds the normal (within a cell) and whose range fits the line.
-        let support: Vec<usize> = by_beam
-            .facing(normal, half_cone_rad + step)
-            .into_iter()
-            .filter(|&i| !used[i] && supports(&echoes[i], normal, offset, half_cone_rad + step))
-            .collect();
+        let support = by_beam.facing(normal, half_cone_rad + step, |i| {
+            !used[i] && supports(&echoes[i], normal, offset, half_cone_rad + step)
+        });
         // Whatever the outcome, these readings have voted: take their votes back, and the cell's
         // own count, so the search moves on.
         for &i in &support {
@@ -283,20 +281,22 @@ impl BeamBins {
         ((angle_rad.rem_euclid(TAU) / TAU * n as f64) as usize).min(n - 1)
     }
 
-    /// Indices, ascending, of the echoes whose beam may lie within `half_rad` of looking against
-    /// `normal` (all that do, and some that do not).
-    fn facing(&self, normal: f64, half_rad: f64) -> Vec<usize> {
+    /// Indices, ascending, of the echoes that pass `keep` among those whose beam may lie within
+    /// `half_rad` of looking against `normal` (all that do, and some that do not).
+    fn facing(&self, normal: f64, half_rad: f64, keep: impl Fn(usize) -> bool) -> Vec<usize> {
         let n = self.0.len();
         let axis = normal + std::f64::consts::PI;
         let bins = (half_rad / TAU * n as f64).ceil() as usize + 1;
-        let mut found: Vec<usize> = if 2 * bins + 1 >= n {
-            (0..n).flat_map(|b| self.0[b].iter().copied()).collect()
+        let range = if 2 * bins + 1 >= n {
+            0..n
         } else {
             let first = Self::bin(axis, n) + n - bins;
-            (first..=first + 2 * bins)
-                .flat_map(|b| self.0[b % n].iter().copied())
-                .collect()
+            first..first + 2 * bins + 1
         };
+        let mut found: Vec<usize> = range
+            .flat_map(|b| self.0[b % n].iter().copied())
+            .filter(|&i| keep(i))
+            .collect();
         found.sort_unstable();
         found
     }

@@ -106,6 +106,7 @@ pub fn map_and_score(
         "grid_log_odds.us_per_reading".into(),
         per_reading_us("grid_log_odds"),
     );
+    metrics.insert("total.us_per_reading".into(), per_reading_us("total"));
     metrics.insert("readings".into(), map.readings as f64);
     metrics.insert("echoes".into(), map.echoes as f64);
     metrics.insert("echoes.off_grid".into(), map.echoes_off_grid as f64);
