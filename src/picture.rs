@@ -75,6 +75,11 @@ pub struct Overlay<'a> {
     pub marks: Vec<Mark>,
     /// Legend entries of the marks: (text, colour).
     pub mark_legend: Vec<(&'a str, [u8; 3])>,
+    /// A colour for each map cell (row-major) drawn instead of its occupancy, `None` to keep
+    /// it; empty: none.
+    pub cells: Vec<Option<[u8; 3]>>,
+    /// Legend entries of the cell colours.
+    pub cell_legend: Vec<(&'a str, [u8; 3])>,
 }
 
 /// An RGB image as an embedded-graphics drawing surface.
@@ -421,6 +426,7 @@ pub fn map_picture(map: &OccupancyMap, title: &str, overlay: &Overlay<'_>) -> Rg
     let unknown = rgb(UNKNOWN);
     let mut legend = vec![("free", PAPER), ("occupied", INK), ("unknown", unknown)];
     legend.extend(overlay.paths.iter().map(|p| (p.label, rgb(p.colour))));
+    legend.extend(overlay.cell_legend.iter().map(|(t, c)| (*t, rgb(*c))));
     legend.extend(overlay.mark_legend.iter().map(|(t, c)| (*t, rgb(*c))));
     let mut plot = Plot::new(lo, hi, [scale, scale], title, &legend, "y (m)");
     let (lo, hi) = (plot.lo, plot.hi);
@@ -434,11 +440,11 @@ pub fn map_picture(map: &OccupancyMap, title: &str, overlay: &Overlay<'_>) -> Rg
             continue;
         }
         let v = (255.0 * (1.0 - occupancy.clamp(0.0, 1.0))).round() as u8;
-        plot.fill(
-            [x - half, x + half],
-            [y - half, y + half],
-            Rgb888::new(v, v, v),
-        );
+        let colour = match overlay.cells.get(i).copied().flatten() {
+            Some(c) => rgb(c),
+            None => Rgb888::new(v, v, v),
+        };
+        plot.fill([x - half, x + half], [y - half, y + half], colour);
     }
     for path in &overlay.paths {
         let points = distinct_pixels(path.points.iter().map(|&p| plot.px(p)));

@@ -304,6 +304,23 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
             );
         }
     }
+    // `plan` on the survey reads its corrected map, corners and walls, all in one frame, and
+    // finds nothing to warn about.
+    let plan_dir = dir.path().join("plan");
+    plan(&out, &plan_dir, None, false);
+    let planned: Value =
+        serde_json::from_str(&std::fs::read_to_string(plan_dir.join("plan.json")).unwrap())
+            .unwrap();
+    let files = &planned["map_files"];
+    assert_eq!(files["corrected"], true, "{files}");
+    for (key, name) in [
+        ("map", "map_corrected.yaml"),
+        ("corners", "corners_corrected.csv"),
+        ("walls", "walls_corrected.csv"),
+    ] {
+        assert!(files[key].as_str().unwrap().ends_with(name), "{files}");
+    }
+    assert_eq!(planned["warnings"], serde_json::json!([]), "{planned}");
 }
 
 /// The first `[[x, y, z]]` row of the chunk logged at `entity` in `rerun rrd print -vvv` output.
@@ -632,6 +649,36 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
             assert!(d >= 1.5, "{a} and {b} are {d} m apart");
         }
     }
+}
+
+#[test]
+fn plan_warns_on_a_drifted_map() {
+    // The office's sonar on its odometry alone: a drifted map whose corners are not the world's.
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let map = dir.path().join("map");
+    simulate(
+        Path::new("samples/office/world.yaml"),
+        &run,
+        SimSettings::default(),
+        true,
+    );
+    self::map(&run, &map, PoseSource::Odometry);
+    let precision = metric(&read_report(&map), "features.precision");
+    assert!(precision < 0.5, "precision {precision}");
+    let plan_dir = dir.path().join("plan");
+    plan(&map, &plan_dir, None, false);
+    let planned: Value =
+        serde_json::from_str(&std::fs::read_to_string(plan_dir.join("plan.json")).unwrap())
+            .unwrap();
+    assert_eq!(planned["map_files"]["corrected"], false);
+    let warnings = planned["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("score precision")),
+        "{warnings:?}"
+    );
 }
 
 /// RMS of `plan`'s predicted error at the cells a localised run drove through (its ground-truth

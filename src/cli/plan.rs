@@ -62,9 +62,10 @@ impl PlanArgs {
                 tags_m,
                 walls,
                 json,
+                ..
             } => {
                 tracing::info!(
-                    "{} tags from {}: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
+                    "{} tags from {}: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m{}",
                     tags_m.len(),
                     self.tags.as_deref().unwrap_or(std::path::Path::new("")).display(),
                     100.0 * prediction.coverage,
@@ -72,7 +73,8 @@ impl PlanArgs {
                     100.0 * prediction.wall_held,
                     walls,
                     prediction.predicted_error_mean_m,
-                    prediction.predicted_error_max_m
+                    prediction.predicted_error_max_m,
+                    out_of_reach(prediction)
                 );
                 json
             }
@@ -81,9 +83,10 @@ impl PlanArgs {
                 corners,
                 walls,
                 json,
+                ..
             } => {
                 tracing::info!(
-                    "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m",
+                    "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m{}",
                     plan.tags.len(),
                     corners,
                     100.0 * plan.prediction.coverage,
@@ -91,7 +94,8 @@ impl PlanArgs {
                     100.0 * plan.prediction.wall_held,
                     walls,
                     plan.prediction.predicted_error_mean_m,
-                    plan.prediction.predicted_error_max_m
+                    plan.prediction.predicted_error_max_m,
+                    out_of_reach(&plan.prediction)
                 );
                 for t in &plan.tags {
                     tracing::info!(
@@ -111,4 +115,17 @@ impl PlanArgs {
         }
         Ok(())
     }
+}
+
+/// ", over N free cells (M out of reach of any tag)" when some are: the mean and worst leave
+/// those out.
+fn out_of_reach(p: &stereotag::plan::Prediction) -> String {
+    if p.unreachable_cells == 0 {
+        return String::new();
+    }
+    format!(
+        " over the {} free cells within reach ({} have no way to a cell that sees a tag)",
+        p.free_cells - p.unreachable_cells,
+        p.unreachable_cells
+    )
 }

@@ -184,6 +184,7 @@ fn save_survey_pictures(dir: &Path, run: &RunDataset, s: &Survey) -> Result<(), 
         )],
         marks: Mark::corners(&s.raw.features_offline),
         mark_legend: vec![("Hough corner", colours::CORNER)],
+        ..Overlay::default()
     };
     super::save_map_png(
         &dir.join("map.png"),
@@ -216,6 +217,7 @@ fn save_survey_pictures(dir: &Path, run: &RunDataset, s: &Survey) -> Result<(), 
             .collect(),
         marks: Mark::landmarks(&s.landmarks),
         mark_legend: vec![("landmark", colours::LANDMARK)],
+        ..Overlay::default()
     };
     super::save_map_png(
         &dir.join("map_corrected.png"),

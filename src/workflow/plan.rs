@@ -44,6 +44,8 @@ pub enum PlanOutput {
         walls: usize,
         /// plan.json's contents.
         json: serde_json::Value,
+        /// What makes the figures speak for little ([`PlanOutput::warnings`]).
+        warnings: Vec<String>,
     },
     /// The error to expect with tags already up.
     Predicted {
@@ -55,36 +57,127 @@ pub enum PlanOutput {
         walls: usize,
         /// plan.json's contents.
         json: serde_json::Value,
+        /// What makes the figures speak for little ([`PlanOutput::warnings`]).
+        warnings: Vec<String>,
     },
 }
 
-/// The map's straight walls (`walls.csv` of `map`, or a survey's `walls_corrected.csv`).
-fn map_walls(map: &Path, no_walls: bool) -> Result<Vec<WallSegment>> {
-    if no_walls {
-        return Ok(Vec::new());
-    }
-    match ["walls.csv", "walls_corrected.csv"]
-        .iter()
-        .map(|f| map.join(f))
-        .find(|p| p.exists())
-    {
-        Some(path) => Ok(io::load_walls_csv(&path)?),
-        None => {
-            tracing::warn!(
-                "{}: no walls.csv (written by `stereotag map`): predicting as with tags only",
-                map.display()
-            );
-            Ok(Vec::new())
+/// One map's files, all in one frame: a survey's corrected map, corners and walls when the
+/// directory holds a survey (the raw map beside them is drifted), else `map`'s own.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapFiles {
+    /// `map.yaml` or `map_corrected.yaml`.
+    pub map_yaml: std::path::PathBuf,
+    /// `corners.csv` or `corners_corrected.csv`.
+    pub corners: std::path::PathBuf,
+    /// `walls.csv` or `walls_corrected.csv`.
+    pub walls: std::path::PathBuf,
+    /// The key of `report.json`'s metrics that scores these corners against the world, when it
+    /// was known: `features.precision` or `features_corrected.precision`.
+    pub precision_key: &'static str,
+    /// Whether these are a survey's corrected files.
+    pub corrected: bool,
+}
+
+impl MapFiles {
+    /// The files of the map in `dir`.
+    pub fn of(dir: &Path) -> Self {
+        let corrected = dir.join("map_corrected.yaml").exists();
+        let (suffix, precision_key) = if corrected {
+            ("_corrected", "features_corrected.precision")
+        } else {
+            ("", "features.precision")
+        };
+        Self {
+            map_yaml: dir.join(format!("map{suffix}.yaml")),
+            corners: dir.join(format!("corners{suffix}.csv")),
+            walls: dir.join(format!("walls{suffix}.csv")),
+            precision_key,
+            corrected,
         }
     }
 }
 
+/// The map's straight walls, `None` when there is no walls file.
+fn map_walls(files: &MapFiles, no_walls: bool) -> Result<Option<Vec<WallSegment>>> {
+    if no_walls {
+        return Ok(Some(Vec::new()));
+    }
+    if !files.walls.exists() {
+        return Ok(None);
+    }
+    Ok(Some(io::load_walls_csv(&files.walls)?))
+}
+
+/// Share of the free cells with no estimate (no way to a covered cell) above which `plan` warns
+/// that its figures speak for little of the map: a half.
+pub const UNREACHABLE_WARN: f64 = 0.5;
+
+/// Precision of the map's corners against the world (when `report.json` has it) below which
+/// `plan` warns that its tag places may not be corners: 0.5.
+pub const POOR_CORNERS: f64 = 0.5;
+
+/// What is wrong with planning on this map: the corners scored poorly against the world (from
+/// the map's `report.json`, when the map was scored), most free cells out of reach of any tag,
+/// no walls. Each is a sentence for the user.
+fn map_warnings(
+    dir: &Path,
+    files: &MapFiles,
+    prediction: &Prediction,
+    walls: Option<usize>,
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let report = dir.join("report.json");
+    let precision = std::fs::read_to_string(&report)
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|v| v["metrics"][files.precision_key].as_f64());
+    if let Some(p) = precision.filter(|&p| p < POOR_CORNERS) {
+        warnings.push(format!(
+            "{}: the map's corners score precision {p:.2} against the world ({} in {}): most are not corners, so the places proposed may not be either; map on better poses first (a survey's corrected map, or `map --poses ground-truth`)",
+            files.corners.display(),
+            files.precision_key,
+            report.display()
+        ));
+    }
+    let reachable = prediction.free_cells - prediction.unreachable_cells;
+    let out_of_reach = prediction.unreachable_cells as f64 / prediction.free_cells.max(1) as f64;
+    if out_of_reach > UNREACHABLE_WARN {
+        warnings.push(format!(
+            "{} of {} free cells ({:.0}%) have no way over free cells to a cell that sees a tag: the predicted error speaks for the other {reachable} only (free cells cut off by unknown ones: a sparse map, or rooms no tag sees)",
+            prediction.unreachable_cells,
+            prediction.free_cells,
+            100.0 * out_of_reach
+        ));
+    }
+    if walls.is_none() {
+        warnings.push(format!(
+            "{}: no walls file (written by `stereotag map` and `survey`): predicting as with tags only",
+            files.walls.display()
+        ));
+    }
+    warnings
+}
+
 /// Plans tags on a map (or predicts the error with given tags) and, with `out`, writes
 /// `plan.json` and `predicted_error.csv` (the predicted error at each free cell).
+///
+/// A survey's directory is read as its corrected map, corners and walls ([`MapFiles`]). What
+/// makes the figures speak for little (corners that scored poorly, most free cells out of
+/// reach) is warned about, and listed in `plan.json`'s `warnings`.
 pub fn plan(request: &PlanRequest<'_>) -> Result<PlanOutput> {
-    let map = io::load_ros_occupancy(&request.map.join("map.yaml"))?;
-    let corners = io::load_features_csv(&request.map.join("corners.csv"))?;
-    let walls = map_walls(request.map, request.no_walls)?;
+    let files = MapFiles::of(request.map);
+    if files.corrected {
+        tracing::info!(
+            "{}: a survey: planning on its corrected map, corners and walls",
+            request.map.display()
+        );
+    }
+    let map = io::load_ros_occupancy(&files.map_yaml)?;
+    let corners = io::load_features_csv(&files.corners)?;
+    let loaded_walls = map_walls(&files, request.no_walls)?;
+    let walls_found = loaded_walls.as_ref().map(Vec::len);
+    let walls = loaded_walls.unwrap_or_default();
     let config = &request.config;
     let output = match request.tags {
         Some(tags) => {
@@ -95,26 +188,43 @@ pub fn plan(request: &PlanRequest<'_>) -> Result<PlanOutput> {
                 .map(|r| [r.landmark.position_m[0], r.landmark.position_m[1]])
                 .collect();
             let prediction = predict(&map, &tags_m, &walls, config);
-            let json =
-                serde_json::json!({ "prediction": prediction, "tags_m": tags_m, "config": config });
+            let warnings = map_warnings(request.map, &files, &prediction, walls_found);
+            let json = serde_json::json!({
+                "prediction": prediction,
+                "tags_m": tags_m,
+                "config": config,
+                "map_files": files_json(&files),
+                "warnings": warnings,
+            });
             PlanOutput::Predicted {
                 prediction,
                 tags_m,
                 walls: walls.len(),
                 json,
+                warnings,
             }
         }
         None => {
             let plan = plan_tags(&map, &corners, &walls, config);
-            let json = serde_json::json!({ "plan": plan, "config": config });
+            let warnings = map_warnings(request.map, &files, &plan.prediction, walls_found);
+            let json = serde_json::json!({
+                "plan": plan,
+                "config": config,
+                "map_files": files_json(&files),
+                "warnings": warnings,
+            });
             PlanOutput::Proposed {
                 plan,
                 corners: corners.len(),
                 walls: walls.len(),
                 json,
+                warnings,
             }
         }
     };
+    for w in output.warnings() {
+        tracing::warn!("{w}");
+    }
     if let Some(out) = request.out {
         let (json, errors) = match &output {
             PlanOutput::Proposed { plan, json, .. } => (json, &plan.prediction.cell_errors_m),
@@ -133,6 +243,27 @@ pub fn plan(request: &PlanRequest<'_>) -> Result<PlanOutput> {
         record(request, &map, &corners, &output, Path::new("plan.rrd"))?;
     }
     Ok(output)
+}
+
+/// The files planned on, for `plan.json`.
+fn files_json(files: &MapFiles) -> serde_json::Value {
+    serde_json::json!({
+        "map": files.map_yaml,
+        "corners": files.corners,
+        "walls": files.walls,
+        "corrected": files.corrected,
+    })
+}
+
+impl PlanOutput {
+    /// What makes the figures speak for little (also `plan.json`'s `warnings`).
+    pub fn warnings(&self) -> &[String] {
+        match self {
+            PlanOutput::Proposed { warnings, .. } | PlanOutput::Predicted { warnings, .. } => {
+                warnings
+            }
+        }
+    }
 }
 
 /// Records the plan to the sinks asked for (`default_file` when none is named).
@@ -183,6 +314,19 @@ fn save_plan_picture(
     use crate::picture::{colours, Mark, Overlay};
     let (tags_m, prediction, proposed) = tags_of(output);
     let what = if proposed { "proposed" } else { "given" };
+    // The free cells coloured by the error predicted there.
+    let g = &map.geometry;
+    let cells = (0..g.width * g.height)
+        .map(
+            |i| match prediction.cell_errors_m.get(i).copied().flatten() {
+                Some(e) if e <= 0.02 => Some(ERROR_COLOURS[0]),
+                Some(e) if e <= 0.05 => Some(ERROR_COLOURS[1]),
+                Some(_) => Some(ERROR_COLOURS[2]),
+                None if map.is_free(i) => Some(ERROR_COLOURS[3]),
+                None => None,
+            },
+        )
+        .collect();
     let mut marks = Mark::corners(corners);
     marks.extend(tags_m.iter().enumerate().map(|(i, &at_m)| Mark {
         at_m,
@@ -196,9 +340,21 @@ fn save_plan_picture(
             ("Hough corner", colours::CORNER),
             ("tag", colours::LANDMARK),
         ],
+        cells,
+        cell_legend: vec![
+            ("error <= 2 cm", ERROR_COLOURS[0]),
+            ("<= 5 cm", ERROR_COLOURS[1]),
+            ("> 5 cm", ERROR_COLOURS[2]),
+            ("out of reach", ERROR_COLOURS[3]),
+        ],
+    };
+    let warned = match output.warnings().len() {
+        0 => String::new(),
+        1 => " (a warning: see plan.json)".to_string(),
+        n => format!(" ({n} warnings: see plan.json)"),
     };
     let title = format!(
-        "plan.png: {} tags {what}; {:.0}% of free cells see one; predicted error mean {:.3} m, worst {:.3} m",
+        "plan.png: {} tags {what}; {:.0}% of free cells see one; predicted error mean {:.3} m, worst {:.3} m{warned}",
         tags_m.len(),
         100.0 * prediction.coverage,
         prediction.predicted_error_mean_m,
@@ -206,6 +362,15 @@ fn save_plan_picture(
     );
     Ok(io::save_map_png(path, map, &title, &overlay)?)
 }
+
+/// Colours of `plan.png`'s free cells: predicted error up to 2 cm, up to 5 cm, more, and no
+/// estimate (no way to a cell that sees a tag).
+const ERROR_COLOURS: [[u8; 3]; 4] = [
+    [161, 217, 155],
+    [254, 224, 139],
+    [244, 137, 110],
+    [222, 170, 222],
+];
 
 /// `predicted_error.csv`: the predicted error at each free cell's centre.
 fn save_predicted_error(
