@@ -20,7 +20,9 @@
 //! when its votes came from positions spread around it (the directions from the cell to the
 //! voting sensors, in 5 degree sectors, span at least [`HoughConfig::min_spread_deg`], 30
 //! degrees by default) and the grid does not put it in the middle of a straight run of
-//! occupied cells ([`is_mid_wall`]).
+//! occupied cells ([`is_mid_wall`]). (5) Every feature must stand on something static: a cell
+//! near it that the grid holds firmly occupied ([`STATIC_OCCUPANCY`]), which a person walking by
+//! never makes.
 //!
 //! **Windows.** Online, votes are gathered over windows of 70 cm of travel or 70 degrees of turn
 //! (the paper's), each window starting half a window after the previous one so a corner on a
@@ -368,19 +370,51 @@ pub fn locate_features(
 ) -> Vec<Feature> {
     let mut out = Vec::new();
     for f in peaks {
-        match place_peak(arcs, upto, (f.x_m, f.y_m), map) {
-            PeakPlace::Corner(x_m, y_m) | PeakPlace::WallEnd(x_m, y_m) => {
-                out.push(Feature { x_m, y_m, ..f })
-            }
-            PeakPlace::MidWall => {}
+        let f = match place_peak(arcs, upto, (f.x_m, f.y_m), map) {
+            PeakPlace::Corner(x_m, y_m) | PeakPlace::WallEnd(x_m, y_m) => Feature { x_m, y_m, ..f },
+            PeakPlace::MidWall => continue,
             PeakPlace::Unknown => {
                 if f.spread_deg >= config.min_spread_deg && !is_mid_wall(&f, map) {
-                    out.push(f);
+                    f
+                } else {
+                    continue;
+                }
+            }
+        };
+        if firmest_near(map, (f.x_m, f.y_m)) >= STATIC_OCCUPANCY {
+            out.push(f);
+        }
+    }
+    out
+}
+
+/// Rule 5: a feature stands on something that does not move: a cell within [`STATIC_REACH_M`]
+/// whose echoes outnumber the beams that passed through it 4 to 1. A wall is hit whenever a
+/// beam reaches it; where a person walked, the sonar saw free space as often as the person, and
+/// the Hough transform makes corners of the path (the office's default run: 5 false corners of
+/// 11, occupancy 0.54-0.75 around them, 0.92-1.0 at the room's corners).
+pub const STATIC_OCCUPANCY: f64 = 0.8;
+/// ... within this distance of the feature: 0.3 m.
+pub const STATIC_REACH_M: f64 = 0.3;
+
+/// The highest occupancy among the cells within [`STATIC_REACH_M`] (in whole cells, rounded up)
+/// of `point`'s cell (0 where none is known).
+fn firmest_near(map: &OccupancyMap, point: (f64, f64)) -> f64 {
+    let g = &map.geometry;
+    let c0 = ((point.0 - g.origin_m[0]) / g.resolution_m).floor() as i64;
+    let r0 = ((point.1 - g.origin_m[1]) / g.resolution_m).floor() as i64;
+    let mut firmest = 0.0f64;
+    let k = (STATIC_REACH_M / g.resolution_m).ceil() as i64;
+    for r in r0 - k..=r0 + k {
+        for c in c0 - k..=c0 + k {
+            if c >= 0 && r >= 0 && (c as usize) < g.width && (r as usize) < g.height {
+                if let Some(o) = map.occupancy[r as usize * g.width + c as usize] {
+                    firmest = firmest.max(o);
                 }
             }
         }
     }
-    out
+    firmest
 }
 
 /// Online features: windows of travel or turn along `trajectory`, each window's peaks located
