@@ -88,6 +88,28 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
         if log.starts_with("freiburg") {
             assert!(walls > 20, "{log}: {walls} walls");
         }
+        // What the evidence floor hid is reported, and said when it is most of the map (aces:
+        // a scan every 3 s leaves most cells it saw below the floor).
+        let (known, below) = (
+            m["hidden.cells_known"].as_f64().unwrap(),
+            m["hidden.cells_below_floor"].as_f64().unwrap(),
+        );
+        assert!(known > 0.0 && below > 0.0, "{log}: {m}");
+        if log.starts_with("aces") {
+            assert!(below > known, "{log}: {m}");
+            let (code, err) = stereotag(&[
+                "map",
+                "--run",
+                run.to_str().unwrap(),
+                "--out",
+                map.to_str().unwrap(),
+                "--poses",
+                "ground-truth",
+                "--force",
+            ]);
+            assert_eq!(code, 0, "{log}: {err}");
+            assert!(err.contains("mapping.grid.min_evidence"), "{log}: {err}");
+        }
     }
 }
 

@@ -58,6 +58,7 @@ fn print_summary(output: &MapOutput) {
     for w in [map.off_grid_warning(), map.unplaced_warning()]
         .into_iter()
         .flatten()
+        .chain(map.hidden_warnings())
     {
         tracing::warn!("{w}");
     }

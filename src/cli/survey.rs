@@ -188,6 +188,7 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
     for w in [s.raw.off_grid_warning(), s.raw.unplaced_warning()]
         .into_iter()
         .flatten()
+        .chain(s.raw.hidden_warnings())
     {
         tracing::warn!("{w}");
     }

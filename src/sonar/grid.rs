@@ -587,6 +587,21 @@ impl CountingGrid {
         Ok(Self::over(ConeCells::for_layout(config, layout)?))
     }
 
+    /// Cells with some evidence, but less than the floor (`min_evidence`): left unknown.
+    pub fn cells_below_floor(&self) -> usize {
+        self.hits
+            .iter()
+            .zip(&self.misses)
+            .filter(|(&h, &m)| {
+                let evidence = match self.cells.beam {
+                    BeamModel::Cone => h + m,
+                    BeamModel::Ray => h / RAY_HIT_WEIGHT + m,
+                };
+                evidence > 0 && !self.cells.enough(evidence)
+            })
+            .count()
+    }
+
     /// Hit and miss tallies of a cell.
     pub fn counts(&self, idx: usize) -> (u32, u32) {
         (
