@@ -65,7 +65,9 @@ pub fn survey(
     visual: &[VisualTurn],
     settings: &SurveySettings<'_>,
 ) -> Result<Survey, GridError> {
-    let (mapping, fuse) = (settings.mapping, settings.fuse);
+    // The floor the raw map used (following the run's sampling), for every map after it.
+    let mapping = &settings.mapping.for_run(&run.sonar_log(), &run.odometry);
+    let fuse = settings.fuse;
     let obs = Observations {
         odometry: &run.odometry,
         sightings,
@@ -131,7 +133,8 @@ fn walls_pass(
 ) -> Result<OfflineResult, GridError> {
     let layout = &run.meta.robot.sonar;
     let readings = run.placed_readings(&offline.trajectory);
-    let walls = walls_of(layout, &readings, settings.mapping)?;
+    let mapping = settings.mapping.for_run(&run.sonar_log(), &run.odometry);
+    let walls = walls_of(layout, &readings, &mapping)?;
     let sonar = SonarInput {
         readings: &run.sonar,
         layout,

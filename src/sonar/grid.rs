@@ -42,6 +42,11 @@ pub struct GridConfig {
     /// (ours: 6, six far readings or one near one, so a few far hits from multipath echoes behind
     /// a wall do not make a wall).
     pub min_evidence: u32,
+    /// Whether the floor follows how densely the run samples
+    /// ([`crate::sonar::map::MappingConfig::for_run`]): `min_evidence` for runs with a reading
+    /// every 15 cm of travel or closer, scaled down (to 2 at least) for sparser ones. On by
+    /// default.
+    pub floor_follows_sampling: bool,
     /// Whether a reading with no echo marks its whole cone as free. Off by default: a specular
     /// wall returns no echo, so silence is no proof of free space.
     pub no_echo_is_free: bool,
@@ -62,6 +67,7 @@ impl Default for GridConfig {
             occupied_threshold: 0.5,
             free_threshold: 0.2,
             min_evidence: 6,
+            floor_follows_sampling: true,
             no_echo_is_free: false,
         }
     }
