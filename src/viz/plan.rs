@@ -129,10 +129,18 @@ fn log_error_image(
 /// The report: what the tags give, and where they go.
 fn report(scene: &PlanScene<'_>) -> String {
     let p = scene.prediction;
-    let mut md = format!(
-        "# stereotag plan\n\n{} tags {}.\n\n| value | |\n|---:|---|\n\
+    let mut md = String::from("# stereotag plan\n\n");
+    if !scene.warnings.is_empty() {
+        md.push_str("## Warnings\n\n");
+        for w in scene.warnings {
+            md.push_str(&format!("- {w}\n"));
+        }
+        md.push('\n');
+    }
+    md += &format!(
+        "{} tags {}.\n\n| value | |\n|---:|---|\n\
          | {:.0}% | free cells that see a tag |\n\
-         | {:.3} m | predicted error, mean over free cells |\n\
+         | {:.3} m | predicted error, mean over reachable cells |\n\
          | {:.3} m | predicted error, worst cell |\n\
          | {:.0}% | free cells a mapped wall holds |\n\
          | {} | free cells no covered cell can be reached from |\n\

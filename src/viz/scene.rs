@@ -77,4 +77,6 @@ pub struct PlanScene<'a> {
     pub proposed: bool,
     /// The predicted error.
     pub prediction: &'a crate::plan::Prediction,
+    /// What makes the figures speak for little ([`crate::workflow::plan::PlanOutput::warnings`]).
+    pub warnings: &'a [String],
 }

@@ -284,6 +284,7 @@ fn record(
         tags_m: &tags_m,
         proposed,
         prediction,
+        warnings: output.warnings(),
     })?;
     rec.finish()?;
     Ok(())
