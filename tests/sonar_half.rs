@@ -95,10 +95,11 @@ fn office_with_ground_truth_poses_maps_the_walls() {
 }
 
 #[test]
-fn a_person_walking_by_makes_no_corners() {
+fn the_default_office_run_finds_its_corners_and_not_a_walking_person() {
     // The office's default exploration: a person crosses the second room now and then, and the
     // Hough transform made corners of their path (precision 0.55 before features had to stand
-    // on a firmly occupied cell).
+    // on a firmly occupied cell); its door jambs were missed (recall 0.75) until a robot that
+    // went through a wall's line told a doorway the cone painted closed.
     let loaded = load_world(&common::sample("office/world.yaml")).unwrap();
     let out = simulate(&loaded.world, &loaded.simulation, |_| {}).unwrap();
     let run = &out.run;
@@ -110,6 +111,7 @@ fn a_person_walking_by_makes_no_corners() {
     .unwrap();
     let features = score_sonar_map(&gt, run, &loaded.world).features_offline;
     assert!(features.precision >= FEATURE_PRECISION_GT, "{features:?}");
+    assert!(features.recall >= FEATURE_RECALL_GT, "{features:?}");
 }
 
 #[test]

@@ -12,7 +12,9 @@
 //! because the robot rounds the corner close to both walls. [`place_peak`] looks for two walls
 //! near such a peak and, when they cross near it and both reach the crossing, moves the feature
 //! there. A peak on a wall where the grid shows free space on one side is the wall's end (a door
-//! jamb); one with the wall going on to both sides is dropped.
+//! jamb); one with the wall going on to both sides is dropped, unless the robot went through the
+//! wall's line on one side and the wall's echoes stop there: a doorway the wide cone painted
+//! closed in the grid.
 
 use crate::sonar::grid::OccupancyMap;
 use crate::sonar::tangent::{
@@ -159,7 +161,15 @@ pub struct Arcs<'a> {
     buckets: HashMap<(i64, i64), Vec<usize>>,
     /// The farthest any point of an arc lies from the arc's middle, metres.
     reach_m: f64,
+    /// Indices of the readings whose sensor lies in each bucket, ascending.
+    sensors: HashMap<(i64, i64), Vec<usize>>,
 }
+
+/// A robot that passed through a wall's line this far beyond a peak on it (metres, along the
+/// wall) went through an opening: 0.2 to 1.0 m (a door's jamb is its edge).
+const DOORWAY_M: (f64, f64) = (0.2, 1.0);
+/// ... with a sensor this close to the line: 0.1 m.
+const DOORWAY_ACROSS_M: f64 = 0.1;
 
 impl<'a> Arcs<'a> {
     /// Buckets the arcs of `readings` (cones of half-width `half_cone_rad`). Readings without a
@@ -168,8 +178,13 @@ impl<'a> Arcs<'a> {
         // A point of the arc at angle a off the axis lies 2 r sin(a / 2) from its middle.
         let chord = 2.0 * (0.5 * half_cone_rad.clamp(0.0, std::f64::consts::PI)).sin();
         let mut buckets: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+        let mut sensors: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
         let mut reach_m = 0.0f64;
         for (i, r) in readings.iter().enumerate() {
+            let p = r.world_from_sensor;
+            if p.x.is_finite() && p.y.is_finite() {
+                sensors.entry(bucket_of((p.x, p.y))).or_default().push(i);
+            }
             let Some(range) = r.range_m.filter(|x| x.is_finite() && *x >= 0.0) else {
                 continue;
             };
@@ -185,12 +200,39 @@ impl<'a> Arcs<'a> {
             half_cone_rad,
             buckets,
             reach_m,
+            sensors,
         }
     }
 
     /// The readings.
     pub fn readings(&self) -> &'a [PlacedReading] {
         self.readings
+    }
+
+    /// Whether one of the first `upto` readings was taken on the line through `point` along
+    /// `dir` (a unit vector), [`DOORWAY_M`] beyond it: the robot passed through there.
+    fn passed_along(&self, point: (f64, f64), dir: (f64, f64), upto: usize) -> bool {
+        let (lo, hi) = DOORWAY_M;
+        let middle = 0.5 * (lo + hi);
+        let at = (point.0 + middle * dir.0, point.1 + middle * dir.1);
+        let radius = 0.5 * (hi - lo) + DOORWAY_ACROSS_M;
+        let (b0, b1) = (
+            bucket_of((at.0 - radius, at.1 - radius)),
+            bucket_of((at.0 + radius, at.1 + radius)),
+        );
+        (b0.0..=b1.0).any(|bx| {
+            (b0.1..=b1.1).any(|by| {
+                self.sensors.get(&(bx, by)).is_some_and(|ids| {
+                    ids[..ids.partition_point(|&i| i < upto)].iter().any(|&i| {
+                        let p = self.readings[i].world_from_sensor;
+                        let (dx, dy) = (p.x - point.0, p.y - point.1);
+                        let along = dx * dir.0 + dy * dir.1;
+                        let across = -dx * dir.1 + dy * dir.0;
+                        (lo..=hi).contains(&along) && across.abs() <= DOORWAY_ACROSS_M
+                    })
+                })
+            })
+        })
     }
 
     /// Indices, ascending, of the readings among the first `upto` whose arcs may come within
@@ -427,19 +469,43 @@ fn seen_along(tangents: &[Tangent], wall: &LocalWall, point: (f64, f64)) -> Opti
     let (s, c) = wall.normal_rad.sin_cos();
     let mut span: Option<(f64, f64)> = None;
     for t in tangents {
-        if close_lines(
-            t.normal,
-            t.offset,
-            wall.normal_rad,
-            wall.offset_m,
-            ANGLE_STEP_DEG.to_radians(),
-            1.5 * DIST_STEP_M,
-        ) {
+        if on_wall(t, wall) {
             let u = -s * (t.point.0 - point.0) + c * (t.point.1 - point.1);
             span = Some(span.map_or((u, u), |(lo, hi)| (lo.min(u), hi.max(u))));
         }
     }
     span
+}
+
+/// Past a jamb along its wall, no echo's tangent point on the wall this far: 0.45 to 0.9 m. Up
+/// to 0.35-0.4 m past it there are some: echoes off the jamb's edge, smeared along the wall by
+/// the cone (the office's door, 1.2 m wide: tangent points 0-0.35 m into it from each side).
+const JAMB_CLEAR_M: (f64, f64) = (0.45, 0.9);
+/// ... and on the wall's side, at least this many over the same distances: 10.
+const JAMB_WALL_POINTS: usize = 10;
+
+/// How many tangent points of `wall`'s line lie [`JAMB_CLEAR_M`] beyond `point` along `dir` (a
+/// unit vector along the wall).
+fn seen_near(tangents: &[Tangent], wall: &LocalWall, point: (f64, f64), dir: (f64, f64)) -> usize {
+    tangents
+        .iter()
+        .filter(|t| {
+            let along = (t.point.0 - point.0) * dir.0 + (t.point.1 - point.1) * dir.1;
+            (JAMB_CLEAR_M.0..=JAMB_CLEAR_M.1).contains(&along) && on_wall(t, wall)
+        })
+        .count()
+}
+
+/// Whether a tangent is a vote for `wall`: its line within an angle cell and 1.5 offset cells.
+fn on_wall(t: &Tangent, wall: &LocalWall) -> bool {
+    close_lines(
+        t.normal,
+        t.offset,
+        wall.normal_rad,
+        wall.offset_m,
+        ANGLE_STEP_DEG.to_radians(),
+        1.5 * DIST_STEP_M,
+    )
 }
 
 /// Distance from `point` to the nearest place `wall` was seen.
@@ -496,7 +562,23 @@ pub fn place_peak(
     let foot = (centre.0 + wall.offset_m * c, centre.1 + wall.offset_m * s);
     let sides = [1.0, -1.0].map(|sign| beyond(map, foot, (-s * sign, c * sign)));
     match sides {
-        [Beyond::Wall, Beyond::Wall] => PeakPlace::MidWall,
+        [Beyond::Wall, Beyond::Wall] => {
+            // The robot went through the wall's line on one side, and the wall was seen (its
+            // echoes' tangent points) just past the peak on the other side only: a doorway the
+            // cone painted closed, and the peak is its jamb.
+            let dirs = [1.0, -1.0].map(|sign| (-s * sign, c * sign));
+            let seen = dirs.map(|dir| match seen_near(&tangents, wall, foot, dir) {
+                0 => Some(false),
+                n if n >= JAMB_WALL_POINTS => Some(true),
+                _ => None,
+            });
+            let through = dirs.map(|dir| arcs.passed_along(foot, dir, upto));
+            match (seen, through) {
+                ([Some(true), Some(false)], [false, true])
+                | ([Some(false), Some(true)], [true, false]) => PeakPlace::WallEnd(foot.0, foot.1),
+                _ => PeakPlace::MidWall,
+            }
+        }
         [Beyond::Wall, Beyond::Free] | [Beyond::Free, Beyond::Wall] => {
             PeakPlace::WallEnd(foot.0, foot.1)
         }
