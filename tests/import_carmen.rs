@@ -17,6 +17,15 @@ fn stereotag(args: &[&str]) -> (i32, String) {
     )
 }
 
+/// `stereotag [-q] map` of `run` into `out` on its ground-truth poses, `extra` arguments after.
+fn map_on_truth(run: &Path, out: &Path, quiet: bool, extra: &[&str]) -> (i32, String) {
+    let mut args = if quiet { vec!["-q"] } else { Vec::new() };
+    args.extend(["map", "--run", run.to_str().unwrap(), "--out"]);
+    args.extend([out.to_str().unwrap(), "--poses", "ground-truth"]);
+    args.extend(extra);
+    stereotag(&args)
+}
+
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -62,16 +71,7 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
         );
         // Mapped on the corrected poses: no echo falls off the fitted grid, walls are found.
         let map = dir.path().join("map");
-        let (code, err) = stereotag(&[
-            "-q",
-            "map",
-            "--run",
-            run.to_str().unwrap(),
-            "--out",
-            map.to_str().unwrap(),
-            "--poses",
-            "ground-truth",
-        ]);
+        let (code, err) = map_on_truth(&run, &map, true, &[]);
         assert_eq!(code, 0, "{log}: {err}");
         let report = json(&map.join("report.json"));
         let m = &report["metrics"];
@@ -109,16 +109,7 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
                 "floor_follows_sampling: false",
             );
             std::fs::write(&yaml, held).unwrap();
-            let (code, err) = stereotag(&[
-                "map",
-                "--run",
-                run.to_str().unwrap(),
-                "--out",
-                map.to_str().unwrap(),
-                "--poses",
-                "ground-truth",
-                "--force",
-            ]);
+            let (code, err) = map_on_truth(&run, &map, false, &["--force"]);
             assert_eq!(code, 0, "{log}: {err}");
             assert!(err.contains("mapping.grid.min_evidence"), "{log}: {err}");
             let m = &json(&map.join("report.json"))["metrics"];

@@ -230,12 +230,7 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
     let mut m = BTreeMap::new();
     m.insert("sightings.total".into(), sightings as f64);
     m.insert("echoes".into(), survey.raw.echoes as f64);
-    m.insert("echoes.off_grid".into(), survey.raw.echoes_off_grid as f64);
-    m.extend(survey.raw.hidden.metrics().map(|(k, v)| (k.to_string(), v)));
-    m.insert("grid.min_evidence".into(), survey.raw.min_evidence as f64);
-    if let Some(s) = survey.raw.sampling_spacing_m {
-        m.insert("sampling.spacing_m".into(), s);
-    }
+    m.extend(survey.raw.coverage_metrics());
     m.insert(
         "readings.unplaced".into(),
         survey.raw.readings_unplaced as f64,

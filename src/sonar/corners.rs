@@ -204,11 +204,6 @@ impl<'a> Arcs<'a> {
         }
     }
 
-    /// The readings.
-    pub fn readings(&self) -> &'a [PlacedReading] {
-        self.readings
-    }
-
     /// Whether one of the first `upto` readings was taken on the line through `point` along
     /// `dir` (a unit vector), [`DOORWAY_M`] beyond it: the robot passed through there.
     fn passed_along(&self, point: (f64, f64), dir: (f64, f64), upto: usize) -> bool {
@@ -671,19 +666,9 @@ fn corner(
 /// Whether the grid has an occupied cell within one cell of `point` (which may lie just outside
 /// the grid: a wall on its edge).
 fn occupied_near(map: &OccupancyMap, point: (f64, f64)) -> bool {
-    let g = &map.geometry;
-    let c0 = ((point.0 - g.origin_m[0]) / g.resolution_m).floor() as i64;
-    let r0 = ((point.1 - g.origin_m[1]) / g.resolution_m).floor() as i64;
-    (-1..=1i64).any(|dr| {
-        (-1..=1i64).any(|dc| {
-            let (c, r) = (c0 + dc, r0 + dr);
-            c >= 0
-                && r >= 0
-                && c < g.width as i64
-                && r < g.height as i64
-                && map.is_occupied(r as usize * g.width + c as usize)
-        })
-    })
+    map.geometry
+        .cells_around(point, 1)
+        .any(|i| map.is_occupied(i))
 }
 
 #[cfg(test)]

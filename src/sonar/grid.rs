@@ -207,6 +207,21 @@ impl GridGeometry {
         }
     }
 
+    /// Indices of the grid's cells within `reach` cells (a square) of the cell holding `point`,
+    /// which may lie off the grid (a wall on its edge): those that exist.
+    pub fn cells_around(&self, point: (f64, f64), reach: i64) -> impl Iterator<Item = usize> + '_ {
+        let c0 = ((point.0 - self.origin_m[0]) / self.resolution_m).floor() as i64;
+        let r0 = ((point.1 - self.origin_m[1]) / self.resolution_m).floor() as i64;
+        let (w, h) = (self.width as i64, self.height as i64);
+        (r0 - reach..=r0 + reach)
+            .filter(move |r| (0..h).contains(r))
+            .flat_map(move |r| {
+                (c0 - reach..=c0 + reach)
+                    .filter(move |c| (0..w).contains(c))
+                    .map(move |c| (r * w + c) as usize)
+            })
+    }
+
     /// Cell containing a world point, as (column, row from the bottom).
     pub fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
         let cx = ((x - self.origin_m[0]) / self.resolution_m).floor();
@@ -599,13 +614,20 @@ impl CountingGrid {
             .iter()
             .zip(&self.misses)
             .filter(|(&h, &m)| {
-                let evidence = match self.cells.beam {
-                    BeamModel::Cone => h + m,
-                    BeamModel::Ray => h / RAY_HIT_WEIGHT + m,
-                };
+                let evidence = self.evidence(h, m);
                 evidence > 0 && !self.cells.enough(evidence)
             })
             .count()
+    }
+
+    /// The evidence of a cell with `h` weighted hits and `m` misses. A laser's evidence is its
+    /// beams (a hit weighs more in the share, not in the count): one return with five beams by
+    /// is no wall yet.
+    fn evidence(&self, h: u32, m: u32) -> u32 {
+        match self.cells.beam {
+            BeamModel::Cone => h + m,
+            BeamModel::Ray => h / RAY_HIT_WEIGHT + m,
+        }
     }
 
     /// Hit and miss tallies of a cell.
@@ -646,14 +668,8 @@ impl OccupancyGrid for CountingGrid {
             .iter()
             .zip(&self.misses)
             .map(|(&h, &m)| {
-                // A laser's evidence is its beams (a hit weighs more in the share, not in the
-                // count): one return with five beams by is no wall yet.
-                let evidence = match self.cells.beam {
-                    BeamModel::Cone => h + m,
-                    BeamModel::Ray => h / RAY_HIT_WEIGHT + m,
-                };
                 self.cells
-                    .enough(evidence)
+                    .enough(self.evidence(h, m))
                     .then(|| h as f64 / (h + m) as f64)
             })
             .collect();

@@ -400,21 +400,11 @@ pub const STATIC_REACH_M: f64 = 0.3;
 /// The highest occupancy among the cells within [`STATIC_REACH_M`] (in whole cells, rounded up)
 /// of `point`'s cell (0 where none is known).
 fn firmest_near(map: &OccupancyMap, point: (f64, f64)) -> f64 {
-    let g = &map.geometry;
-    let c0 = ((point.0 - g.origin_m[0]) / g.resolution_m).floor() as i64;
-    let r0 = ((point.1 - g.origin_m[1]) / g.resolution_m).floor() as i64;
-    let mut firmest = 0.0f64;
-    let k = (STATIC_REACH_M / g.resolution_m).ceil() as i64;
-    for r in r0 - k..=r0 + k {
-        for c in c0 - k..=c0 + k {
-            if c >= 0 && r >= 0 && (c as usize) < g.width && (r as usize) < g.height {
-                if let Some(o) = map.occupancy[r as usize * g.width + c as usize] {
-                    firmest = firmest.max(o);
-                }
-            }
-        }
-    }
-    firmest
+    let reach = (STATIC_REACH_M / map.geometry.resolution_m).ceil() as i64;
+    map.geometry
+        .cells_around(point, reach)
+        .filter_map(|i| map.occupancy[i])
+        .fold(0.0, f64::max)
 }
 
 /// Online features: windows of travel or turn along `trajectory`, each window's peaks located

@@ -54,15 +54,20 @@ impl MappingConfig {
     /// [`LOWEST_FLOOR`] at least: a cell is seen by fewer readings, in proportion. The settings
     /// returned follow nothing more (applying this twice changes nothing).
     pub fn for_run(&self, sonar: &SonarLog<'_>, trajectory: &[StampedPose]) -> MappingConfig {
+        self.for_spacing(sonar.layout, sampling_spacing_m(sonar, trajectory))
+    }
+
+    /// [`Self::for_run`] with the run's spacing already measured.
+    fn for_spacing(&self, layout: &SonarLayout, spacing: Option<f64>) -> MappingConfig {
         let mut config = self.clone();
         if !config.grid.floor_follows_sampling {
             return config;
         }
         config.grid.floor_follows_sampling = false;
-        if sonar.layout.beam != crate::sonar::BeamModel::Cone {
+        if layout.beam != crate::sonar::BeamModel::Cone {
             return config;
         }
-        if let Some(spacing) = sampling_spacing_m(sonar, trajectory) {
+        if let Some(spacing) = spacing {
             if spacing > FLOOR_SPACING_M {
                 let scaled = (config.grid.min_evidence as f64 * FLOOR_SPACING_M / spacing).round();
                 config.grid.min_evidence = (scaled as u32)
@@ -165,6 +170,21 @@ impl SonarMap {
         })
     }
 
+    /// What `report.json` says of the data the map kept and left out: the echoes off the grid,
+    /// [`Hidden::metrics`], the floor used and the run's sampling.
+    pub fn coverage_metrics(&self) -> Vec<(String, f64)> {
+        let mut m = vec![
+            ("echoes.off_grid".to_string(), self.echoes_off_grid as f64),
+            ("grid.min_evidence".to_string(), self.min_evidence as f64),
+        ];
+        m.extend(self.hidden.metrics().map(|(k, v)| (k.to_string(), v)));
+        m.extend(
+            self.sampling_spacing_m
+                .map(|s| ("sampling.spacing_m".to_string(), s)),
+        );
+        m
+    }
+
     /// What to tell the user when a setting hid most of what it could have shown: the evidence
     /// floor more cells than it left known, the Hough threshold over three times the peaks it
     /// kept (the simulated museum, sampled every 5-10 cm, has 1.6 times as many low peaks as
@@ -237,7 +257,8 @@ pub fn map_trajectory(
     config: &MappingConfig,
 ) -> Result<SonarMap, GridError> {
     let layout = sonar.layout;
-    let config = &config.for_run(sonar, trajectory);
+    let spacing = sampling_spacing_m(sonar, trajectory);
+    let config = &config.for_spacing(layout, spacing);
     let mut timings_s = BTreeMap::new();
     let start = Instant::now();
     let readings = timed("place_readings", &mut timings_s, || {
@@ -304,13 +325,14 @@ pub fn map_trajectory(
         .hough
         .offline_threshold
         .unwrap_or(config.hough.threshold);
-    let peaks = |t: u32| accumulator.peaks(t, config.hough.peak_radius_cells).len();
-    let peaks_kept = peaks(threshold);
+    // Being a local maximum does not depend on the threshold: one pass at half of it.
+    let low = accumulator.peaks(threshold.div_ceil(2), config.hough.peak_radius_cells);
+    let peaks_kept = low.iter().filter(|f| f.votes >= threshold).count();
     let hidden = Hidden {
         cells_known: counting.occupancy.iter().filter(|c| c.is_some()).count(),
         cells_below_floor,
         peaks_kept,
-        peaks_below_threshold: peaks(threshold.div_ceil(2)) - peaks_kept,
+        peaks_below_threshold: low.len() - peaks_kept,
         readings_beyond_range,
     };
     timings_s.extend(online_times);
@@ -329,7 +351,7 @@ pub fn map_trajectory(
         echoes_off_grid,
         readings_unplaced,
         hidden,
-        sampling_spacing_m: sampling_spacing_m(sonar, trajectory),
+        sampling_spacing_m: spacing,
         min_evidence: config.grid.min_evidence,
         timings_s,
     })

@@ -139,13 +139,6 @@ impl LineVotes {
     pub fn offset_m(&self, id: usize) -> f64 {
         -self.reach_m + (id as f64 + 0.5) * DIST_STEP_M
     }
-
-    /// The cell with the most votes (the first of several), and its votes; `None` for an empty
-    /// grid.
-    pub fn strongest(&self) -> Option<(usize, u32)> {
-        let &v = self.counts.iter().max()?;
-        Some((self.counts.iter().position(|&x| x == v).unwrap_or(0), v))
-    }
 }
 
 /// The strongest cell of a [`LineVotes`] grid whose counts only go down, found again after each
@@ -176,7 +169,7 @@ impl Strongest {
         )
     }
 
-    /// The cell with the most votes now (the first of several, as [`LineVotes::strongest`]),
+    /// The cell with the most votes now (the first of several: the lowest index),
     /// `None` when every count is zero. Counts may only have gone down since the last call.
     pub fn next(&mut self, votes: &LineVotes) -> Option<(usize, u32)> {
         while let Some(&(count, Reverse(i))) = self.0.peek() {
@@ -212,10 +205,20 @@ mod tests {
     #[test]
     fn the_strongest_cell_is_the_first_with_the_most_votes() {
         let mut votes = LineVotes::new(2, 3, 0.045);
-        assert_eq!(votes.strongest(), Some((0, 0)));
+        assert_eq!(Strongest::new(&votes).next(&votes), None);
         votes.counts = vec![1, 4, 0, 4, 2, 0];
-        assert_eq!(votes.strongest(), Some((1, 4)));
+        let mut strongest = Strongest::new(&votes);
+        assert_eq!(strongest.next(&votes), Some((1, 4)));
         assert!((votes.offset_m(1) - 0.0).abs() < 1e-12);
-        assert_eq!(LineVotes::new(0, 3, 0.0).strongest(), None);
+        // Counts going down: the heap's stale entries give way to the cells' counts now.
+        votes.counts[1] = 0;
+        votes.counts[3] = 1;
+        assert_eq!(strongest.next(&votes), Some((4, 2)));
+        assert_eq!(
+            Strongest::of_cells(&votes, &[0, 3]).next(&votes),
+            Some((0, 1))
+        );
+        let empty = LineVotes::new(0, 3, 0.0);
+        assert_eq!(Strongest::new(&empty).next(&empty), None);
     }
 }

@@ -109,12 +109,7 @@ pub fn map_and_score(
     metrics.insert("total.us_per_reading".into(), per_reading_us("total"));
     metrics.insert("readings".into(), map.readings as f64);
     metrics.insert("echoes".into(), map.echoes as f64);
-    metrics.insert("echoes.off_grid".into(), map.echoes_off_grid as f64);
-    metrics.extend(map.hidden.metrics().map(|(k, v)| (k.to_string(), v)));
-    metrics.insert("grid.min_evidence".into(), map.min_evidence as f64);
-    if let Some(s) = map.sampling_spacing_m {
-        metrics.insert("sampling.spacing_m".into(), s);
-    }
+    metrics.extend(map.coverage_metrics());
     metrics.insert("readings.unplaced".into(), map.readings_unplaced as f64);
     metrics.insert("walls".into(), map.walls.len() as f64);
     metrics.insert("features".into(), map.features_offline.len() as f64);
