@@ -7,6 +7,7 @@
 
 pub mod aprilgrid;
 mod bundle;
+pub mod charuco;
 pub mod chessboard;
 mod init;
 mod target;
@@ -14,6 +15,7 @@ mod uncertainty;
 mod xcorner;
 
 pub use aprilgrid::{aprilgrid_board_point, aprilgrid_corners};
+pub use charuco::CharucoTarget;
 pub use chessboard::{chessboard_board_corners, chessboard_board_point};
 pub use target::{
     AprilGridTarget, CheckerboardTarget, TagBoardTarget, Target, TargetDetector, TargetView,

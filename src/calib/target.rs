@@ -21,6 +21,8 @@ pub enum Target {
     Checkerboard(CheckerboardTarget),
     /// A grid of ordinary tags (1-bit border) of any family, ids in any order.
     Tagboard(TagBoardTarget),
+    /// OpenCV's ChArUco board: a chessboard with ArUco markers in its white squares.
+    Charuco(crate::calib::CharucoTarget),
 }
 
 /// A board of ordinary tags (`target_type: tagboard`): `tagCols x tagRows` tags of `family`,
@@ -148,16 +150,21 @@ impl TargetDetector {
     pub fn new(target: &Target) -> Result<Self, TagError> {
         let grid = match target {
             Target::Aprilgrid(_) => Some(AprilGridMultiScale::new()?),
-            Target::Checkerboard(_) | Target::Tagboard(_) => None,
+            _ => None,
         };
-        let tags = match target {
-            // Full resolution: a calibration wants every tag and the best corners.
-            Target::Tagboard(b) => Some(Backend::ApriltagC.detector(DetectorConfig {
-                families: vec![b.family],
+        // Full resolution: a calibration wants every tag and the best corners.
+        let family = match target {
+            Target::Tagboard(b) => Some(b.family),
+            Target::Charuco(c) => Some(c.dictionary),
+            _ => None,
+        };
+        let tags = match family {
+            Some(family) => Some(Backend::ApriltagC.detector(DetectorConfig {
+                families: vec![family],
                 decimate: 1.0,
                 ..DetectorConfig::default()
             })?),
-            _ => None,
+            None => None,
         };
         Ok(Self {
             target: target.clone(),
@@ -229,6 +236,27 @@ impl TargetDetector {
                 let miss = tags
                     .is_empty()
                     .then(|| format!("no {} tags of the board", b.family));
+                TargetView {
+                    corners,
+                    tags,
+                    miss,
+                }
+            }
+            (Target::Charuco(c), _) => {
+                let Some(detector) = self.tags.as_mut() else {
+                    return Err(TagError::Invalid(
+                        "no marker detector was made for this target".into(),
+                    ));
+                };
+                let tags = detector.detect(image)?;
+                let corners = c.corners(image, &tags);
+                let miss = corners.is_empty().then(|| {
+                    format!(
+                        "{} {} markers, no corner between two of them",
+                        tags.len(),
+                        c.dictionary
+                    )
+                });
                 TargetView {
                     corners,
                     tags,

@@ -10,6 +10,18 @@ pub(crate) const MAX_REFINE_HALF_WIDTH: i32 = 11;
 /// The X-corner near `(x, y)` within a window of `half_width` pixels; `None` when the window
 /// holds no corner or the estimate runs off it.
 pub(crate) fn refine_x_corner(plane: &Plane, x: f64, y: f64, half_width: i32) -> Option<[f64; 2]> {
+    refine_x_corner_where(plane, x, y, half_width, |_, _| true)
+}
+
+/// [`refine_x_corner`] from the pixels `keep` accepts alone (by their centres): a corner with
+/// other edges close by (a ChArUco corner between its markers) keeps only its own.
+pub(crate) fn refine_x_corner_where<F: Fn(f64, f64) -> bool>(
+    plane: &Plane,
+    x: f64,
+    y: f64,
+    half_width: i32,
+    keep: F,
+) -> Option<[f64; 2]> {
     let hw = half_width.max(1);
     let inv = 1.0 / (hw as f64 * hw as f64);
     let (mut cx, mut cy) = (x, y);
@@ -21,6 +33,9 @@ pub(crate) fn refine_x_corner(plane: &Plane, x: f64, y: f64, half_width: i32) ->
         for qy in iy - hw as i64..=iy + hw as i64 {
             for qx in ix - hw as i64..=ix + hw as i64 {
                 if qx < 1 || qy < 1 || qx + 1 >= plane.w as i64 || qy + 1 >= plane.h as i64 {
+                    continue;
+                }
+                if !keep(qx as f64, qy as f64) {
                     continue;
                 }
                 let (ux, uy) = (qx as usize, qy as usize);

@@ -21,9 +21,10 @@ pub struct Detect {
     /// Detector backend.
     #[arg(long, value_enum, default_value = "apriltag-c")]
     backend: Backend,
-    /// Tag family: tag36h11, tag25h9, tag16h5, tagStandard41h12, or aprilgrid36h11 (alias
+    /// Tag family: tag36h11, tag25h9, tag16h5, tagStandard41h12, aprilgrid36h11 (alias
     /// tag36h11b2: Kalibr's AprilGrid tags, with their 2-bit border; searched at their own
-    /// decimations) (repeat for several).
+    /// decimations), or an OpenCV ArUco dictionary by its name (DICT_4X4_50 ... DICT_7X7_1000)
+    /// (repeat for several).
     #[arg(long, default_value = "tag36h11")]
     family: Vec<String>,
     /// Decimation before quad detection (1 = full resolution; default: the survey's, 1.5 with
@@ -31,7 +32,8 @@ pub struct Detect {
     #[arg(long)]
     decimate: Option<f32>,
     /// Bit errors corrected (default: each family's safe number: 2 for tag36h11 and
-    /// tagStandard41h12, 1 for tag25h9, 0 for tag16h5).
+    /// tagStandard41h12, 1 for tag25h9, 0 for tag16h5; for ArUco OpenCV's 60% of the
+    /// dictionary's correctable bits, at most 2: 0 for 4x4, 1 for 5x5, 2 for 6x6 and 7x7).
     #[arg(long)]
     max_hamming: Option<usize>,
     /// Turn edge refinement off.

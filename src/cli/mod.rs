@@ -358,11 +358,8 @@ pub(crate) fn families(names: &[String]) -> Result<Vec<TagFamily>, UsageError> {
     names
         .iter()
         .map(|f| {
-            TagFamily::from_name(f).ok_or_else(|| {
-                UsageError(format!(
-                    "--family {f}: expected tag36h11, tag25h9, tag16h5, tagStandard41h12 or aprilgrid36h11 (Kalibr's AprilGrid tags, also called tag36h11b2)"
-                ))
-            })
+            TagFamily::from_name(f)
+                .ok_or_else(|| UsageError(format!("--family {f}: expected {}", TagFamily::NAMES)))
         })
         .collect()
 }

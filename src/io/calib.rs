@@ -22,6 +22,7 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
         "aprilgrid" => Target::Aprilgrid(parse_yaml(path, &text)?),
         "checkerboard" => Target::Checkerboard(parse_yaml(path, &text)?),
         "tagboard" => Target::Tagboard(parse_yaml(path, &text)?),
+        "charuco" => Target::Charuco(parse_yaml(path, &text)?),
         other => {
             let line = text
                 .lines()
@@ -31,7 +32,7 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
                 path,
                 line,
                 format!(
-                    "target_type `{other}`: expected `aprilgrid`, `checkerboard` or `tagboard`"
+                    "target_type `{other}`: expected `aprilgrid`, `checkerboard`, `tagboard` or `charuco`"
                 ),
             ));
         }
@@ -45,6 +46,10 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
         }
         Target::Tagboard(b) => {
             b.tag_cols > 0 && b.tag_rows > 0 && b.tag_size > 0.0 && b.tag_spacing >= 0.0
+        }
+        Target::Charuco(c) => {
+            c.check().map_err(|e| IoError::content(path, e))?;
+            true
         }
     };
     if !ok {
@@ -151,11 +156,11 @@ pub fn load_corner_csvs(dir: &Path) -> Result<ViewCorners, IoError> {
 /// A tag board's family must be one the tag detectors find, and its `ids` one distinct id of
 /// that family per position.
 fn check_tag_board(path: &Path, b: &crate::calib::TagBoardTarget) -> Result<(), IoError> {
-    if !crate::visual::tags::DETECTABLE_FAMILIES.contains(&b.family) {
+    if !b.family.is_detectable() {
         return Err(IoError::content(
             path,
             format!(
-                "family {}: a tag board takes an ordinary family (tag36h11, tag25h9, tag16h5, tagStandard41h12); Kalibr's AprilGrid is target_type aprilgrid",
+                "family {}: a tag board takes an ordinary family (tag36h11, tag25h9, tag16h5, tagStandard41h12, an ArUco DICT_...); Kalibr's AprilGrid is target_type aprilgrid",
                 b.family
             ),
         ));
@@ -208,6 +213,7 @@ pub fn save_corner_csvs(dir: &Path, views: &ViewCorners, target: &Target) -> Res
         Target::Aprilgrid(g) => (g.tag_rows, g.tag_cols, g.tag_size, g.tag_spacing),
         Target::Checkerboard(c) => (c.target_rows, c.target_cols, c.col_spacing_m, 0.0),
         Target::Tagboard(b) => (b.tag_rows, b.tag_cols, b.tag_size, b.tag_spacing),
+        Target::Charuco(c) => (c.inner().1, c.inner().0, c.square_length, 0.0),
     };
     for (index, (name, corners)) in views.iter().enumerate() {
         let ts = name

@@ -57,6 +57,18 @@ pub enum Board {
         /// Square height, metres.
         row_m: f64,
     },
+    /// OpenCV's ChArUco board.
+    Charuco {
+        /// The board.
+        target: crate::calib::CharucoTarget,
+        /// Cells across a marker's black square.
+        cells_across: usize,
+        /// Per marker square (the target's order), `true` where a cell of its marker's black
+        /// square is white (row-major from the top of the marker as printed).
+        cells: Vec<Vec<bool>>,
+        /// Per square (row-major from the top-left), its marker's index in `cells`.
+        marker_of_square: Vec<Option<usize>>,
+    },
 }
 
 impl Board {
@@ -100,26 +112,8 @@ impl Board {
     /// A board of ordinary tags ([`crate::calib::TagBoardTarget`]): each tag's black square with
     /// its data cells, as the AprilTag library prints it, in the board's id layout.
     pub fn tag_board(target: &crate::calib::TagBoardTarget) -> Result<Self, RenderError> {
-        let family = target.family;
         let ids = target.layout();
-        let mut cells_across = 0;
-        let cells = ids
-            .iter()
-            .map(|&id| {
-                let code = family.code_image(id).ok_or(RenderError::IdOutOfRange {
-                    id,
-                    family,
-                    count: family.code_count(),
-                })?;
-                // The black square inside the library's white ring.
-                let (tw, n) = (code.total_cells, code.black_square_cells);
-                let border = (tw - n) / 2;
-                cells_across = n;
-                Ok((0..n * n)
-                    .map(|i| code.white[(border + i / n) * tw + border + i % n])
-                    .collect())
-            })
-            .collect::<Result<_, RenderError>>()?;
+        let (cells_across, cells) = black_squares(target.family, &ids, false)?;
         Ok(Self::TagGrid {
             cols: target.tag_cols,
             rows: target.tag_rows,
@@ -129,6 +123,25 @@ impl Board {
             cells,
             ids,
             gap_squares: false,
+        })
+    }
+
+    /// A ChArUco board ([`crate::calib::CharucoTarget`]): the chessboard's black squares and a
+    /// marker as OpenCV prints it in each white square.
+    pub fn charuco(target: &crate::calib::CharucoTarget) -> Result<Self, RenderError> {
+        // OpenCV prints its AprilTag dictionaries' tags upside down.
+        let turned = target.marker_turns() == 2;
+        let (cells_across, cells) = black_squares(target.dictionary, &target.layout(), turned)?;
+        let squares = target.marker_squares();
+        let marker_of_square = (0..target.squares_y)
+            .flat_map(|r| (0..target.squares_x).map(move |c| (c, r)))
+            .map(|s| squares.iter().position(|&q| q == s))
+            .collect();
+        Ok(Self::Charuco {
+            target: target.clone(),
+            cells_across,
+            cells,
+            marker_of_square,
         })
     }
 
@@ -163,6 +176,12 @@ impl Board {
             } => (0..cols * rows)
                 .map(|k| (k, chessboard_board_point(k, *cols, *col_m, *row_m)))
                 .collect(),
+            Self::Charuco { target, .. } => {
+                let (cols, rows) = target.inner();
+                (0..cols * rows)
+                    .filter_map(|k| Some((k, target.corner_point(k)?)))
+                    .collect()
+            }
         }
     }
 
@@ -170,7 +189,7 @@ impl Board {
     fn camera_side(&self) -> f64 {
         match self {
             Self::TagGrid { .. } => 1.0,
-            Self::Chessboard { .. } => -1.0,
+            Self::Chessboard { .. } | Self::Charuco { .. } => -1.0,
         }
     }
 
@@ -204,6 +223,15 @@ impl Board {
                 (*cols as f64 + 1.0) * col_m,
                 (*rows as f64 + 1.0) * row_m,
             ],
+            Self::Charuco { target, .. } => {
+                let margin = 0.5 * target.square_length;
+                [
+                    -margin,
+                    -margin,
+                    target.squares_x as f64 * target.square_length + margin,
+                    target.squares_y as f64 * target.square_length + margin,
+                ]
+            }
         }
     }
 
@@ -263,9 +291,79 @@ impl Board {
                 // The square between corners (0, 0) and (1, 1) is dark.
                 on && (i + j).rem_euclid(2) == 0
             }
+            Self::Charuco {
+                target,
+                cells_across,
+                cells,
+                marker_of_square,
+            } => {
+                let l = target.square_length;
+                let (c, r) = ((x / l).floor(), (y / l).floor());
+                if c < 0.0
+                    || r < 0.0
+                    || c >= target.squares_x as f64
+                    || r >= target.squares_y as f64
+                {
+                    false
+                } else {
+                    let (c, r) = (c as u32, r as u32);
+                    match marker_of_square[(r * target.squares_x + c) as usize] {
+                        None => !target.holds_marker(c, r),
+                        Some(marker) => {
+                            let m = target.marker_length;
+                            let margin = 0.5 * (l - m);
+                            let lx = x - c as f64 * l - margin;
+                            let ly = y - r as f64 * l - margin;
+                            if (0.0..m).contains(&lx) && (0.0..m).contains(&ly) {
+                                let n = *cells_across;
+                                let cell = m / n as f64;
+                                // y grows down the board as printed.
+                                let (mx, my) = (
+                                    ((lx / cell) as usize).min(n - 1),
+                                    ((ly / cell) as usize).min(n - 1),
+                                );
+                                !cells[marker][my * n + mx]
+                            } else {
+                                false
+                            }
+                        }
+                    }
+                }
+            }
         };
         Some(if black { TAG_BLACK } else { TAG_WHITE })
     }
+}
+
+/// Each tag's black square as printed (`true` where white, row-major from the top; turned
+/// upside down if `turned`), inside the library's white ring, and its cells across.
+fn black_squares(
+    family: TagFamily,
+    ids: &[u32],
+    turned: bool,
+) -> Result<(usize, Vec<Vec<bool>>), RenderError> {
+    let mut cells_across = 0;
+    let cells = ids
+        .iter()
+        .map(|&id| {
+            let code = family.code_image(id).ok_or(RenderError::IdOutOfRange {
+                id,
+                family,
+                count: family.code_count(),
+            })?;
+            let (tw, n) = (code.total_cells, code.black_square_cells);
+            let border = (tw - n) / 2;
+            cells_across = n;
+            let mut cells: Vec<bool> = (0..n * n)
+                .map(|i| code.white[(border + i / n) * tw + border + i % n])
+                .collect();
+            if turned {
+                cells.reverse();
+            }
+            Ok(cells)
+        })
+        .collect::<Result<_, RenderError>>()?;
+    Ok((cells_across, cells))
 }
 
 /// True position of one board corner in a rendered view.

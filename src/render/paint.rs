@@ -2,7 +2,6 @@
 //! just in front of their wall) and the procedural texture of walls and floors.
 
 use super::*;
-use crate::visual::tags::DETECTABLE_FAMILIES;
 use crate::world::Tag;
 use nalgebra::Vector3;
 
@@ -32,12 +31,13 @@ pub(super) const TAG_STANDOFF_M: f64 = 0.001;
 pub(super) const QUIET_ZONE_CELLS: i64 = 2;
 
 pub(super) fn tag_paint(tag: &Tag) -> Result<TagPaint, RenderError> {
-    let family = Some(tag.family)
-        .filter(|f| DETECTABLE_FAMILIES.contains(f))
-        .ok_or(RenderError::UnknownFamily {
-            id: tag.id,
-            family: tag.family,
-        })?;
+    let family =
+        Some(tag.family)
+            .filter(|f| f.is_detectable())
+            .ok_or(RenderError::UnknownFamily {
+                id: tag.id,
+                family: tag.family,
+            })?;
     let image = family
         .code_image(tag.id)
         .ok_or_else(|| RenderError::IdOutOfRange {

@@ -328,8 +328,8 @@ pub fn calibrate(
 }
 
 /// Every view's corners as `corners/<camera>/<view>.csv` (EuRoC / yac CSV, which
-/// `--corners-left`, `--corners-right` and `--corners` read back), and for a chessboard mrcal's
-/// `corners.vnl` of every image.
+/// `--corners-left`, `--corners-right` and `--corners` read back), and for a chessboard or a
+/// ChArUco board mrcal's `corners.vnl` of every image.
 fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> Result<()> {
     let stereo = !views.right.is_empty();
     let sides = if stereo {
@@ -340,7 +340,12 @@ fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> R
     for (camera, corners) in &sides {
         io::save_corner_csvs(&dir.path(&format!("corners/{camera}")), corners, target)?;
     }
-    if let Target::Checkerboard(board) = target {
+    let grid = match target {
+        Target::Checkerboard(board) => Some((board.target_cols, board.target_rows)),
+        Target::Charuco(board) => Some(board.inner()),
+        _ => None,
+    };
+    if let Some((cols, rows)) = grid {
         let images: Vec<(String, &[Corner])> = views
             .per_image
             .iter()
@@ -354,12 +359,7 @@ fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> R
                 (r.image.clone(), corners)
             })
             .collect();
-        io::save_corners_vnl(
-            &dir.path("corners.vnl"),
-            &images,
-            board.target_cols,
-            board.target_rows,
-        )?;
+        io::save_corners_vnl(&dir.path("corners.vnl"), &images, cols, rows)?;
     }
     Ok(())
 }

@@ -153,6 +153,7 @@ pub fn render_calibration_sequence(
             row_m: c.row_spacing_m,
         },
         Target::Tagboard(b) => Board::tag_board(b)?,
+        Target::Charuco(c) => Board::charuco(c)?,
     };
     let poses = calibration_poses(&rig, &board, n, request.seed);
     if poses.len() < n {

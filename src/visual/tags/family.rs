@@ -1,28 +1,45 @@
 //! The tag families: their names, the code tables both backends decode with, and each tag's
 //! printed pattern (what the renderer draws).
 
+use super::aruco::ArucoDictionary;
 use serde::{Deserialize, Serialize};
 
-/// The tag families: the four both backends detect, and Kalibr's AprilGrid tags. Written in
-/// files by the AprilTag library's names (`tag36h11`, ...), and ordered by them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// The tag families: the four AprilTag families and OpenCV's ArUco dictionaries, which both
+/// backends detect, and Kalibr's AprilGrid tags. Written in files by the AprilTag library's
+/// names (`tag36h11`, ...) and OpenCV's (`DICT_4X4_50`, ...), and ordered by them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum TagFamily {
     /// tag36h11, the default: the family of the paper's landmarks and of Kalibr's AprilGrid.
-    #[serde(rename = "tag36h11")]
     Tag36h11,
     /// tag25h9.
-    #[serde(rename = "tag25h9")]
     Tag25h9,
     /// tag16h5.
-    #[serde(rename = "tag16h5")]
     Tag16h5,
     /// tagStandard41h12.
-    #[serde(rename = "tagStandard41h12")]
     TagStandard41h12,
     /// Kalibr's AprilGrid tags: tag36h11's codes with a 2-bit black border, found by the
     /// AprilGrid detector ([`super::AprilGridDetector`]) alone.
-    #[serde(rename = "aprilgrid36h11")]
     Aprilgrid36h11,
+    /// One of OpenCV's ArUco dictionaries (`DICT_4X4_50` ... `DICT_7X7_1000`).
+    Aruco(ArucoDictionary),
+}
+
+impl Serialize for TagFamily {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for TagFamily {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        TagFamily::from_name(&name).ok_or_else(|| {
+            serde::de::Error::custom(format!(
+                "unknown tag family {name:?}: expected {}",
+                TagFamily::NAMES
+            ))
+        })
+    }
 }
 
 impl PartialOrd for TagFamily {
@@ -70,7 +87,19 @@ impl TagFamily {
             TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 | TagFamily::TagStandard41h12 => 2,
             TagFamily::Tag25h9 => 1,
             TagFamily::Tag16h5 => 0,
+            TagFamily::Aruco(d) => d.default_max_hamming(),
         }
+    }
+
+    /// What `--family` and the files take, for error messages.
+    pub const NAMES: &'static str = "tag36h11, tag25h9, tag16h5, tagStandard41h12, \
+        aprilgrid36h11 (Kalibr's AprilGrid tags, also tag36h11b2) or an OpenCV ArUco dictionary \
+        (DICT_4X4_50 ... DICT_7X7_1000)";
+
+    /// Whether the tag detectors find it (all but Kalibr's AprilGrid tags, which the AprilGrid
+    /// detector finds).
+    pub fn is_detectable(&self) -> bool {
+        !matches!(self, TagFamily::Aprilgrid36h11)
     }
 
     /// The name the AprilTag library uses.
@@ -81,19 +110,31 @@ impl TagFamily {
             TagFamily::Tag16h5 => "tag16h5",
             TagFamily::TagStandard41h12 => "tagStandard41h12",
             TagFamily::Aprilgrid36h11 => "aprilgrid36h11",
+            TagFamily::Aruco(d) => d.name(),
         }
     }
 
-    /// A family from its name: the library's, or `aprilgrid36h11` (also `tag36h11b2`, the
-    /// 2-bit-border name) for Kalibr's AprilGrid tags.
+    /// A family from its name: the library's, `aprilgrid36h11` (also `tag36h11b2`, the
+    /// 2-bit-border name) for Kalibr's AprilGrid tags, or OpenCV's name of an ArUco dictionary
+    /// (`DICT_APRILTAG_16h5`, `_25h9` and `_36h11` are the AprilTag families).
     pub fn from_name(name: &str) -> Option<Self> {
-        if name == "tag36h11b2" {
-            return Some(TagFamily::Aprilgrid36h11);
+        match name {
+            "tag36h11b2" => return Some(TagFamily::Aprilgrid36h11),
+            "DICT_APRILTAG_16h5" => return Some(TagFamily::Tag16h5),
+            "DICT_APRILTAG_25h9" => return Some(TagFamily::Tag25h9),
+            "DICT_APRILTAG_36h11" => return Some(TagFamily::Tag36h11),
+            _ => {}
         }
         DETECTABLE_FAMILIES
             .into_iter()
             .chain([TagFamily::Aprilgrid36h11])
             .find(|f| f.name() == name)
+            .or_else(|| {
+                name.to_ascii_uppercase()
+                    .starts_with("DICT_")
+                    .then(|| ArucoDictionary::from_name(name).map(TagFamily::Aruco))
+                    .flatten()
+            })
     }
 
     pub(super) fn kornia(&self) -> kornia_apriltag::family::TagFamilyKind {
@@ -103,11 +144,18 @@ impl TagFamily {
             TagFamily::Tag25h9 => K::Tag25H9,
             TagFamily::Tag16h5 => K::Tag16H5,
             TagFamily::TagStandard41h12 => K::TagStandard41H12,
+            TagFamily::Aruco(_) => match self.tables() {
+                Some(t) => K::Custom(std::sync::Arc::new(t.clone())),
+                None => K::Tag36H11,
+            },
         }
     }
 
     /// The C library's family (null if its constructor fails); free it with [`Self::c_destroy`].
     pub(super) fn c_create(&self) -> *mut apriltag_sys::apriltag_family_t {
+        if let TagFamily::Aruco(d) = self {
+            return d.c_create();
+        }
         // SAFETY: the library's constructors take nothing and return an owned family.
         unsafe {
             match self {
@@ -115,6 +163,7 @@ impl TagFamily {
                 TagFamily::Tag25h9 => apriltag_sys::tag25h9_create(),
                 TagFamily::Tag16h5 => apriltag_sys::tag16h5_create(),
                 TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_create(),
+                TagFamily::Aruco(_) => std::ptr::null_mut(),
             }
         }
     }
@@ -133,6 +182,7 @@ impl TagFamily {
                 TagFamily::Tag25h9 => apriltag_sys::tag25h9_destroy(family),
                 TagFamily::Tag16h5 => apriltag_sys::tag16h5_destroy(family),
                 TagFamily::TagStandard41h12 => apriltag_sys::tagStandard41h12_destroy(family),
+                TagFamily::Aruco(d) => d.c_destroy(family),
             }
         }
     }
@@ -160,11 +210,17 @@ impl TagFamily {
         static T16: OnceLock<Option<K>> = OnceLock::new();
         static T41: OnceLock<Option<K>> = OnceLock::new();
         type Cached = OnceLock<Option<K>>;
+        static ARUCO: [Cached; 16] = [const { OnceLock::new() }; 16];
+        if let TagFamily::Aruco(d) = self {
+            let index = ArucoDictionary::all().position(|a| a == *d)?;
+            return ARUCO.get(index)?.get_or_init(|| d.kornia_family()).as_ref();
+        }
         let (cell, make): (&Cached, fn() -> Option<K>) = match self {
             TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => (&T36, || K::tag36_h11().ok()),
             TagFamily::Tag25h9 => (&T25, || K::tag25_h9().ok()),
             TagFamily::Tag16h5 => (&T16, || K::tag16_h5().ok()),
             TagFamily::TagStandard41h12 => (&T41, || K::tagstandard41_h12().ok()),
+            TagFamily::Aruco(_) => return None,
         };
         cell.get_or_init(make).as_ref()
     }

@@ -18,6 +18,9 @@
 //! C library's own test photos in `tests/detect_real.rs`).
 
 mod aprilgrid;
+mod aruco;
+#[rustfmt::skip]
+mod aruco_codes;
 mod c;
 mod decode;
 pub(crate) mod edges;
@@ -28,6 +31,7 @@ pub(crate) mod quads;
 pub use aprilgrid::{
     AprilGridDetector, AprilGridMultiScale, APRILGRID_BORDER_CELLS, APRILGRID_DECIMATIONS,
 };
+pub use aruco::ArucoDictionary;
 pub use c::CDetector;
 pub use family::{TagFamily, TagId, TagImage, DETECTABLE_FAMILIES};
 pub use kornia::KorniaDetector;
@@ -45,11 +49,7 @@ fn to_centre_convention(p: [f64; 2]) -> [f64; 2] {
 impl DetectorConfig {
     /// An error for a family only the AprilGrid detector finds.
     fn check_families(&self) -> Result<(), TagError> {
-        match self
-            .families
-            .iter()
-            .find(|f| !DETECTABLE_FAMILIES.contains(f))
-        {
+        match self.families.iter().find(|f| !f.is_detectable()) {
             Some(f) => Err(TagError::Invalid(format!(
                 "family {f}: found by the AprilGrid detector, not the tag detectors"
             ))),
@@ -260,6 +260,7 @@ fn border_cells(family: TagFamily) -> Option<f64> {
         TagFamily::Tag36h11 => Some(8.0),
         TagFamily::Tag25h9 => Some(7.0),
         TagFamily::Tag16h5 => Some(6.0),
+        TagFamily::Aruco(d) => Some(d.cells() as f64 + 2.0),
         TagFamily::TagStandard41h12 | TagFamily::Aprilgrid36h11 => None,
     }
 }

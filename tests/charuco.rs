@@ -1,0 +1,181 @@
+//! ChArUco boards (issue 32, item 6): OpenCV's board, its markers read with OpenCV's ArUco
+//! dictionaries.
+//! - Views drawn by OpenCV itself (`scripts/opencv_charuco.py`: its `CharucoBoard` drawing seen
+//!   by a pinhole camera, one view cut off by the image's edge, one upside down, one of a board
+//!   of OpenCV's `DICT_APRILTAG_36h11`, whose tags OpenCV draws upside down), in
+//!   `tests/fixtures/charuco`: every corner found has OpenCV's id and lies within 0.15 px of the
+//!   truth (median within 0.03 px), and at least as many corners are found as OpenCV's own
+//!   `CharucoDetector` finds in the same images (more: a corner whose second marker the image's
+//!   edge cuts is kept).
+//! - A rendered sequence of a ChArUco board calibrates the rig (intrinsics within 0.1% of the
+//!   truth).
+
+use serde_json::Value;
+use std::path::Path;
+use stereotag::calib::{Target, TargetDetector};
+
+const FIXTURES: &str = "tests/fixtures/charuco";
+
+#[test]
+fn opencvs_charuco_views_give_the_true_corners_with_opencvs_ids() {
+    let meta: Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(FIXTURES).join("views.json")).unwrap(),
+    )
+    .unwrap();
+    let mut all_errors = Vec::new();
+    eprintln!("view | in view | OpenCV finds | we find | median px | worst px");
+    for (name, view) in meta["views"].as_object().unwrap() {
+        let board = format!("{}.yaml", view["board"].as_str().unwrap());
+        let target = stereotag::io::load_target(&Path::new(FIXTURES).join(board)).unwrap();
+        assert!(matches!(target, Target::Charuco(_)));
+        let mut detector = TargetDetector::new(&target).unwrap();
+        let image = image::open(Path::new(FIXTURES).join(format!("{name}.png")))
+            .unwrap()
+            .to_luma8();
+        let found = detector.detect(&image).unwrap();
+        let truth: std::collections::BTreeMap<u32, [f64; 2]> = view["truth"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| {
+                let p = &c["px"];
+                (
+                    c["id"].as_u64().unwrap() as u32,
+                    [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()],
+                )
+            })
+            .collect();
+        let mut errors: Vec<f64> = found
+            .corners
+            .iter()
+            .map(|c| {
+                let t = truth
+                    .get(&c.id)
+                    .unwrap_or_else(|| panic!("{name}: corner {} is not in view", c.id));
+                (c.px[0] - t[0]).hypot(c.px[1] - t[1])
+            })
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        let opencv = view["opencv"].as_array().unwrap().len();
+        eprintln!(
+            "{name} | {} | {opencv} | {} | {:.3} | {:.3}",
+            truth.len(),
+            errors.len(),
+            errors[errors.len() / 2],
+            errors[errors.len() - 1]
+        );
+        assert!(
+            errors.len() >= opencv,
+            "{name}: {} < {opencv}",
+            errors.len()
+        );
+        assert!(errors[errors.len() - 1] <= 0.15, "{name}: {errors:?}");
+        all_errors.extend(errors);
+    }
+    all_errors.sort_by(f64::total_cmp);
+    let median = all_errors[all_errors.len() / 2];
+    eprintln!(
+        "all views: {} corners, median {median:.3} px",
+        all_errors.len()
+    );
+    assert!(median <= 0.03, "{median}");
+}
+
+#[test]
+fn a_rendered_charuco_board_calibrates_the_rig() {
+    use stereotag::progress::Silent;
+    use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
+    use stereotag::workflow::render::{render_calibration_sequence, RenderRequest};
+    let target = Path::new("calibration/targets/charuco_11x8.yaml");
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    render_calibration_sequence(
+        &RenderRequest {
+            rig: Path::new("calibration/rigs/default.yaml"),
+            out: &seq,
+            samples: None,
+            every_sample: false,
+            motion: None,
+            seed: 1,
+            force: false,
+        },
+        24,
+        target,
+        &Silent,
+    )
+    .unwrap();
+    let truth = stereotag::io::load_rig(&seq.join("rig.yaml")).unwrap();
+    let (left, right) = (
+        format!("{}/left/*.png", seq.display()),
+        format!("{}/right/*.png", seq.display()),
+    );
+    let out = dir.path().join("cal");
+    calibrate(
+        &CalibrateRequest::new(
+            target,
+            CalibrationInput::Images {
+                left: &left,
+                right: &right,
+            },
+            &out,
+        ),
+        &Silent,
+    )
+    .unwrap();
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let m = &report["metrics"];
+    eprintln!("ChArUco 11x8: {m}; left {}", report["left"]);
+    assert!(m["rms_px"].as_f64().unwrap() <= 0.1, "{m}");
+    assert!(m["views_used"].as_u64().unwrap() >= 22, "{m}");
+    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
+        for (k, v) in [("fx", t.fx), ("fy", t.fy), ("cx", t.cx), ("cy", t.cy)] {
+            let e = report[cam][k].as_f64().unwrap();
+            assert!((e - v).abs() <= 1e-3 * v, "{cam}.{k} {e} vs {v}");
+        }
+    }
+    let baseline = m["baseline_m"].as_f64().unwrap();
+    let true_baseline = truth.right_from_left.translation.vector.norm();
+    assert!((baseline - true_baseline).abs() <= 1e-3 * true_baseline);
+    // Markers counted per image; the corners out as EuRoC CSV and mrcal's corners.vnl (7 x 10
+    // inner corners an image).
+    assert!(
+        report["images"][0]["tags"].as_u64().unwrap() >= 40,
+        "{}",
+        report["images"][0]
+    );
+    let vnl = std::fs::read_to_string(out.join("corners.vnl")).unwrap();
+    assert_eq!(vnl.lines().count(), 1 + 48 * 70);
+    assert!(out.join("corners/left").read_dir().unwrap().count() >= 22);
+}
+
+#[test]
+fn both_backends_read_opencvs_aruco_markers_alike() {
+    use stereotag::visual::tags::{Backend, DetectorConfig, TagFamily};
+    let family = TagFamily::from_name("DICT_5X5_100").unwrap();
+    let image = image::open(Path::new(FIXTURES).join("upside_down.png"))
+        .unwrap()
+        .to_luma8();
+    let detect = |backend: Backend| {
+        backend
+            .detector(DetectorConfig {
+                families: vec![family],
+                decimate: 1.0,
+                ..DetectorConfig::default()
+            })
+            .unwrap()
+            .detect(&image)
+            .unwrap()
+    };
+    let (c, k) = (detect(Backend::ApriltagC), detect(Backend::Kornia));
+    // The board's 24 markers (ids 0-23), upside down, and nothing else.
+    let ids: Vec<u32> = c.iter().map(|d| d.id).collect();
+    assert_eq!(ids, (0..24).collect::<Vec<_>>());
+    assert_eq!(c.len(), k.len());
+    for (a, b) in c.iter().zip(&k) {
+        assert_eq!(a.id, b.id);
+        for (p, q) in a.corners_px.iter().zip(&b.corners_px) {
+            assert!((p[0] - q[0]).hypot(p[1] - q[1]) < 0.01, "{a:?} {b:?}");
+        }
+    }
+}
