@@ -179,3 +179,88 @@ fn both_backends_read_opencvs_aruco_markers_alike() {
         }
     }
 }
+
+/// Two ChArUco boards side by side, told apart by their markers' ids.
+const TWO_BOARDS: &str = "target_type: boards
+boards:
+  - {target_type: charuco, dictionary: DICT_4X4_50, squaresX: 5, squaresY: 4, squareLength: 0.04, markerLength: 0.03}
+  - {target_type: charuco, dictionary: DICT_4X4_50, squaresX: 5, squaresY: 4, squareLength: 0.04, markerLength: 0.03,
+     ids: [10, 11, 12, 13, 14, 15, 16, 17, 18, 19]}
+";
+
+#[test]
+fn several_boards_in_one_view_each_get_their_pose() {
+    use stereotag::progress::Silent;
+    use stereotag::workflow::calibrate::{calibrate, CalibrateRequest, CalibrationInput};
+    use stereotag::workflow::render::{render_calibration_sequence, RenderRequest};
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("two.yaml");
+    std::fs::write(&target, TWO_BOARDS).unwrap();
+    let seq = dir.path().join("seq");
+    render_calibration_sequence(
+        &RenderRequest {
+            rig: Path::new("calibration/rigs/default.yaml"),
+            out: &seq,
+            samples: None,
+            every_sample: false,
+            motion: None,
+            seed: 3,
+            force: false,
+        },
+        24,
+        &target,
+        &Silent,
+    )
+    .unwrap();
+    let truth = stereotag::io::load_rig(&seq.join("rig.yaml")).unwrap();
+    // Both boards in every image, 12 corners each.
+    let image = image::open(seq.join("left/000000.png")).unwrap().to_luma8();
+    let t = stereotag::io::load_target(&target).unwrap();
+    let view = TargetDetector::new(&t).unwrap().detect(&image).unwrap();
+    let on_second = view
+        .corners
+        .iter()
+        .filter(|c| c.id >= stereotag::calib::BOARD_ID_STRIDE)
+        .count();
+    assert_eq!((view.corners.len(), on_second), (24, 12));
+    let (left, right) = (
+        format!("{}/left/*.png", seq.display()),
+        format!("{}/right/*.png", seq.display()),
+    );
+    let out = dir.path().join("cal");
+    calibrate(
+        &CalibrateRequest::new(
+            &target,
+            CalibrationInput::Images {
+                left: &left,
+                right: &right,
+            },
+            &out,
+        ),
+        &Silent,
+    )
+    .unwrap();
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let m = &report["metrics"];
+    eprintln!("two boards: {m}; left {}", report["left"]);
+    // Each board of each view is a view of its own (of 48, those with all 12 corners seen in
+    // both cameras).
+    assert!(m["views_used"].as_u64().unwrap() >= 36, "{m}");
+    assert!(m["rms_px"].as_f64().unwrap() <= 0.1, "{m}");
+    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
+        for (k, v) in [("fx", t.fx), ("fy", t.fy), ("cx", t.cx), ("cy", t.cy)] {
+            let e = report[cam][k].as_f64().unwrap();
+            assert!((e - v).abs() <= 1e-3 * v, "{cam}.{k} {e} vs {v}");
+        }
+    }
+    assert_eq!(report["images"][0]["used"], Value::Bool(true));
+    // A tag on two boards is refused, naming the file.
+    let bad = dir.path().join("bad.yaml");
+    std::fs::write(&bad, TWO_BOARDS.replace("ids: [10,", "ids: [9,")).unwrap();
+    let err = stereotag::io::load_target(&bad).unwrap_err().to_string();
+    assert!(
+        err.contains("bad.yaml") && err.contains("both hold DICT_4X4_50 tag 9"),
+        "{err}"
+    );
+}

@@ -18,7 +18,8 @@ pub use aprilgrid::{aprilgrid_board_point, aprilgrid_corners};
 pub use charuco::CharucoTarget;
 pub use chessboard::{chessboard_board_corners, chessboard_board_point};
 pub use target::{
-    AprilGridTarget, CheckerboardTarget, TagBoardTarget, Target, TargetDetector, TargetView,
+    AprilGridTarget, BoardsTarget, CheckerboardTarget, TagBoardTarget, Target, TargetDetector,
+    TargetView, BOARD_ID_STRIDE,
 };
 pub use uncertainty::{
     projection_uncertainty, ProjectionUncertainty, UNCERTAINTY_COLS, UNCERTAINTY_ROWS,

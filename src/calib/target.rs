@@ -6,7 +6,7 @@ use crate::calib::aprilgrid::refine_aprilgrid;
 use crate::calib::chessboard::detect_chessboard;
 use crate::calib::{aprilgrid_corners, chessboard_board_corners, Corner};
 use crate::visual::tags::{
-    AprilGridMultiScale, Backend, DetectorConfig, TagDetection, TagDetector, TagError,
+    AprilGridMultiScale, Backend, DetectorConfig, TagDetection, TagDetector, TagError, TagFamily,
 };
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
@@ -23,6 +23,52 @@ pub enum Target {
     Tagboard(TagBoardTarget),
     /// OpenCV's ChArUco board: a chessboard with ArUco markers in its white squares.
     Charuco(crate::calib::CharucoTarget),
+    /// Several boards seen together (tag boards and ChArUco boards, each tag on one board
+    /// alone), each its own rigid board: every board seen in a view gets its own pose.
+    Boards(BoardsTarget),
+}
+
+/// Corner ids of several boards: board `k`'s corner `id` is `k · BOARD_ID_STRIDE + id`.
+pub const BOARD_ID_STRIDE: u32 = 1 << 20;
+
+/// Several boards (`target_type: boards`, `boards:` a list of tag board and ChArUco targets).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoardsTarget {
+    /// The boards, in the order their corner ids are offset.
+    pub boards: Vec<Target>,
+    #[serde(default, rename = "target_type", skip_serializing)]
+    kind: Option<serde::de::IgnoredAny>,
+}
+
+impl Target {
+    /// The boards: several boards' list, else the target itself.
+    pub fn boards(&self) -> Vec<&Target> {
+        match self {
+            Target::Boards(b) => b.boards.iter().collect(),
+            other => vec![other],
+        }
+    }
+
+    /// The tag family whose tags the board's corners come from (tag and ChArUco boards).
+    pub fn family(&self) -> Option<TagFamily> {
+        match self {
+            Target::Tagboard(b) => Some(b.family),
+            Target::Charuco(c) => Some(c.dictionary),
+            _ => None,
+        }
+    }
+
+    /// Whether `tag` is one of this board's tags.
+    pub fn holds_tag(&self, tag: &TagDetection) -> bool {
+        match self {
+            Target::Tagboard(b) => tag.family == b.family && b.board_point(tag.id * 4).is_some(),
+            Target::Charuco(c) => tag.family == c.dictionary && c.layout().contains(&tag.id),
+            Target::Aprilgrid(_) => tag.family == TagFamily::Aprilgrid36h11,
+            Target::Checkerboard(_) => false,
+            Target::Boards(b) => b.boards.iter().any(|t| t.holds_tag(tag)),
+        }
+    }
 }
 
 /// A board of ordinary tags (`target_type: tagboard`): `tagCols x tagRows` tags of `family`,
@@ -138,11 +184,12 @@ pub struct TargetView {
 
 /// Finds a target's corners in images: an AprilGrid's tags by the C library with Kalibr's 2-bit
 /// border at several scales, their corners refined as X-corners and from the fitted tag edges;
-/// a chessboard by our own detector. One per thread (the C detector is not shared).
+/// a chessboard by our own detector; a tag board's and a ChArUco board's tags by the C library
+/// at full resolution (one detector a family). One per thread (the C detector is not shared).
 pub struct TargetDetector {
     target: Target,
     grid: Option<AprilGridMultiScale>,
-    tags: Option<Box<dyn TagDetector + Send>>,
+    tags: Vec<(TagFamily, Box<dyn TagDetector + Send>)>,
 }
 
 impl TargetDetector {
@@ -152,20 +199,22 @@ impl TargetDetector {
             Target::Aprilgrid(_) => Some(AprilGridMultiScale::new()?),
             _ => None,
         };
+        let mut families: Vec<TagFamily> =
+            target.boards().iter().filter_map(|b| b.family()).collect();
+        families.sort();
+        families.dedup();
         // Full resolution: a calibration wants every tag and the best corners.
-        let family = match target {
-            Target::Tagboard(b) => Some(b.family),
-            Target::Charuco(c) => Some(c.dictionary),
-            _ => None,
-        };
-        let tags = match family {
-            Some(family) => Some(Backend::ApriltagC.detector(DetectorConfig {
-                families: vec![family],
-                decimate: 1.0,
-                ..DetectorConfig::default()
-            })?),
-            None => None,
-        };
+        let tags = families
+            .into_iter()
+            .map(|family| {
+                let detector = Backend::ApriltagC.detector(DetectorConfig {
+                    families: vec![family],
+                    decimate: 1.0,
+                    ..DetectorConfig::default()
+                })?;
+                Ok((family, detector))
+            })
+            .collect::<Result<_, TagError>>()?;
         Ok(Self {
             target: target.clone(),
             grid,
@@ -173,24 +222,25 @@ impl TargetDetector {
         })
     }
 
-    /// The target's corners in `image`.
+    /// The target's corners in `image` (of several boards: each board's corner ids offset by
+    /// its index times [`BOARD_ID_STRIDE`]).
     pub fn detect(&mut self, image: &GrayImage) -> Result<TargetView, TagError> {
-        Ok(match (&self.target, &mut self.grid) {
-            (Target::Aprilgrid(g), Some(detector)) => {
-                let tags = detector.detect(image)?;
-                let points = refine_aprilgrid(image, &tags, g.tag_cols, g.tag_spacing);
-                let corners =
-                    aprilgrid_corners(&points, g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing);
-                let miss = tags
-                    .is_empty()
-                    .then(|| format!("{} AprilGrid tags", tags.len()));
-                TargetView {
-                    corners,
-                    tags,
-                    miss,
-                }
-            }
-            (Target::Checkerboard(c), _) => {
+        if let (Target::Aprilgrid(g), Some(detector)) = (&self.target, &mut self.grid) {
+            let tags = detector.detect(image)?;
+            let points = refine_aprilgrid(image, &tags, g.tag_cols, g.tag_spacing);
+            let corners =
+                aprilgrid_corners(&points, g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing);
+            let miss = tags
+                .is_empty()
+                .then(|| format!("{} AprilGrid tags", tags.len()));
+            return Ok(TargetView {
+                corners,
+                tags,
+                miss,
+            });
+        }
+        if let Target::Checkerboard(c) = &self.target {
+            return Ok(
                 match detect_chessboard(image, c.target_cols, c.target_rows) {
                     Ok(px) => TargetView {
                         corners: chessboard_board_corners(
@@ -207,67 +257,66 @@ impl TargetDetector {
                         tags: Vec::new(),
                         miss: Some(miss.to_string()),
                     },
-                }
-            }
-            (Target::Tagboard(b), _) => {
-                let Some(detector) = self.tags.as_mut() else {
+                },
+            );
+        }
+        let mut tags = Vec::new();
+        for (_, detector) in &mut self.tags {
+            tags.extend(detector.detect(image)?);
+        }
+        let boards = self.target.boards();
+        let mut corners = Vec::new();
+        for (k, board) in boards.iter().enumerate() {
+            let offset = k as u32 * BOARD_ID_STRIDE;
+            let found = match board {
+                Target::Tagboard(b) => tag_board_corners(b, &tags),
+                Target::Charuco(c) => c.corners(image, &tags),
+                _ => {
                     return Err(TagError::Invalid(
-                        "no tag detector was made for this target".into(),
-                    ));
-                };
-                let tags: Vec<TagDetection> = detector
-                    .detect(image)?
-                    .into_iter()
-                    .filter(|t| t.family == b.family && b.board_point(t.id * 4).is_some())
-                    .collect();
-                let corners = tags
-                    .iter()
-                    .flat_map(|t| {
-                        (0..4).filter_map(move |k| {
-                            let id = t.id * 4 + k;
-                            Some(Corner {
-                                id,
-                                board_m: b.board_point(id)?,
-                                px: t.corners_px[k as usize],
-                            })
-                        })
-                    })
-                    .collect();
-                let miss = tags
-                    .is_empty()
-                    .then(|| format!("no {} tags of the board", b.family));
-                TargetView {
-                    corners,
-                    tags,
-                    miss,
+                        "several boards are tag boards and ChArUco boards only".into(),
+                    ))
                 }
-            }
-            (Target::Charuco(c), _) => {
-                let Some(detector) = self.tags.as_mut() else {
-                    return Err(TagError::Invalid(
-                        "no marker detector was made for this target".into(),
-                    ));
-                };
-                let tags = detector.detect(image)?;
-                let corners = c.corners(image, &tags);
-                let miss = corners.is_empty().then(|| {
-                    format!(
-                        "{} {} markers, no corner between two of them",
-                        tags.len(),
-                        c.dictionary
-                    )
-                });
-                TargetView {
-                    corners,
-                    tags,
-                    miss,
-                }
-            }
-            (Target::Aprilgrid(_), None) => {
-                return Err(TagError::Invalid(
-                    "no AprilGrid detector was made for this target".into(),
-                ))
-            }
+            };
+            corners.extend(found.into_iter().map(|c| Corner {
+                id: c.id + offset,
+                ..c
+            }));
+        }
+        // The boards' tags alone.
+        tags.retain(|t| boards.iter().any(|b| b.holds_tag(t)));
+        let miss = corners.is_empty().then(|| {
+            let names: Vec<String> = boards
+                .iter()
+                .filter_map(|b| b.family())
+                .map(|f| f.to_string())
+                .collect();
+            format!(
+                "{} tags of the board ({}), no corner found",
+                tags.len(),
+                names.join(", ")
+            )
+        });
+        Ok(TargetView {
+            corners,
+            tags,
+            miss,
         })
     }
+}
+
+/// A tag board's corners: the corners of its tags found (`tags`: any tags in the image).
+fn tag_board_corners(b: &TagBoardTarget, tags: &[TagDetection]) -> Vec<Corner> {
+    tags.iter()
+        .filter(|t| t.family == b.family && b.board_point(t.id * 4).is_some())
+        .flat_map(|t| {
+            (0..4).filter_map(move |k| {
+                let id = t.id * 4 + k;
+                Some(Corner {
+                    id,
+                    board_m: b.board_point(id)?,
+                    px: t.corners_px[k as usize],
+                })
+            })
+        })
+        .collect()
 }

@@ -35,6 +35,7 @@ pub const FILES: &[(&str, &[u8])] = &[
     bundle!("calibration/targets/aprilgrid_6x6.yaml"),
     bundle!("calibration/targets/checkerboard_9x6.yaml"),
     bundle!("calibration/targets/tagboard_6x6_reversed.yaml"),
+    bundle!("calibration/targets/charuco_11x8.yaml"),
 ];
 
 /// The built-in copy of `path`, if it names one (`./samples/...` as well as `samples/...`).

@@ -23,6 +23,7 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
         "checkerboard" => Target::Checkerboard(parse_yaml(path, &text)?),
         "tagboard" => Target::Tagboard(parse_yaml(path, &text)?),
         "charuco" => Target::Charuco(parse_yaml(path, &text)?),
+        "boards" => Target::Boards(parse_yaml(path, &text)?),
         other => {
             let line = text
                 .lines()
@@ -32,12 +33,19 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
                 path,
                 line,
                 format!(
-                    "target_type `{other}`: expected `aprilgrid`, `checkerboard`, `tagboard` or `charuco`"
+                    "target_type `{other}`: expected `aprilgrid`, `checkerboard`, `tagboard`, `charuco` or `boards`"
                 ),
             ));
         }
     };
-    let ok = match &target {
+    check_target(path, &target)?;
+    Ok(target)
+}
+
+/// Whether a target's numbers make a board; several boards must be tag or ChArUco boards with
+/// no tag on two of them (a tag tells which board it is on).
+fn check_target(path: &Path, target: &Target) -> Result<(), IoError> {
+    let ok = match target {
         Target::Aprilgrid(g) => {
             g.tag_cols > 0 && g.tag_rows > 0 && g.tag_size > 0.0 && g.tag_spacing >= 0.0
         }
@@ -51,6 +59,36 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
             c.check().map_err(|e| IoError::content(path, e))?;
             true
         }
+        Target::Boards(several) => {
+            if several.boards.is_empty() {
+                return Err(IoError::content(path, "boards: the list is empty"));
+            }
+            let mut seen = std::collections::BTreeMap::new();
+            for (k, board) in several.boards.iter().enumerate() {
+                let tags = match board {
+                    Target::Tagboard(b) => b.layout().into_iter().map(|id| (b.family, id)).collect::<Vec<_>>(),
+                    Target::Charuco(c) => c.layout().into_iter().map(|id| (c.dictionary, id)).collect(),
+                    _ => {
+                        return Err(IoError::content(
+                            path,
+                            format!(
+                                "boards[{k}]: several boards are tag boards and ChArUco boards (whose tags tell them apart), not AprilGrids, chessboards or lists"
+                            ),
+                        ))
+                    }
+                };
+                check_target(path, board)?;
+                for (family, id) in tags {
+                    if let Some(other) = seen.insert((family, id), k) {
+                        return Err(IoError::content(
+                            path,
+                            format!("boards[{other}] and boards[{k}] both hold {family} tag {id}: each tag must be on one board"),
+                        ));
+                    }
+                }
+            }
+            true
+        }
     };
     if !ok {
         return Err(IoError::content(
@@ -58,10 +96,10 @@ pub fn load_target(path: &Path) -> Result<Target, IoError> {
             "counts must be positive and sizes positive numbers of metres",
         ));
     }
-    if let Target::Tagboard(b) = &target {
+    if let Target::Tagboard(b) = target {
         check_tag_board(path, b)?;
     }
-    Ok(target)
+    Ok(())
 }
 
 /// Reads a directory of per-frame corner CSV files as EuRoC's calibration data and yac write them:
@@ -214,6 +252,8 @@ pub fn save_corner_csvs(dir: &Path, views: &ViewCorners, target: &Target) -> Res
         Target::Checkerboard(c) => (c.target_rows, c.target_cols, c.col_spacing_m, 0.0),
         Target::Tagboard(b) => (b.tag_rows, b.tag_cols, b.tag_size, b.tag_spacing),
         Target::Charuco(c) => (c.inner().1, c.inner().0, c.square_length, 0.0),
+        // Several boards: the corner ids say the board (`BOARD_ID_STRIDE`).
+        Target::Boards(_) => (0, 0, 0.0, 0.0),
     };
     for (index, (name, corners)) in views.iter().enumerate() {
         let ts = name

@@ -57,6 +57,9 @@ pub enum Board {
         /// Square height, metres.
         row_m: f64,
     },
+    /// Several boards side by side on one sheet, each at its offset (metres, along the sheet);
+    /// board `k`'s corner ids offset by `k` times [`crate::calib::BOARD_ID_STRIDE`].
+    Several(Vec<([f64; 2], Board)>),
     /// OpenCV's ChArUco board.
     Charuco {
         /// The board.
@@ -126,6 +129,56 @@ impl Board {
         })
     }
 
+    /// The board a calibration target describes.
+    pub fn of_target(target: &crate::calib::Target) -> Result<Self, RenderError> {
+        use crate::calib::Target;
+        Ok(match target {
+            Target::Aprilgrid(g) => {
+                Board::aprilgrid(g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing)?
+            }
+            Target::Checkerboard(c) => Board::Chessboard {
+                cols: c.target_cols,
+                rows: c.target_rows,
+                col_m: c.col_spacing_m,
+                row_m: c.row_spacing_m,
+            },
+            Target::Tagboard(b) => Board::tag_board(b)?,
+            Target::Charuco(c) => Board::charuco(c)?,
+            Target::Boards(several) => {
+                let boards = several
+                    .boards
+                    .iter()
+                    .map(Board::of_target)
+                    .collect::<Result<Vec<_>, _>>()?;
+                Board::side_by_side(boards)?
+            }
+        })
+    }
+
+    /// Boards printed side by side along x on one sheet, a tenth of the first board's width
+    /// apart; they must face the camera from the same side.
+    pub fn side_by_side(boards: Vec<Board>) -> Result<Self, RenderError> {
+        let side = boards.first().map_or(1.0, Board::camera_side);
+        if boards.iter().any(|b| b.camera_side() != side) {
+            return Err(RenderError::Boards(
+                "boards on one sheet must all be ChArUco (or chessboards) or all tag grids: their frames face opposite ways".into(),
+            ));
+        }
+        let gap = boards.first().map_or(0.0, |b| {
+            let [x0, _, x1, _] = b.paper();
+            0.1 * (x1 - x0)
+        });
+        let mut right = 0.0;
+        let mut placed = Vec::with_capacity(boards.len());
+        for (k, board) in boards.into_iter().enumerate() {
+            let [x0, ..] = board.paper();
+            let offset = if k == 0 { 0.0 } else { right + gap - x0 };
+            right = offset + board.paper()[2];
+            placed.push(([offset, 0.0], board));
+        }
+        Ok(Self::Several(placed))
+    }
+
     /// A ChArUco board ([`crate::calib::CharucoTarget`]): the chessboard's black squares and a
     /// marker as OpenCV prints it in each white square.
     pub fn charuco(target: &crate::calib::CharucoTarget) -> Result<Self, RenderError> {
@@ -182,6 +235,18 @@ impl Board {
                     .filter_map(|k| Some((k, target.corner_point(k)?)))
                     .collect()
             }
+            Self::Several(boards) => boards
+                .iter()
+                .enumerate()
+                .flat_map(|(k, (o, b))| {
+                    b.corners().into_iter().map(move |(id, p)| {
+                        (
+                            id + k as u32 * crate::calib::BOARD_ID_STRIDE,
+                            [p[0] + o[0], p[1] + o[1], p[2]],
+                        )
+                    })
+                })
+                .collect(),
         }
     }
 
@@ -190,6 +255,7 @@ impl Board {
         match self {
             Self::TagGrid { .. } => 1.0,
             Self::Chessboard { .. } | Self::Charuco { .. } => -1.0,
+            Self::Several(boards) => boards.first().map_or(1.0, |(_, b)| b.camera_side()),
         }
     }
 
@@ -223,6 +289,19 @@ impl Board {
                 (*cols as f64 + 1.0) * col_m,
                 (*rows as f64 + 1.0) * row_m,
             ],
+            Self::Several(boards) => {
+                boards
+                    .iter()
+                    .fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |a, (o, b)| {
+                        let p = b.paper();
+                        [
+                            a[0].min(p[0] + o[0]),
+                            a[1].min(p[1] + o[1]),
+                            a[2].max(p[2] + o[0]),
+                            a[3].max(p[3] + o[1]),
+                        ]
+                    })
+            }
             Self::Charuco { target, .. } => {
                 let margin = 0.5 * target.square_length;
                 [
@@ -241,7 +320,17 @@ impl Board {
         if x < x0 || y < y0 || x >= x1 || y >= y1 {
             return None;
         }
+        if let Self::Several(boards) = self {
+            // White sheet between the boards.
+            return Some(
+                boards
+                    .iter()
+                    .find_map(|(o, b)| b.albedo(x - o[0], y - o[1]))
+                    .unwrap_or(TAG_WHITE),
+            );
+        }
         let black = match self {
+            Self::Several(_) => false,
             Self::TagGrid {
                 cols,
                 rows,

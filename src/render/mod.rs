@@ -75,7 +75,7 @@ impl Default for RenderConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
     /// A tag's family has no code book here.
-    #[error("tag {id}: family {family} cannot be rendered (tag36h11, tag25h9, tag16h5 and tagStandard41h12 can)")]
+    #[error("tag {id}: family {family} cannot be rendered (tag36h11, tag25h9, tag16h5, tagStandard41h12 and the ArUco dictionaries can)")]
     UnknownFamily {
         /// Tag id.
         id: u32,
@@ -92,6 +92,9 @@ pub enum RenderError {
         /// Codes in the family.
         count: usize,
     },
+    /// Boards that cannot share a sheet.
+    #[error("{0}")]
+    Boards(String),
 }
 
 /// Ground truth of one tag in a rendered pair.

@@ -248,10 +248,15 @@ pub fn calibrate(
             ))
         }
     };
+    // Several boards: each board seen in a view is a view of its own (its own pose).
+    let (left, right) = (
+        by_board(&views.left, &target),
+        by_board(&views.right, &target),
+    );
     let calib = if stereo {
-        calibrate_stereo(&views.left, &views.right, resolution, &config)
+        calibrate_stereo(&left, &right, resolution, &config)
     } else {
-        calibrate_camera(&views.left, resolution, &config)
+        calibrate_camera(&left, resolution, &config)
     }
     .inspect_err(|e| {
         if matches!(e, CalibError::TooFewViews { .. }) {
@@ -294,7 +299,7 @@ pub fn calibrate(
         [detect_s, solve_s, started.elapsed().as_secs_f64()],
     )?;
     report["failures"] = serde_json::json!(failures);
-    report["images"] = images_json(&calib, &views.per_image);
+    report["images"] = images_json(&calib, &views.per_image, &target);
     report["projection_uncertainty"] = serde_json::json!(uncertainty);
     io::save_json(&dir.path("report.json"), &report)?;
     let rectified = match request.rectify_pair {
@@ -316,7 +321,7 @@ pub fn calibrate(
             calibration: &calib,
             report_markdown: &md,
             rectified_pair: rectified.as_ref(),
-            view_images: &views.images,
+            view_images: &by_board_images(&views.images, &left),
         })?;
         rec.finish()?;
     }
@@ -364,11 +369,50 @@ fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> R
     Ok(())
 }
 
+/// Separator between a view's name and its board's index when the target has several boards.
+const BOARD_SEPARATOR: char = '#';
+
+/// A view's corners of several boards as one view a board seen, `VIEW#k` for board `k` (the
+/// corner ids say the board, [`crate::calib::BOARD_ID_STRIDE`]); other targets' as they are.
+fn by_board(views: &ViewCorners, target: &Target) -> ViewCorners {
+    if !matches!(target, Target::Boards(_)) {
+        return views.clone();
+    }
+    let mut out = ViewCorners::new();
+    for (name, corners) in views {
+        for c in corners {
+            let board = c.id / crate::calib::BOARD_ID_STRIDE;
+            out.entry(format!("{name}{BOARD_SEPARATOR}{board}"))
+                .or_default()
+                .push(*c);
+        }
+    }
+    out
+}
+
+/// The view a view of [`by_board`] came from.
+fn view_of(name: &str) -> &str {
+    name.split(BOARD_SEPARATOR).next().unwrap_or(name)
+}
+
+/// The images of [`by_board`]'s views: each its view's.
+fn by_board_images(images: &ViewImages, views: &ViewCorners) -> ViewImages {
+    views
+        .keys()
+        .filter_map(|k| Some((k.clone(), images.get(view_of(k))?.clone())))
+        .collect()
+}
+
 /// Each image's record with whether its view was used and how many of its corners were left
 /// out as outliers; a view that found a board but was not used says why.
-fn images_json(calib: &Calibration, records: &[ImageRecord]) -> serde_json::Value {
+fn images_json(calib: &Calibration, records: &[ImageRecord], target: &Target) -> serde_json::Value {
+    let several = if matches!(target, Target::Boards(_)) {
+        " of any one board"
+    } else {
+        ""
+    };
     let used: std::collections::BTreeSet<&str> =
-        calib.used.iter().map(|v| v.name.as_str()).collect();
+        calib.used.iter().map(|v| view_of(&v.name)).collect();
     records
         .iter()
         .map(|r| {
@@ -378,12 +422,12 @@ fn images_json(calib: &Calibration, records: &[ImageRecord]) -> serde_json::Valu
             v["outliers"] = calib
                 .outliers
                 .iter()
-                .filter(|o| o.view == r.view && o.camera == r.camera)
+                .filter(|o| view_of(&o.view) == r.view && o.camera == r.camera)
                 .count()
                 .into();
             if !is_used && r.miss.is_none() {
                 v["miss"] = format!(
-                    "{} corners here, or in the other camera's image of this view, fewer than the {} a view needs",
+                    "{} corners here: here, or in the other camera's image of this view, fewer than the {} corners{several} a view needs",
                     r.corners,
                     crate::calib::CalibConfig::default().min_corners
                 )

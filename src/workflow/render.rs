@@ -2,7 +2,6 @@
 //! or a calibration sequence of a target in front of the rig, each with its ground truth.
 
 use super::Result;
-use crate::calib::Target;
 use crate::geometry::Pose2;
 use crate::io::{self, OutputDir};
 use crate::progress::Progress;
@@ -142,19 +141,7 @@ pub fn render_calibration_sequence(
 ) -> Result<usize> {
     let target = io::load_target(target_path)?;
     let rig = io::load_rig(request.rig)?;
-    let board = match &target {
-        Target::Aprilgrid(g) => {
-            Board::aprilgrid(g.tag_cols, g.tag_rows, g.tag_size, g.tag_spacing)?
-        }
-        Target::Checkerboard(c) => Board::Chessboard {
-            cols: c.target_cols,
-            rows: c.target_rows,
-            col_m: c.col_spacing_m,
-            row_m: c.row_spacing_m,
-        },
-        Target::Tagboard(b) => Board::tag_board(b)?,
-        Target::Charuco(c) => Board::charuco(c)?,
-    };
+    let board = Board::of_target(&target)?;
     let poses = calibration_poses(&rig, &board, n, request.seed);
     if poses.len() < n {
         tracing::warn!(
