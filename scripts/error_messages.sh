@@ -142,6 +142,10 @@ run calibrate --target "$t/t.yaml" --left '../shared/data/mrpt_stereo_calib/*_le
 run rig /nonexistent/rig.yaml --out "$t/rigout"
 run config --default colours
 run render --calibration-sequence 3 --target "$t/t.yaml" --out "$t/calseq"
+printf 'target_type: charuco\ndictionary: DICT_4X4_50\nsquaresX: 20\nsquaresY: 20\nsquareLength: 0.03\nmarkerLength: 0.02\n' > "$t/t.yaml"
+run calibrate --target "$t/t.yaml" --left '../shared/data/mrpt_stereo_calib/*_left.jpg' --right '../shared/data/mrpt_stereo_calib/*_right.jpg' --no-rerun --out "$t/cal"
+printf 'target_type: boards\nboards:\n  - {target_type: charuco, dictionary: DICT_4X4_50, squaresX: 5, squaresY: 4, squareLength: 0.04, markerLength: 0.03}\n  - {target_type: charuco, dictionary: DICT_4X4_50, squaresX: 5, squaresY: 4, squareLength: 0.04, markerLength: 0.03}\n' > "$t/t.yaml"
+run calibrate --target "$t/t.yaml" --left '../shared/data/mrpt_stereo_calib/*_left.jpg' --right '../shared/data/mrpt_stereo_calib/*_right.jpg' --no-rerun --out "$t/cal"
 # import: logs that are not what they say.
 printf '#ROSBAG V2.0\n' > "$t/old.bag"
 run import --bag "$t/old.bag" --out "$t/imp"

@@ -748,7 +748,15 @@ fn calibration_target_with_a_wrong_typed_or_unknown_key_names_the_line() {
         ),
         (
             "# a ring of circles\ntarget_type: circles\n",
-            "t.yaml:2: target_type `circles`: expected `aprilgrid`, `checkerboard` or `tagboard`",
+            "t.yaml:2: target_type `circles`: expected `aprilgrid`, `checkerboard`, `tagboard`, `charuco` or `boards`",
+        ),
+        (
+            "target_type: charuco\ndictionary: DICT_4X4_50\nsquaresX: 20\nsquaresY: 20\nsquareLength: 0.03\nmarkerLength: 0.02\n",
+            "t.yaml: marker 50 is not in DICT_4X4_50 (it has 50 markers)",
+        ),
+        (
+            "target_type: charuco\ndictionary: DICT_9X9_50\nsquaresX: 5\nsquaresY: 4\nsquareLength: 0.03\nmarkerLength: 0.02\n",
+            "t.yaml:2: column 13: dictionary: unknown tag family \"DICT_9X9_50\"",
         ),
     ] {
         let target = tmp.path().join("t.yaml");

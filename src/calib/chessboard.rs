@@ -88,11 +88,16 @@ fn candidates(blur: &Plane) -> Vec<Candidate> {
     // Ring samples as offsets into the row-major buffer.
     let offsets: [isize; 16] = std::array::from_fn(|k| ring[k].1 * w as isize + ring[k].0);
     let data = &blur.data;
+    // Row by row, each ring sample a slice shifted along the row (so the loop vectorises).
+    let span = w.saturating_sub(2 * r);
     for y in r..h.saturating_sub(r) {
-        let row = &mut response[y * w..(y + 1) * w];
-        for (x, out) in row.iter_mut().enumerate().take(w.saturating_sub(r)).skip(r) {
-            let i = y * w + x;
-            let s: [f32; 16] = std::array::from_fn(|k| data[(i as isize + offsets[k]) as usize]);
+        let start = y * w + r;
+        let at = |offset: isize| &data[(start as isize + offset) as usize..][..span];
+        let ring: [&[f32]; 16] = std::array::from_fn(|k| at(offsets[k]));
+        let centre = [at(0), at(-1), at(1), at(-(w as isize)), at(w as isize)];
+        let out = &mut response[start..start + span];
+        for (j, out) in out.iter_mut().enumerate() {
+            let s: [f32; 16] = std::array::from_fn(|k| ring[k][j]);
             let mut sum = 0.0;
             for n in 0..4 {
                 sum += ((s[n] + s[n + 8]) - (s[n + 4] + s[n + 12])).abs();
@@ -102,7 +107,8 @@ fn candidates(blur: &Plane) -> Vec<Candidate> {
                 diff += (s[n] - s[n + 8]).abs();
             }
             let ring_mean = s.iter().sum::<f32>() / 16.0;
-            let local = (data[i] + data[i - 1] + data[i + 1] + data[i - w] + data[i + w]) / 5.0;
+            let local =
+                (centre[0][j] + centre[1][j] + centre[2][j] + centre[3][j] + centre[4][j]) / 5.0;
             *out = sum - diff - 16.0 * (ring_mean - local).abs();
         }
     }
@@ -280,25 +286,52 @@ pub fn detect_chessboard(
     if cands.len() < 4 {
         return Err(ChessboardMiss::NoCorners);
     }
+    match search(&blur, &cands, cols, rows) {
+        Search::Whole(at) => Ok(refine_all(
+            &binomial5(&blur),
+            &at,
+            cols as usize,
+            rows as usize,
+        )),
+        Search::Part(grid) if grid.is_empty() => Err(ChessboardMiss::NoCorners),
+        Search::Part(grid) => Err(ChessboardMiss::Partial {
+            found: grid.len(),
+            expected: (cols * rows) as usize,
+        }),
+    }
+}
+
+/// What the search for a board found: the whole board (corners in board order, not yet
+/// refined), or the largest grid grown.
+enum Search {
+    Whole(Vec<[f64; 2]>),
+    Part(Vec<((i32, i32), [f64; 2])>),
+}
+
+/// Grows grids from the strongest candidates until one holds the whole board; else the largest.
+fn search(blur: &Plane, cands: &[Candidate], cols: u32, rows: u32) -> Search {
     let (cols_i, rows_i) = (cols as i32, rows as i32);
-    let mut largest = 0usize;
+    let mut largest: Vec<((i32, i32), [f64; 2])> = Vec::new();
     let mut seeded = vec![false; cands.len()];
     for seed in 0..cands.len().min(MAX_SEEDS * 4) {
         if seeded[seed] || seeded.iter().filter(|&&s| s).count() >= MAX_SEEDS {
             continue;
         }
         seeded[seed] = true;
-        let Some(grid) = grow(&blur, &cands, seed) else {
+        let Some(grid) = grow(blur, cands, seed) else {
             continue;
         };
         // Candidates in a failed grid are not tried again as seeds.
         for &k in grid.values() {
             seeded[k] = true;
         }
-        if grid.len() > largest {
-            largest = grid.len();
+        if grid.len() > largest.len() {
+            largest = grid
+                .iter()
+                .map(|(&cell, &k)| (cell, [cands[k].x, cands[k].y]))
+                .collect();
         }
-        let Some(cell) = best_window(&grid, &cands, cols_i, rows_i) else {
+        let Some(cell) = best_window(&grid, cands, cols_i, rows_i) else {
             continue;
         };
         let mut at: Vec<[f64; 2]> = (0..rows_i)
@@ -308,21 +341,71 @@ pub fn detect_chessboard(
                 [cands[k].x, cands[k].y]
             })
             .collect();
-        order_board(&blur, &mut at, cols as usize, rows as usize);
-        return Ok(refine_all(
-            &binomial5(&blur),
-            &at,
-            cols as usize,
-            rows as usize,
-        ));
+        order_board(blur, &mut at, cols as usize, rows as usize);
+        return Search::Whole(at);
     }
-    match largest {
-        0 => Err(ChessboardMiss::NoCorners),
-        found => Err(ChessboardMiss::Partial {
-            found,
-            expected: (cols * rows) as usize,
-        }),
+    largest.sort_by_key(|(cell, _)| (cell.1, cell.0));
+    Search::Part(largest)
+}
+
+/// A corner of a chessboard seen in part: its cell `(c, r)` counted from the part's first
+/// corner, and its pixel.
+pub type PartCorner = ((u32, u32), [f64; 2]);
+
+/// A chessboard seen in part: the corners of the largest grid grown when the whole board is not
+/// in view (at least `min_corners`, in two rows and two columns or more, fitting inside the
+/// board either way round), refined to sub-pixel, each with its cell `(c, r)` counted from the
+/// grid's own first corner (+c then +r turning clockwise on the image, as a whole board's).
+/// Which of the board's corners they are is not known (rows and columns look alike), but they
+/// lie on the board's grid: a calibration gives such a view a board pose of its own, which
+/// takes up the offset. `None` when the whole board is in view, or no such part.
+pub fn detect_chessboard_part(
+    image: &GrayImage,
+    cols: u32,
+    rows: u32,
+    min_corners: usize,
+) -> Option<Vec<PartCorner>> {
+    if image.width() < 16 || image.height() < 16 || cols < 2 || rows < 2 {
+        return None;
     }
+    let blur = binomial5_gray(image);
+    let cands = candidates(&blur);
+    let Search::Part(part) = search(&blur, &cands, cols, rows) else {
+        return None;
+    };
+    let (i0, i1) = range(part.iter().map(|(c, _)| c.0));
+    let (j0, j1) = range(part.iter().map(|(c, _)| c.1));
+    let (ni, nj) = ((i1 - i0 + 1) as u32, (j1 - j0 + 1) as u32);
+    let fits = (ni <= cols && nj <= rows) || (ni <= rows && nj <= cols);
+    if part.len() < min_corners.max(4) || ni < 2 || nj < 2 || !fits {
+        return None;
+    }
+    let at: HashMap<(i32, i32), [f64; 2]> = part.iter().copied().collect();
+    // Handedness, from the first corner with both neighbours: mirror the columns if +c then +r
+    // turn anticlockwise.
+    let anticlockwise = part.iter().find_map(|(c, p)| {
+        let (u, v) = (at.get(&(c.0 + 1, c.1))?, at.get(&(c.0, c.1 + 1))?);
+        let (u, v) = ([u[0] - p[0], u[1] - p[1]], [v[0] - p[0], v[1] - p[1]]);
+        Some(u[0] * v[1] - u[1] * v[0] < 0.0)
+    })?;
+    let plane = binomial5(&blur);
+    Some(
+        part.iter()
+            .map(|&((i, j), p)| {
+                let nearest = [(1, 0), (-1, 0), (0, 1), (0, -1)]
+                    .iter()
+                    .filter_map(|(di, dj)| at.get(&(i + di, j + dj)))
+                    .map(|q| (q[0] - p[0]).hypot(q[1] - p[1]))
+                    .fold(f64::INFINITY, f64::min);
+                let hw = ((0.4 * nearest) as i32).clamp(2, MAX_REFINE_HALF_WIDTH);
+                let c = if anticlockwise { i1 - i } else { i - i0 };
+                (
+                    (c as u32, (j - j0) as u32),
+                    refine_x_corner(&plane, p[0], p[1], hw).unwrap_or(p),
+                )
+            })
+            .collect(),
+    )
 }
 
 /// Board cell `(c, r)` -> grid cell.

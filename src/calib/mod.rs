@@ -340,31 +340,43 @@ fn adjust(
     Ok(calib)
 }
 
-/// The views whose corners are enough (in both cameras when `right` is given; then the right
-/// corners are empty), sorted by name; an error when too few.
+/// The views whose corners are enough (in both cameras when `right` is given; with one camera
+/// the right corners are empty), sorted by name; an error when too few. A rig's view that only
+/// one camera's corners name (the other camera's map has no such view: a board seen in part,
+/// which cannot be numbered alike in both images) is a view of that camera alone, its other
+/// side empty; at least one view must be seen by both.
 fn usable_views<'a>(
     left: &'a ViewCorners,
     right: Option<&'a ViewCorners>,
     config: &CalibConfig,
 ) -> Result<Vec<View<'a>>, CalibError> {
-    let mut names: Vec<&String> = left
+    let enough = |c: Option<&Vec<Corner>>| c.is_some_and(|c| c.len() >= config.min_corners);
+    let names: std::collections::BTreeSet<&String> = left
         .keys()
-        .filter(|k| {
-            left[*k].len() >= config.min_corners
-                && right.is_none_or(|right| {
-                    right.get(*k).is_some_and(|r| r.len() >= config.min_corners)
-                })
+        .chain(right.iter().flat_map(|r| r.keys()))
+        .collect();
+    let names: Vec<&String> = names
+        .into_iter()
+        .filter(|k| match right {
+            None => enough(left.get(*k)),
+            Some(right) => match (left.get(*k), right.get(*k)) {
+                (Some(_), Some(_)) => enough(left.get(*k)) && enough(right.get(*k)),
+                (l, r) => enough(l) || enough(r),
+            },
         })
         .collect();
-    names.sort();
     let need = if config.fixed_intrinsics.is_some() {
         MIN_VIEWS_FIXED
     } else {
         MIN_VIEWS_FREE
     };
-    if names.len() < need {
+    let both = names
+        .iter()
+        .filter(|k| right.is_none_or(|r| left.contains_key(**k) && r.contains_key(**k)))
+        .count();
+    if names.len() < need || both == 0 {
         return Err(CalibError::TooFewViews {
-            got: names.len(),
+            got: both.min(names.len()),
             need,
             min_corners: config.min_corners,
             stereo: right.is_some(),
@@ -374,8 +386,8 @@ fn usable_views<'a>(
         .iter()
         .map(|n| View {
             name: n.as_str(),
-            left: left[*n].clone(),
-            right: right.map(|r| r[*n].clone()).unwrap_or_default(),
+            left: left.get(*n).cloned().unwrap_or_default(),
+            right: right.and_then(|r| r.get(*n).cloned()).unwrap_or_default(),
         })
         .collect())
 }
@@ -391,9 +403,18 @@ fn initial_state(
     let (left, right) = match &config.fixed_intrinsics {
         Some((l, r)) => (*l, *r),
         None => {
-            let left = initial_camera(views.iter().map(|v| &v.left), resolution, config.model)?;
+            let seen = |side: fn(&View<'_>) -> bool| views.iter().filter(move |v| side(v));
+            let left = initial_camera(
+                seen(|v| !v.left.is_empty()).map(|v| &v.left),
+                resolution,
+                config.model,
+            )?;
             let right = if stereo {
-                initial_camera(views.iter().map(|v| &v.right), resolution, config.model)?
+                initial_camera(
+                    seen(|v| !v.right.is_empty()).map(|v| &v.right),
+                    resolution,
+                    config.model,
+                )?
             } else {
                 left
             };
@@ -413,19 +434,32 @@ fn initial_state(
             stereo,
         });
     }
-    let poses = |cam: &Camera, side: for<'v> fn(&'v View<'_>) -> &'v Vec<Corner>| {
-        views
-            .iter()
-            .map(|v| board_pose(cam, side(v)).ok_or(CalibError::Initialisation))
-            .collect::<Result<Vec<_>, _>>()
+    let pose = |cam: &Camera, corners: &[Corner]| {
+        board_pose(cam, corners).ok_or(CalibError::Initialisation)
     };
-    let poses_l = poses(&left, |v| &v.left)?;
-    let poses_r = poses(&right, |v| &v.right)?;
+    // `right_from_left` from the views both cameras saw; a view of the right camera alone
+    // placed through it.
+    let (mut both_l, mut both_r) = (Vec::new(), Vec::new());
+    for v in views
+        .iter()
+        .filter(|v| !v.left.is_empty() && !v.right.is_empty())
+    {
+        both_l.push(pose(&left, &v.left)?);
+        both_r.push(pose(&right, &v.right)?);
+    }
+    let right_from_left = median_relative(&both_l, &both_r);
+    let poses = views
+        .iter()
+        .map(|v| match v.left.is_empty() {
+            false => pose(&left, &v.left),
+            true => Ok(right_from_left.inverse() * pose(&right, &v.right)?),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(State {
         left,
         right,
-        right_from_left: median_relative(&poses_l, &poses_r),
-        poses: poses_l,
+        right_from_left,
+        poses,
         stereo,
     })
 }

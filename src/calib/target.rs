@@ -252,11 +252,15 @@ impl TargetDetector {
                         tags: Vec::new(),
                         miss: None,
                     },
-                    Err(miss) => TargetView {
-                        corners: Vec::new(),
-                        tags: Vec::new(),
-                        miss: Some(miss.to_string()),
-                    },
+                    Err(miss) => {
+                        // A board seen in part gives its corners, and no miss.
+                        let corners = chessboard_part(image, c);
+                        TargetView {
+                            miss: corners.is_empty().then(|| miss.to_string()),
+                            corners,
+                            tags: Vec::new(),
+                        }
+                    }
                 },
             );
         }
@@ -302,6 +306,38 @@ impl TargetDetector {
             miss,
         })
     }
+}
+
+/// Fewest corners of a chessboard seen in part that are used (a view's least, by default).
+pub const MIN_PART_CORNERS: usize = 12;
+
+/// The corners of a chessboard seen in part ([`crate::calib::chessboard::detect_chessboard_part`]),
+/// numbered from the part's own first corner (id `r · max(cols, rows) + c`) and placed on the
+/// board from there; none when the squares are not square (the part's way round is unknown).
+/// Fewer than the board's corners: a calibration solves such a view with a pose of its own.
+fn chessboard_part(image: &GrayImage, c: &CheckerboardTarget) -> Vec<Corner> {
+    if (c.col_spacing_m - c.row_spacing_m).abs() > 1e-9 * c.col_spacing_m {
+        return Vec::new();
+    }
+    let stride = c.target_cols.max(c.target_rows);
+    crate::calib::chessboard::detect_chessboard_part(
+        image,
+        c.target_cols,
+        c.target_rows,
+        MIN_PART_CORNERS,
+    )
+    .unwrap_or_default()
+    .into_iter()
+    .map(|((col, row), px)| Corner {
+        id: row * stride + col,
+        board_m: [
+            col as f64 * c.col_spacing_m,
+            row as f64 * c.row_spacing_m,
+            0.0,
+        ],
+        px,
+    })
+    .collect()
 }
 
 /// A tag board's corners: the corners of its tags found (`tags`: any tags in the image).

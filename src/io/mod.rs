@@ -131,15 +131,13 @@ pub fn load_gray(path: &Path) -> Result<image::GrayImage, IoError> {
     if !img.color().has_color() {
         return Ok(img.into_luma8());
     }
-    let rgb = img.to_rgb8();
+    let rgb = img.into_rgb8();
     let (w, h) = rgb.dimensions();
+    // ITU-R BT.601 luma (OpenCV's weights), rounded, in integers (which vectorise).
     let luma = rgb
-        .pixels()
-        .map(|p| {
-            (0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64)
-                .round()
-                .min(255.0) as u8
-        })
+        .as_raw()
+        .chunks_exact(3)
+        .map(|p| ((299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32 + 500) / 1000) as u8)
         .collect();
     image::GrayImage::from_raw(w, h, luma)
         .ok_or_else(|| IoError::content(path, "image buffer has the wrong size"))

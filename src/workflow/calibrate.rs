@@ -248,11 +248,7 @@ pub fn calibrate(
             ))
         }
     };
-    // Several boards: each board seen in a view is a view of its own (its own pose).
-    let (left, right) = (
-        by_board(&views.left, &target),
-        by_board(&views.right, &target),
-    );
+    let (left, right) = solved_views(&views, &target);
     let calib = if stereo {
         calibrate_stereo(&left, &right, resolution, &config)
     } else {
@@ -321,7 +317,7 @@ pub fn calibrate(
             calibration: &calib,
             report_markdown: &md,
             rectified_pair: rectified.as_ref(),
-            view_images: &by_board_images(&views.images, &left),
+            view_images: &solved_view_images(&views.images, &left, &right),
         })?;
         rec.finish()?;
     }
@@ -361,7 +357,11 @@ fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> R
                     &views.left
                 };
                 let corners = side.get(&r.view).map_or(&[][..], Vec::as_slice);
-                (r.image.clone(), corners)
+                // A chessboard seen in part is numbered from its own first corner, not the
+                // board's, which mrcal's file cannot say: written as no board.
+                let part = matches!(target, Target::Checkerboard(_))
+                    && corners.len() < (cols * rows) as usize;
+                (r.image.clone(), if part { &[][..] } else { corners })
             })
             .collect();
         io::save_corners_vnl(&dir.path("corners.vnl"), &images, cols, rows)?;
@@ -369,36 +369,67 @@ fn save_corners(dir: &OutputDir, views: &CalibrationViews, target: &Target) -> R
     Ok(())
 }
 
-/// Separator between a view's name and its board's index when the target has several boards.
-const BOARD_SEPARATOR: char = '#';
+/// Separator between a view's name and the part of it [`solved_views`] made a view of its own.
+const PART_SEPARATOR: char = '#';
 
-/// A view's corners of several boards as one view a board seen, `VIEW#k` for board `k` (the
-/// corner ids say the board, [`crate::calib::BOARD_ID_STRIDE`]); other targets' as they are.
-fn by_board(views: &ViewCorners, target: &Target) -> ViewCorners {
-    if !matches!(target, Target::Boards(_)) {
-        return views.clone();
-    }
-    let mut out = ViewCorners::new();
-    for (name, corners) in views {
-        for c in corners {
-            let board = c.id / crate::calib::BOARD_ID_STRIDE;
-            out.entry(format!("{name}{BOARD_SEPARATOR}{board}"))
-                .or_default()
-                .push(*c);
+/// The views the calibration solves, left and right: several boards' one a board seen
+/// (`VIEW#k` for board `k`, the corner ids saying the board,
+/// [`crate::calib::BOARD_ID_STRIDE`]), each with a pose of its own; a rig's chessboard seen in
+/// part in either image one a camera (`VIEW#left` in the left camera's views alone, `VIEW#right`
+/// in the right's: a part cannot be numbered alike in both images, so its view ties no camera to
+/// the other); other views as they are.
+fn solved_views(views: &CalibrationViews, target: &Target) -> (ViewCorners, ViewCorners) {
+    match target {
+        Target::Boards(_) => {
+            let by_board = |side: &ViewCorners| {
+                let mut out = ViewCorners::new();
+                for (name, corners) in side {
+                    for c in corners {
+                        let board = c.id / crate::calib::BOARD_ID_STRIDE;
+                        out.entry(format!("{name}{PART_SEPARATOR}{board}"))
+                            .or_default()
+                            .push(*c);
+                    }
+                }
+                out
+            };
+            (by_board(&views.left), by_board(&views.right))
         }
+        Target::Checkerboard(board) if !views.right.is_empty() => {
+            let whole = (board.target_cols * board.target_rows) as usize;
+            let part = |c: &Vec<Corner>| !c.is_empty() && c.len() < whole;
+            let (mut left, mut right) = (ViewCorners::new(), ViewCorners::new());
+            for (name, l) in &views.left {
+                let r = views.right.get(name);
+                if part(l) || r.is_some_and(part) {
+                    if !l.is_empty() {
+                        left.insert(format!("{name}{PART_SEPARATOR}left"), l.clone());
+                    }
+                    if let Some(r) = r.filter(|r| !r.is_empty()) {
+                        right.insert(format!("{name}{PART_SEPARATOR}right"), r.clone());
+                    }
+                } else {
+                    left.insert(name.clone(), l.clone());
+                    if let Some(r) = r {
+                        right.insert(name.clone(), r.clone());
+                    }
+                }
+            }
+            (left, right)
+        }
+        _ => (views.left.clone(), views.right.clone()),
     }
-    out
 }
 
-/// The view a view of [`by_board`] came from.
+/// The view a view of [`solved_views`] came from.
 fn view_of(name: &str) -> &str {
-    name.split(BOARD_SEPARATOR).next().unwrap_or(name)
+    name.split(PART_SEPARATOR).next().unwrap_or(name)
 }
 
-/// The images of [`by_board`]'s views: each its view's.
-fn by_board_images(images: &ViewImages, views: &ViewCorners) -> ViewImages {
-    views
-        .keys()
+/// The images of [`solved_views`]' views: each its view's.
+fn solved_view_images(images: &ViewImages, left: &ViewCorners, right: &ViewCorners) -> ViewImages {
+    left.keys()
+        .chain(right.keys())
         .filter_map(|k| Some((k.clone(), images.get(view_of(k))?.clone())))
         .collect()
 }

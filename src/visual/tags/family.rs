@@ -32,13 +32,23 @@ impl Serialize for TagFamily {
 
 impl<'de> Deserialize<'de> for TagFamily {
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        let name = String::deserialize(deserializer)?;
-        TagFamily::from_name(&name).ok_or_else(|| {
-            serde::de::Error::custom(format!(
-                "unknown tag family {name:?}: expected {}",
-                TagFamily::NAMES
-            ))
-        })
+        /// Reads a name where it stands (so an error points at it).
+        struct Name;
+        impl serde::de::Visitor<'_> for Name {
+            type Value = TagFamily;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                write!(f, "{}", TagFamily::NAMES)
+            }
+            fn visit_str<E: serde::de::Error>(self, name: &str) -> Result<TagFamily, E> {
+                TagFamily::from_name(name).ok_or_else(|| {
+                    E::custom(format!(
+                        "unknown tag family {name:?}: expected {}",
+                        TagFamily::NAMES
+                    ))
+                })
+            }
+        }
+        deserializer.deserialize_str(Name)
     }
 }
 
