@@ -41,3 +41,64 @@ pub fn max_projection_difference_px(
     }
     worst
 }
+
+/// Renders `views` calibration pairs of `rig` seeing `target` into `out` (`seed` places the
+/// boards); returns the true rig.
+pub fn render_calibration(
+    out: &std::path::Path,
+    rig: &str,
+    target: &std::path::Path,
+    views: usize,
+    seed: u64,
+) -> stereotag::camera::StereoRig {
+    use stereotag::workflow::render::{render_calibration_sequence, RenderRequest};
+    render_calibration_sequence(
+        &RenderRequest {
+            rig: std::path::Path::new(rig),
+            out,
+            samples: None,
+            every_sample: false,
+            motion: None,
+            seed,
+            force: false,
+        },
+        views,
+        target,
+        &stereotag::progress::Silent,
+    )
+    .unwrap();
+    stereotag::io::load_rig(&out.join("rig.yaml")).unwrap()
+}
+
+/// Calibrates `input` with `target` into `out` with the defaults; returns report.json.
+pub fn calibrate_report(
+    target: &std::path::Path,
+    input: stereotag::workflow::calibrate::CalibrationInput<'_>,
+    out: &std::path::Path,
+) -> serde_json::Value {
+    use stereotag::workflow::calibrate::{calibrate, CalibrateRequest};
+    calibrate(
+        &CalibrateRequest::new(target, input, out),
+        &stereotag::progress::Silent,
+    )
+    .unwrap();
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// The largest relative difference of fx, fy, cx, cy between the report's camera `cam`
+/// (`left`, `right` or `camera`) and `truth`.
+pub fn worst_share(
+    report: &serde_json::Value,
+    cam: &str,
+    truth: &stereotag::camera::Camera,
+) -> f64 {
+    [
+        ("fx", truth.fx),
+        ("fy", truth.fy),
+        ("cx", truth.cx),
+        ("cy", truth.cy),
+    ]
+    .iter()
+    .map(|(k, t)| (report[cam][*k].as_f64().unwrap() - t).abs() / t)
+    .fold(0.0, f64::max)
+}
