@@ -56,6 +56,9 @@ const MAX_CANDIDATES: usize = 1500;
 const SEARCH_FRACTION: f64 = 0.3;
 /// An edge between neighbours must show this fraction of the smaller local contrast.
 const EDGE_CONTRAST_FRACTION: f32 = 0.3;
+/// A corner of a part may lie this share of a square off the plane through the part (lens
+/// distortion; a grid grown astray is a whole square off).
+const PART_PLANE_SHARE: f64 = 0.25;
 /// Seeds tried before giving up.
 const MAX_SEEDS: usize = 40;
 
@@ -388,6 +391,31 @@ pub fn detect_chessboard_part(
         let (u, v) = ([u[0] - p[0], u[1] - p[1]], [v[0] - p[0], v[1] - p[1]]);
         Some(u[0] * v[1] - u[1] * v[0] < 0.0)
     })?;
+    // One plane maps the cells onto the corners (within lens distortion): a grid grown astray,
+    // a step skipped or doubled, is a square off somewhere.
+    let pairs: Vec<([f64; 2], [f64; 2])> = part
+        .iter()
+        .map(|&((i, j), p)| ([i as f64, j as f64], p))
+        .collect();
+    let h = crate::geometry::homography::Homography::from_pairs(&pairs)?;
+    let step = {
+        let mut steps: Vec<f64> = part
+            .iter()
+            .filter_map(|(c, p)| {
+                let q = at.get(&(c.0 + 1, c.1))?;
+                Some((q[0] - p[0]).hypot(q[1] - p[1]))
+            })
+            .collect();
+        steps.sort_by(f64::total_cmp);
+        steps.get(steps.len() / 2).copied()?
+    };
+    let off = |(c, p): &((i32, i32), [f64; 2])| {
+        let q = h.project(c.0 as f64, c.1 as f64);
+        (q[0] - p[0]).hypot(q[1] - p[1])
+    };
+    if part.iter().map(off).fold(0.0, f64::max) > (PART_PLANE_SHARE * step).max(2.0) {
+        return None;
+    }
     let plane = binomial5(&blur);
     Some(
         part.iter()
