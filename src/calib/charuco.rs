@@ -23,9 +23,11 @@ use image::GrayImage;
 use serde::{Deserialize, Serialize};
 
 /// Pixels around a marker left out of its corners' refinement: a blurred edge's reach (the
-/// 5-tap binomial smoothing the refinement runs on spreads an edge over about 2 px). On
-/// OpenCV's drawn views (`tests/charuco.rs`) 1.5 px gave a median error of 0.022 px and a
-/// worst of 0.146 px, 2.5 px 0.017 and 0.093.
+/// 5-tap binomial smoothing the refinement runs on spreads an edge over about 2 px), at most half
+/// the marker's white margin (a narrow margin's edges are the corner's squares' edges too). On
+/// OpenCV's drawn views (`tests/charuco.rs`, margins of about 5 px) 1.5 px gave a median error
+/// of 0.022 px and a worst of 0.146 px, 2.5 px 0.016 and 0.141; on the rendered 11x8 board
+/// (margins of 2-3 px) 2.5 px without the cap left 37 corners out as outliers, with it none.
 const MARKER_CLEARANCE_PX: f64 = 2.5;
 
 /// Pixels from the image's edge within which a marker counts as cut off by it.
@@ -264,7 +266,8 @@ impl CharucoTarget {
             let Some(inverse) = h.0.try_inverse().map(Homography) else {
                 continue;
             };
-            let blur_m = MARKER_CLEARANCE_PX / scale;
+            // At most half the white margin: a narrow margin's own edges are the corner's too.
+            let blur_m = MARKER_CLEARANCE_PX.min(0.5 * margin_px) / scale;
             let markers: Vec<[f64; 4]> = beside
                 .iter()
                 .map(|&(sc, sr)| {
