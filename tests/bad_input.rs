@@ -752,7 +752,7 @@ fn calibration_target_with_a_wrong_typed_or_unknown_key_names_the_line() {
         ),
         (
             "target_type: charuco\ndictionary: DICT_4X4_50\nsquaresX: 20\nsquaresY: 20\nsquareLength: 0.03\nmarkerLength: 0.02\n",
-            "t.yaml: marker 50 is not in DICT_4X4_50 (it has 50 markers)",
+            "t.yaml: tag 50 is not in DICT_4X4_50 (it has 50 tags)",
         ),
         (
             "target_type: charuco\ndictionary: DICT_9X9_50\nsquaresX: 5\nsquaresY: 4\nsquareLength: 0.03\nmarkerLength: 0.02\n",

@@ -542,30 +542,25 @@ pub(super) fn parameter_covariance(
     rms_px: f64,
 ) -> (BTreeMap<String, f64>, Covariance) {
     let free_intrinsics = config.fixed_intrinsics.is_none();
-    let names = super::camera_names(state.stereo);
-    let mut x: Vec<f64> = Vec::new();
+    let columns = Columns::of(state, views.len(), !free_intrinsics);
+    // The names of the parameters before the board poses, in `columns`' order.
     let mut param_names: Vec<String> = Vec::new();
     if free_intrinsics {
+        let names = super::camera_names(state.stereo);
         for (side, cam) in names.iter().zip([&state.left, &state.right]) {
-            x.extend(intrinsics_vec(cam));
             param_names.extend(intrinsics_names(cam).iter().map(|n| format!("{side}.{n}")));
         }
     }
-    let base = x.len();
+    let base = param_names.len();
     if state.stereo {
-        x.extend(pose_vec(&state.right_from_left));
         param_names.extend(
             ["rx", "ry", "rz", "tx", "ty", "tz"]
                 .iter()
                 .map(|n| format!("right_from_left.{n}")),
         );
     }
-    for p in &state.poses {
-        x.extend(pose_vec(p));
-    }
-    let columns = Columns::of(state, views.len(), !free_intrinsics);
-    debug_assert_eq!(columns.len, x.len());
-    let (info, _) = normal_equations(state, views, &columns, &x, None);
+    debug_assert_eq!(columns.poses, param_names.len());
+    let (info, _) = normal_equations(state, views, &columns, &pack(state, &columns), None);
 
     let mut out = BTreeMap::new();
     let Some(cov) = info.try_inverse() else {

@@ -160,28 +160,12 @@ impl CharucoTarget {
                 self.dictionary
             ));
         }
-        let layout = self.layout();
-        let squares = self.marker_squares().len();
-        if layout.len() != squares {
-            return Err(format!(
-                "ids: {} ids for the board's {squares} marker squares",
-                layout.len()
-            ));
-        }
-        let mut seen = std::collections::BTreeSet::new();
-        for id in &layout {
-            if !seen.insert(id) {
-                return Err(format!("ids: {id} appears twice"));
-            }
-            if *id as usize >= self.dictionary.code_count() {
-                return Err(format!(
-                    "marker {id} is not in {} (it has {} markers): a larger dictionary or fewer squares",
-                    self.dictionary,
-                    self.dictionary.code_count()
-                ));
-            }
-        }
-        Ok(())
+        crate::calib::check_id_layout(
+            &self.layout(),
+            self.marker_squares().len(),
+            "marker squares",
+            self.dictionary,
+        )
     }
 
     /// The board's inner corners found in `image` from its detected markers (`markers`: the

@@ -281,6 +281,40 @@ pub fn detect_chessboard(
     cols: u32,
     rows: u32,
 ) -> Result<Vec<[f64; 2]>, ChessboardMiss> {
+    match find_chessboard(image, cols, rows, None)? {
+        ChessboardFound::Whole(px) => Ok(px),
+        ChessboardFound::Part(part) => Err(ChessboardMiss::Partial {
+            found: part.len(),
+            expected: (cols * rows) as usize,
+        }),
+    }
+}
+
+/// What was found of a chessboard: the whole board (corners in board order, refined), or a part
+/// of it ([`PartCorner`]s).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ChessboardFound {
+    /// The whole board, as [`detect_chessboard`] gives it.
+    Whole(Vec<[f64; 2]>),
+    /// The board seen in part.
+    Part(Vec<PartCorner>),
+}
+
+/// Finds a `cols x rows` chessboard, whole, or when `min_part_corners` is given and the whole
+/// board is not in view, a part of it: the largest grid grown, when it holds at least that many
+/// corners in two rows and two columns or more, fits inside the board either way round and lies
+/// on one plane (every corner within a quarter of a square of the homography through
+/// the part). A part's corners are refined to sub-pixel, each with its cell `(c, r)` counted
+/// from the part's own first corner (+c then +r turning clockwise on the image, as a whole
+/// board's). Which of the board's corners they are is not known (rows and columns look alike),
+/// but they lie on the board's grid: a calibration gives such a view a board pose of its own,
+/// which takes up the offset.
+pub fn find_chessboard(
+    image: &GrayImage,
+    cols: u32,
+    rows: u32,
+    min_part_corners: Option<usize>,
+) -> Result<ChessboardFound, ChessboardMiss> {
     if image.width() < 16 || image.height() < 16 || cols < 2 || rows < 2 {
         return Err(ChessboardMiss::NoCorners);
     }
@@ -290,17 +324,23 @@ pub fn detect_chessboard(
         return Err(ChessboardMiss::NoCorners);
     }
     match search(&blur, &cands, cols, rows) {
-        Search::Whole(at) => Ok(refine_all(
+        Search::Whole(at) => Ok(ChessboardFound::Whole(refine_all(
             &binomial5(&blur),
             &at,
             cols as usize,
             rows as usize,
-        )),
+        ))),
         Search::Part(grid) if grid.is_empty() => Err(ChessboardMiss::NoCorners),
-        Search::Part(grid) => Err(ChessboardMiss::Partial {
-            found: grid.len(),
-            expected: (cols * rows) as usize,
-        }),
+        Search::Part(grid) => {
+            let found = grid.len();
+            min_part_corners
+                .and_then(|min| part_corners(&blur, grid, cols, rows, min))
+                .map(ChessboardFound::Part)
+                .ok_or(ChessboardMiss::Partial {
+                    found,
+                    expected: (cols * rows) as usize,
+                })
+        }
     }
 }
 
@@ -355,27 +395,15 @@ fn search(blur: &Plane, cands: &[Candidate], cols: u32, rows: u32) -> Search {
 /// corner, and its pixel.
 pub type PartCorner = ((u32, u32), [f64; 2]);
 
-/// A chessboard seen in part: the corners of the largest grid grown when the whole board is not
-/// in view (at least `min_corners`, in two rows and two columns or more, fitting inside the
-/// board either way round), refined to sub-pixel, each with its cell `(c, r)` counted from the
-/// grid's own first corner (+c then +r turning clockwise on the image, as a whole board's).
-/// Which of the board's corners they are is not known (rows and columns look alike), but they
-/// lie on the board's grid: a calibration gives such a view a board pose of its own, which
-/// takes up the offset. `None` when the whole board is in view, or no such part.
-pub fn detect_chessboard_part(
-    image: &GrayImage,
+/// The part of a board a grown grid is ([`find_chessboard`]), numbered and refined; `None` when
+/// it is not one.
+fn part_corners(
+    blur: &Plane,
+    part: Vec<((i32, i32), [f64; 2])>,
     cols: u32,
     rows: u32,
     min_corners: usize,
 ) -> Option<Vec<PartCorner>> {
-    if image.width() < 16 || image.height() < 16 || cols < 2 || rows < 2 {
-        return None;
-    }
-    let blur = binomial5_gray(image);
-    let cands = candidates(&blur);
-    let Search::Part(part) = search(&blur, &cands, cols, rows) else {
-        return None;
-    };
     let (i0, i1) = range(part.iter().map(|(c, _)| c.0));
     let (j0, j1) = range(part.iter().map(|(c, _)| c.1));
     let (ni, nj) = ((i1 - i0 + 1) as u32, (j1 - j0 + 1) as u32);
@@ -416,7 +444,7 @@ pub fn detect_chessboard_part(
     if part.iter().map(off).fold(0.0, f64::max) > (PART_PLANE_SHARE * step).max(2.0) {
         return None;
     }
-    let plane = binomial5(&blur);
+    let plane = binomial5(blur);
     Some(
         part.iter()
             .map(|&((i, j), p)| {

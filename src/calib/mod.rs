@@ -17,6 +17,7 @@ mod xcorner;
 pub use aprilgrid::{aprilgrid_board_point, aprilgrid_corners};
 pub use charuco::CharucoTarget;
 pub use chessboard::{chessboard_board_corners, chessboard_board_point};
+pub(crate) use target::check_id_layout;
 pub use target::{
     AprilGridTarget, BoardsTarget, CheckerboardTarget, TagBoardTarget, Target, TargetDetector,
     TargetView, BOARD_ID_STRIDE,

@@ -3,7 +3,7 @@
 //! target's corners in an image, each with its position on the board.
 
 use crate::calib::aprilgrid::refine_aprilgrid;
-use crate::calib::chessboard::detect_chessboard;
+use crate::calib::chessboard::{find_chessboard, ChessboardFound};
 use crate::calib::{aprilgrid_corners, chessboard_board_corners, Corner};
 use crate::visual::tags::{
     AprilGridMultiScale, Backend, DetectorConfig, TagDetection, TagDetector, TagError, TagFamily,
@@ -62,7 +62,7 @@ impl Target {
     /// Whether `tag` is one of this board's tags.
     pub fn holds_tag(&self, tag: &TagDetection) -> bool {
         match self {
-            Target::Tagboard(b) => tag.family == b.family && b.board_point(tag.id * 4).is_some(),
+            Target::Tagboard(b) => b.holds(tag),
             Target::Charuco(c) => tag.family == c.dictionary && c.layout().contains(&tag.id),
             Target::Aprilgrid(_) => tag.family == TagFamily::Aprilgrid36h11,
             Target::Checkerboard(_) => false,
@@ -116,6 +116,11 @@ impl TagBoardTarget {
             Some(ids) => ids.iter().position(|&t| t == tag).map(|p| p as u32),
             None => (tag < self.tag_cols * self.tag_rows).then_some(tag),
         }
+    }
+
+    /// Whether `tag` is one of the board's tags.
+    pub fn holds(&self, tag: &TagDetection) -> bool {
+        tag.family == self.family && self.position_of(tag.id).is_some()
     }
 
     /// Where corner `id` (tag id × 4 + k) sits on the board, if its tag is on it.
@@ -175,8 +180,8 @@ pub struct CheckerboardTarget {
 pub struct TargetView {
     /// The board's corners found, with their positions on the board.
     pub corners: Vec<Corner>,
-    /// An AprilGrid's tags as detected, before the corners were refined (none for a
-    /// chessboard).
+    /// The tags the corners came from, as detected (an AprilGrid's before its corners were
+    /// refined; a tag board's or ChArUco board's); none for a chessboard.
     pub tags: Vec<TagDetection>,
     /// Why the image gave nothing, when it did not (no tag, no whole chessboard).
     pub miss: Option<String>,
@@ -240,29 +245,7 @@ impl TargetDetector {
             });
         }
         if let Target::Checkerboard(c) = &self.target {
-            return Ok(
-                match detect_chessboard(image, c.target_cols, c.target_rows) {
-                    Ok(px) => TargetView {
-                        corners: chessboard_board_corners(
-                            &px,
-                            c.target_cols,
-                            c.col_spacing_m,
-                            c.row_spacing_m,
-                        ),
-                        tags: Vec::new(),
-                        miss: None,
-                    },
-                    Err(miss) => {
-                        // A board seen in part gives its corners, and no miss.
-                        let corners = chessboard_part(image, c);
-                        TargetView {
-                            miss: corners.is_empty().then(|| miss.to_string()),
-                            corners,
-                            tags: Vec::new(),
-                        }
-                    }
-                },
-            );
+            return Ok(chessboard_view(image, c));
         }
         let mut tags = Vec::new();
         for (_, detector) in &mut self.tags {
@@ -308,42 +291,80 @@ impl TargetDetector {
     }
 }
 
-/// Fewest corners of a chessboard seen in part that are used (a view's least, by default).
-pub const MIN_PART_CORNERS: usize = 12;
-
-/// The corners of a chessboard seen in part ([`crate::calib::chessboard::detect_chessboard_part`]),
-/// numbered from the part's own first corner (id `r · max(cols, rows) + c`) and placed on the
-/// board from there; none when the squares are not square (the part's way round is unknown).
-/// Fewer than the board's corners: a calibration solves such a view with a pose of its own.
-fn chessboard_part(image: &GrayImage, c: &CheckerboardTarget) -> Vec<Corner> {
-    if (c.col_spacing_m - c.row_spacing_m).abs() > 1e-9 * c.col_spacing_m {
-        return Vec::new();
+/// A chessboard's corners in `image`: the whole board's, or those of a part of it
+/// ([`find_chessboard`]) numbered from the part's own first corner (id `r · max(cols, rows) + c`)
+/// and placed on the board from there, with no miss (a calibration solves such a view with a
+/// pose of its own). A part needs square squares (its way round is unknown) and as many corners
+/// as a view needs ([`crate::calib::CalibConfig`]'s default).
+fn chessboard_view(image: &GrayImage, c: &CheckerboardTarget) -> TargetView {
+    let square = (c.col_spacing_m - c.row_spacing_m).abs() <= 1e-9 * c.col_spacing_m;
+    let min_part = square.then(|| crate::calib::CalibConfig::default().min_corners);
+    let corners = match find_chessboard(image, c.target_cols, c.target_rows, min_part) {
+        Ok(ChessboardFound::Whole(px)) => {
+            chessboard_board_corners(&px, c.target_cols, c.col_spacing_m, c.row_spacing_m)
+        }
+        Ok(ChessboardFound::Part(part)) => {
+            let stride = c.target_cols.max(c.target_rows);
+            part.into_iter()
+                .map(|((col, row), px)| Corner {
+                    id: row * stride + col,
+                    board_m: [
+                        col as f64 * c.col_spacing_m,
+                        row as f64 * c.row_spacing_m,
+                        0.0,
+                    ],
+                    px,
+                })
+                .collect()
+        }
+        Err(miss) => {
+            return TargetView {
+                corners: Vec::new(),
+                tags: Vec::new(),
+                miss: Some(miss.to_string()),
+            }
+        }
+    };
+    TargetView {
+        corners,
+        tags: Vec::new(),
+        miss: None,
     }
-    let stride = c.target_cols.max(c.target_rows);
-    crate::calib::chessboard::detect_chessboard_part(
-        image,
-        c.target_cols,
-        c.target_rows,
-        MIN_PART_CORNERS,
-    )
-    .unwrap_or_default()
-    .into_iter()
-    .map(|((col, row), px)| Corner {
-        id: row * stride + col,
-        board_m: [
-            col as f64 * c.col_spacing_m,
-            row as f64 * c.row_spacing_m,
-            0.0,
-        ],
-        px,
-    })
-    .collect()
+}
+
+/// Whether `layout` puts one distinct tag of `family` at each of `places` places (`what`, for
+/// the message: "positions", "marker squares"); else why not.
+pub(crate) fn check_id_layout(
+    layout: &[u32],
+    places: usize,
+    what: &str,
+    family: TagFamily,
+) -> Result<(), String> {
+    if layout.len() != places {
+        return Err(format!(
+            "ids: {} ids for the board's {places} {what}",
+            layout.len()
+        ));
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    for id in layout {
+        if !seen.insert(id) {
+            return Err(format!("ids: {id} appears twice"));
+        }
+        if *id as usize >= family.code_count() {
+            return Err(format!(
+                "tag {id} is not in {family} (it has {} tags): a larger family or fewer {what}",
+                family.code_count()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A tag board's corners: the corners of its tags found (`tags`: any tags in the image).
 fn tag_board_corners(b: &TagBoardTarget, tags: &[TagDetection]) -> Vec<Corner> {
     tags.iter()
-        .filter(|t| t.family == b.family && b.board_point(t.id * 4).is_some())
+        .filter(|t| b.holds(t))
         .flat_map(|t| {
             (0..4).filter_map(move |k| {
                 let id = t.id * 4 + k;

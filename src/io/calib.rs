@@ -203,36 +203,13 @@ fn check_tag_board(path: &Path, b: &crate::calib::TagBoardTarget) -> Result<(), 
             ),
         ));
     }
-    let layout = b.layout();
-    let positions = (b.tag_cols * b.tag_rows) as usize;
-    if layout.len() != positions {
-        return Err(IoError::content(
-            path,
-            format!(
-                "ids: {} ids for {} x {} = {positions} positions",
-                layout.len(),
-                b.tag_cols,
-                b.tag_rows
-            ),
-        ));
-    }
-    let mut seen = std::collections::BTreeSet::new();
-    for id in &layout {
-        if !seen.insert(id) {
-            return Err(IoError::content(path, format!("ids: {id} appears twice")));
-        }
-        if *id as usize >= b.family.code_count() {
-            return Err(IoError::content(
-                path,
-                format!(
-                    "ids: {id} is not a {} id (it has {})",
-                    b.family,
-                    b.family.code_count()
-                ),
-            ));
-        }
-    }
-    Ok(())
+    crate::calib::check_id_layout(
+        &b.layout(),
+        (b.tag_cols * b.tag_rows) as usize,
+        "positions",
+        b.family,
+    )
+    .map_err(|e| IoError::content(path, e))
 }
 
 /// The header line of EuRoC / yac corner files.

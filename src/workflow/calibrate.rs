@@ -135,7 +135,8 @@ pub struct ImageRecord {
     pub view: String,
     /// `left`, `right` or `camera`.
     pub camera: &'static str,
-    /// AprilGrid tags found (0 for a chessboard).
+    /// Tags found (an AprilGrid's, a tag board's, a ChArUco board's markers; 0 for a
+    /// chessboard).
     pub tags: usize,
     /// Board corners found.
     pub corners: usize,

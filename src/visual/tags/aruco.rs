@@ -30,8 +30,13 @@ impl ArucoDictionary {
         Self::all().find(|d| d.name() == full)
     }
 
+    /// Its place in OpenCV's order.
+    pub(super) fn index(&self) -> usize {
+        self.0 as usize
+    }
+
     fn entry(&self) -> &'static ArucoEntry {
-        &DICTIONARIES[self.0 as usize]
+        &DICTIONARIES[self.index()]
     }
 
     /// OpenCV's name.

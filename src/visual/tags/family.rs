@@ -80,7 +80,8 @@ pub struct TagId {
     pub id: u32,
 }
 
-/// The families the tag detectors look for (not the AprilGrid's, which its own detector finds).
+/// The AprilTag families the tag detectors look for (not the AprilGrid's, which its own detector
+/// finds; the ArUco dictionaries are detectable too, [`TagFamily::is_detectable`]).
 pub const DETECTABLE_FAMILIES: [TagFamily; 4] = [
     TagFamily::Tag36h11,
     TagFamily::Tag25h9,
@@ -222,8 +223,10 @@ impl TagFamily {
         type Cached = OnceLock<Option<K>>;
         static ARUCO: [Cached; 16] = [const { OnceLock::new() }; 16];
         if let TagFamily::Aruco(d) = self {
-            let index = ArucoDictionary::all().position(|a| a == *d)?;
-            return ARUCO.get(index)?.get_or_init(|| d.kornia_family()).as_ref();
+            return ARUCO
+                .get(d.index())?
+                .get_or_init(|| d.kornia_family())
+                .as_ref();
         }
         let (cell, make): (&Cached, fn() -> Option<K>) = match self {
             TagFamily::Tag36h11 | TagFamily::Aprilgrid36h11 => (&T36, || K::tag36_h11().ok()),
