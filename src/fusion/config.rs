@@ -99,6 +99,10 @@ pub struct FuseConfig {
     /// `sonar_max_range_sigma_m`): the last ranges matched with the surveyed walls over poses
     /// around the estimate, taken only when one pose clearly explains most of them (ours: on).
     pub wall_relocalise: bool,
+    /// With no tag sighting and no visual turn to correct the odometry against, let the sonar
+    /// correct it: each keyframe's latest ranges matched with the grid of the older readings
+    /// ([`super::run_offline_sonar`]; ours: on).
+    pub sonar_scan_match: bool,
     /// Fuse the turns the cameras measure between frames ([`crate::visual::vo`]) with the odometry,
     /// online and offline (ours: on; they are used when the run's pictures give them).
     pub visual_odometry: bool,
@@ -222,6 +226,7 @@ impl Default for FuseConfig {
             hold_tail_to_walls: true,
             walls_between_tags: false,
             wall_relocalise: true,
+            sonar_scan_match: true,
             visual_odometry: true,
             visual_gate_chi2: 10.83,
             estimate_mounting: false,

@@ -18,7 +18,9 @@
 //! observation factors under a Huber kernel and optionally Hough-corner priors on landmarks, solved by
 //! Levenberg-Marquardt in the `tiny-solver` crate (sparse Cholesky, automatic derivatives) from the
 //! online estimate. Poses between keyframes follow the odometry with the keyframe corrections
-//! interpolated by distance travelled.
+//! interpolated by distance travelled. A run with no tag sighting and no visual turn is corrected
+//! by its sonar ([`run_offline_sonar`]): each keyframe's latest ranges matched with the counting
+//! grid of the older readings, the matches holding the graph.
 //!
 //! The stage is split along its phases: [`FuseConfig`] (`config.rs`), the measurement models
 //! (`measurement.rs`), the filter (`ekf.rs`), the online pass (`online.rs`), the offline graph
@@ -55,8 +57,8 @@ pub use localize::{
 };
 pub use observations::Observations;
 pub use offline::{
-    estimate_mounting, run_offline, run_offline_anchored, run_offline_walls, MountingEstimate,
-    OdometryCalibration, OfflineKept, OfflineResult, MOUNTING_STRETCH_M,
+    estimate_mounting, run_offline, run_offline_anchored, run_offline_sonar, run_offline_walls,
+    MountingEstimate, OdometryCalibration, OfflineKept, OfflineResult, MOUNTING_STRETCH_M,
 };
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use streaming::{PairError, PairUpdate, StereoLocalizer};

@@ -4,8 +4,9 @@
 
 use crate::dataset::RunDataset;
 use crate::fusion::{
-    associate, hold_tail_to_walls, run_offline_anchored, run_offline_walls, run_online, FuseConfig,
-    Landmark, Observations, OdometryCalibration, OfflineResult, OnlineResult, SonarInput,
+    associate, hold_tail_to_walls, run_offline_anchored, run_offline_sonar, run_offline_walls,
+    run_online, FuseConfig, Landmark, Observations, OdometryCalibration, OfflineResult,
+    OnlineResult, SonarInput,
 };
 use crate::progress::timed;
 use crate::sonar::grid::{GridError, OccupancyMap};
@@ -81,9 +82,28 @@ pub fn survey(
     let online_map = timed("map_online", times, || {
         counting_map_along(&run.sonar_log(), &online.trajectory, mapping)
     })?;
-    let mut offline = timed("fuse_offline", times, || {
-        run_offline_anchored(&obs, &online, fuse, None, settings.anchors)
-    });
+    // With no sighting and no visual turn, only the sonar can correct the odometry.
+    let sonar_only = online.accepted.is_empty() && visual.is_empty() && settings.anchors.is_empty();
+    let mut offline = if sonar_only && fuse.sonar_scan_match && !run.sonar.is_empty() {
+        let sonar = SonarInput {
+            readings: &run.sonar,
+            layout: &run.meta.robot.sonar,
+            walls: &[],
+        };
+        let offline = timed("fuse_sonar", times, || {
+            run_offline_sonar(&obs, &online, fuse, &sonar, &mapping.grid)
+        });
+        tracing::info!(
+            "no tag sightings and no visual turns: the sonar matched its older readings at {} of {} keyframes",
+            offline.sonar_matches,
+            offline.keyframes
+        );
+        offline
+    } else {
+        timed("fuse_offline", times, || {
+            run_offline_anchored(&obs, &online, fuse, None, settings.anchors)
+        })
+    };
     if fuse.walls_between_tags {
         offline = timed("fuse_walls", times, || {
             walls_pass(run, &obs, &online, offline, settings)

@@ -282,6 +282,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
         "offline.wall_ranges".into(),
         survey.offline.wall_ranges as f64,
     );
+    m.insert(
+        "offline.sonar_matches".into(),
+        survey.offline.sonar_matches as f64,
+    );
     if let Some(c) = survey.offline.odometry_calibration {
         m.insert(
             "offline.odometry_turn_scale_error".into(),

@@ -81,6 +81,27 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for WallRangeFactor {
     }
 }
 
+/// Whitened prior on a pose: `r = S · (p ⊖ measured)` (the heading's difference wrapped).
+pub(super) struct PoseFactor {
+    pub(super) measured: [f64; 3],
+    pub(super) sqrt_info: [[f64; 3]; 3],
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for PoseFactor {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let p = &params[0];
+        let [x, y, theta] = self.measured.map(constant::<T>);
+        whiten(
+            &self.sqrt_info,
+            [
+                p[0].clone() - x,
+                p[1].clone() - y,
+                angle(p[2].clone() - theta),
+            ],
+        )
+    }
+}
+
 /// Whitened prior on a vector variable (first pose; corner priors on landmark x, y).
 pub(super) struct PriorFactor {
     pub(super) measured: Vec<f64>,

@@ -4,7 +4,8 @@
 //! sightings, the visual turns, the corner priors.
 
 use super::factors::{
-    sqrt_information, BetweenFactor, PriorFactor, TagFactor, TurnFactor, WallRangeFactor,
+    sqrt_information, BetweenFactor, PoseFactor, PriorFactor, TagFactor, TurnFactor,
+    WallRangeFactor,
 };
 use super::keyframes::Keyframes;
 use super::OdometryCalibration;
@@ -285,6 +286,30 @@ pub(super) fn add_wall_ranges(
         added += 1;
     }
     added
+}
+
+/// The sonar's matched keyframes ([`super::scan_match`]): every keyframe started at the pose the
+/// matching gave it, and a robust prior on each matched one at its match, with the match's
+/// covariance. Returns the matched keyframes.
+pub(super) fn add_matched_poses(
+    graph: &mut Graph,
+    matches: &super::scan_match::ScanMatches,
+    config: &FuseConfig,
+) -> Vec<usize> {
+    for (i, p) in matches.poses.iter().enumerate() {
+        graph.init.insert(
+            pose_name(i),
+            sna::DVector::from_vec(vec![p.x, p.y, p.theta]),
+        );
+    }
+    for &(k, p, covariance) in &matches.matched {
+        let factor = PoseFactor {
+            measured: [p.x, p.y, p.theta],
+            sqrt_info: sqrt_information(&covariance),
+        };
+        graph.add(3, &[&pose_name(k)], Box::new(factor), true, config);
+    }
+    matches.matched.iter().map(|m| m.0).collect()
 }
 
 /// The odometry calibration's variable and its prior.

@@ -7,6 +7,7 @@ mod graph;
 mod interpolate;
 mod keyframes;
 mod mounting;
+mod scan_match;
 
 use crate::fusion::{FuseConfig, Landmark, Observations, OnlineResult};
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
@@ -50,6 +51,9 @@ pub struct OfflineResult {
     pub odometry_factors: usize,
     /// Range factors off the walls in the graph ([`run_offline_walls`]; 0 in a pass without).
     pub wall_ranges: usize,
+    /// Keyframes held where the sonar's latest ranges matched the grid of its older ones
+    /// ([`run_offline_sonar`]; 0 in a pass without).
+    pub sonar_matches: usize,
     /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
     /// The camera's planar mounting error, when estimated
@@ -148,6 +152,19 @@ impl OdometryCalibration {
         Pose2::new(x, y, theta)
     }
 
+    /// This calibration, then `more` on top of it (one found on odometry already corrected by
+    /// this one), as one: the scales multiply, the drifts add.
+    pub fn then(&self, more: &OdometryCalibration) -> OdometryCalibration {
+        OdometryCalibration {
+            turn_scale_error: (1.0 + self.turn_scale_error) * (1.0 + more.turn_scale_error) - 1.0,
+            heading_drift_rad_per_m: self.heading_drift_rad_per_m
+                + more.heading_drift_rad_per_m * (1.0 + self.distance_scale_error),
+            distance_scale_error: (1.0 + self.distance_scale_error)
+                * (1.0 + more.distance_scale_error)
+                - 1.0,
+        }
+    }
+
     /// A whole odometry log corrected increment by increment, from the same first pose.
     pub fn apply(&self, odometry: &[StampedPose]) -> Vec<StampedPose> {
         let Some(first) = odometry.first() else {
@@ -192,7 +209,76 @@ pub fn run_offline_anchored(
     prior: Option<&OdometryCalibration>,
     anchors: &[crate::fusion::Anchor],
 ) -> OfflineResult {
-    solve(obs, online, config, (prior, None), anchors, None)
+    solve(obs, online, config, (prior, None), anchors, SonarUse::None)
+}
+
+/// The offline pass of a run with nothing else to correct its odometry against (no tag
+/// sightings, no visual turns): the sonar's latest ranges at each keyframe are matched with the
+/// counting grid (on `grid`) of its older readings, placed along the trajectory corrected so far,
+/// and the matched keyframes hold the graph near where they matched (robust priors); the
+/// odometry and its calibration carry the correction between them. With no match, nothing is
+/// corrected ([`OfflineKept::Nothing`]), as in [`run_offline`].
+pub fn run_offline_sonar(
+    obs: &Observations<'_>,
+    online: &OnlineResult,
+    config: &FuseConfig,
+    sonar: &crate::fusion::SonarInput<'_>,
+    grid: &crate::sonar::grid::GridConfig,
+) -> OfflineResult {
+    let mut result = solve(
+        obs,
+        online,
+        config,
+        (None, None),
+        &[],
+        SonarUse::ScanMatch(sonar, grid),
+    );
+    // Each pass's calibration makes the next pass's predictions better, and so its matches.
+    for _ in 1..SONAR_PASSES {
+        let Some(total) = result.odometry_calibration else {
+            break;
+        };
+        let odometry = total.apply(obs.odometry);
+        let pass_obs = Observations {
+            odometry: &odometry,
+            ..*obs
+        };
+        let next = solve(
+            &pass_obs,
+            online,
+            config,
+            (None, None),
+            &[],
+            SonarUse::ScanMatch(sonar, grid),
+        );
+        let Some(more) = next.odometry_calibration else {
+            break;
+        };
+        result = OfflineResult {
+            odometry_calibration: Some(total.then(&more)),
+            ..next
+        };
+    }
+    result
+}
+
+/// Passes of the sonar's own correction: each starts from the odometry corrected by the
+/// calibration the passes before it found (on the simulated office and museum, seeds 1-5, the
+/// offline ATE over the odometry's went from 0.24-0.85 with one pass to 0.10-0.49 with three).
+const SONAR_PASSES: usize = 3;
+
+/// What the sonar gives the offline graph.
+#[derive(Clone, Copy)]
+enum SonarUse<'a> {
+    /// Nothing.
+    None,
+    /// Range factors off its walls, held fixed ([`run_offline_walls`]).
+    Walls(&'a crate::fusion::SonarInput<'a>),
+    /// Keyframe poses matched with its own older readings ([`run_offline_sonar`]).
+    ScanMatch(
+        &'a crate::fusion::SonarInput<'a>,
+        &'a crate::sonar::grid::GridConfig,
+    ),
 }
 
 /// The offline pass again, with the walls holding the trajectory between tag sightings: started
@@ -225,20 +311,20 @@ pub fn run_offline_walls(
         config,
         (None, calibration),
         anchors,
-        Some(sonar),
+        SonarUse::Walls(sonar),
     )
 }
 
 /// The offline pass from `online`: the calibration's prior centred on `prior` (else on no
-/// error) and started at `init` (else at the prior's centre); with `walls`, range factors off
-/// them.
+/// error) and started at `init` (else at the prior's centre); with the sonar, what it gives
+/// ([`SonarUse`]).
 fn solve(
     obs: &Observations<'_>,
     online: &OnlineResult,
     config: &FuseConfig,
     (prior, init): (Option<&OdometryCalibration>, Option<&OdometryCalibration>),
     anchors: &[crate::fusion::Anchor],
-    walls: Option<&crate::fusion::SonarInput<'_>>,
+    sonar: SonarUse<'_>,
 ) -> OfflineResult {
     let Some(first) = obs.odometry.first() else {
         return OfflineResult {
@@ -255,6 +341,7 @@ fn solve(
             odometry_chi2: [0.0; 2],
             odometry_factors: 0,
             wall_ranges: 0,
+            sonar_matches: 0,
             odometry_calibration: None,
             mounting: None,
         };
@@ -280,9 +367,24 @@ fn solve(
             ]),
         );
     }
-    let wall_ranges = walls.map_or(0, |w| {
-        graph::add_wall_ranges(&mut graph, obs, &keyframes, w, config)
-    });
+    let wall_ranges = match sonar {
+        SonarUse::Walls(w) => graph::add_wall_ranges(&mut graph, obs, &keyframes, w, config),
+        _ => 0,
+    };
+    let sonar_matches = match sonar {
+        SonarUse::ScanMatch(s, grid) => scan_match::sequential(
+            &keyframes.frames,
+            obs.odometry,
+            s.readings,
+            s.layout,
+            grid,
+            config,
+        )
+        .map_or_else(Vec::new, |m| {
+            graph::add_matched_poses(&mut graph, &m, config)
+        }),
+        _ => Vec::new(),
+    };
     let options = tiny_solver::OptimizerOptions {
         max_iteration: config.max_iterations,
         ..Default::default()
@@ -290,10 +392,14 @@ fn solve(
     use tiny_solver::Optimizer;
     // Odometry alone corrects nothing: a solve would return its start and an odometry
     // calibration it cannot observe.
-    let nothing = graph.sightings.is_empty() && visual.is_empty();
+    let nothing = graph.sightings.is_empty() && visual.is_empty() && sonar_matches.is_empty();
     if nothing {
         tracing::warn!(
-            "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns): it keeps the online estimate and estimates no odometry calibration"
+            "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns{}): it keeps the online estimate and estimates no odometry calibration",
+            match sonar {
+                SonarUse::ScanMatch(..) => ", no place where the sonar matched its own older readings",
+                _ => "",
+            }
         );
     }
     let solution = (!nothing)
@@ -412,6 +518,7 @@ fn solve(
         ],
         odometry_factors: graph.odometry.len(),
         wall_ranges,
+        sonar_matches: sonar_matches.len(),
         odometry_calibration: values
             .get(graph::CALIBRATION)
             .filter(|_| kept == OfflineKept::Solution && config.calibrate_odometry)

@@ -1,0 +1,438 @@
+//! The sonar's own correction, for a run with nothing else to correct the odometry against (no
+//! tag sightings, no visual turns): keyframe by keyframe, the latest ranges (placed relative to
+//! the keyframe by the odometry) are matched with the counting grid of every older reading,
+//! placed along the trajectory corrected so far. A robot that comes back to a place it mapped
+//! earlier, or turns on the spot before walls it has just seen, is pulled back onto them; the
+//! matched keyframes then hold the offline graph, whose odometry calibration carries the
+//! correction through the stretches no match reached.
+//!
+//! A range is explained at a pose by how near its echo's arc (the range across the beam's cone,
+//! or the point down a laser's ray) comes to an occupied cell of the grid so far; a range whose
+//! arc lies wholly in cells the grid has not seen says nothing and is left out of that match.
+
+use super::keyframes::Keyframe;
+use crate::fusion::measurement::odometry_covariance;
+use crate::fusion::FuseConfig;
+use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
+use crate::sonar::grid::{CountingGrid, GridConfig, OccupancyGrid, OccupancyMap};
+use crate::sonar::{BeamModel, PlacedReading, SonarLayout, SonarReading};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// Ranges (with an echo) matched at a keyframe: the latest, enough for walls in several
+/// directions and a few metres of travel (the heading shows in how ranges taken apart agree).
+const WINDOW: usize = 96;
+/// The grid they are matched with holds the readings at least this long before them, seconds:
+/// the readings just before are placed by the same odometry, and a match with them would only
+/// repeat it (and make the filter surer than it is).
+const GAP_S: f64 = 10.0;
+/// A match needs at least this many of the window's ranges to fall where the grid has seen.
+const MIN_SEEN: usize = 24;
+/// The search around the pose the odometry predicts: metres and radians (10 degrees), and its
+/// steps (metres, radians): coarse over it, then fine around the coarse mean.
+const REACH_M: f64 = 0.4;
+const REACH_RAD: f64 = 0.175;
+const COARSE_STEP: (f64, f64) = (0.08, 0.035);
+const FINE_STEP: (f64, f64) = (0.02, 0.0087);
+/// A range's residual is truncated here (metres): further off, it is another wall or none.
+const TRUNCATE_M: f64 = 0.15;
+/// A range's residual sigma, metres: the sonar's noise, the grid's cells, and room for the
+/// window's ranges not being independent (several off one wall).
+const RANGE_SIGMA_M: f64 = 0.1;
+/// A match is used only when it agrees with the prediction (its squared Mahalanobis distance
+/// below the chi-square 99% point with 3 degrees of freedom): a wrong wall's match is left out.
+const MATCH_GATE_CHI2: f64 = 11.34;
+/// A range agrees with a pose when its arc comes this near an occupied cell, metres; a match
+/// needs this share of the seen ranges to agree at its pose.
+const INLIER_M: f64 = 0.06;
+const MIN_INLIER_SHARE: f64 = 0.6;
+/// A match that leaves its position sigma above this (metres) in every direction says nothing.
+const MAX_MATCH_SIGMA_M: f64 = 0.12;
+/// Points of an echo's arc are taken this far apart across the cone: 5 degrees.
+const ARC_STEP_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+/// The distance table's cells per grid cell along each axis.
+const FIELD_SUBCELLS: usize = 4;
+
+/// What the sequential matching gave: every keyframe's pose (the odometry's prediction from the
+/// one before, updated by its match when it has one) and the matches: keyframe, pose, covariance.
+pub(super) struct ScanMatches {
+    pub(super) poses: Vec<Pose2>,
+    pub(super) matched: Vec<(usize, Pose2, Matrix3<f64>)>,
+}
+
+/// Matches each keyframe's latest ranges with the grid of the older ones, in time order (see
+/// the module's documentation); `None` when the grid cannot be made from `grid`.
+pub(super) fn sequential(
+    frames: &[Keyframe],
+    odometry: &[StampedPose],
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+    grid: &GridConfig,
+    config: &FuseConfig,
+) -> Option<ScanMatches> {
+    let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
+    let echo = |r: &SonarReading| r.range_m.is_some_and(|m| m < layout.max_range_m - 1e-6);
+    // Times of the readings with an echo: the window of keyframe k is the WINDOW latest by then.
+    let echo_times: Vec<f64> = readings.iter().filter(|r| echo(r)).map(|r| r.t_s).collect();
+    let mut poses: Vec<Pose2> = Vec::with_capacity(frames.len());
+    let mut matched = Vec::new();
+    let mut inserted = 0; // readings already in the grid
+    let mut covariance = Matrix3::zeros();
+    for (k, frame) in frames.iter().enumerate() {
+        let predicted = match k {
+            0 => frame.odom,
+            _ => {
+                let delta = frames[k - 1].odom.between(&frame.odom);
+                covariance = propagated(&covariance, poses[k - 1], delta, config);
+                poses[k - 1].compose(&delta)
+            }
+        };
+        let last = echo_times.partition_point(|&t| t <= frame.t_s);
+        let window_start = echo_times[last.saturating_sub(WINDOW)..last]
+            .first()
+            .copied()
+            .unwrap_or(frame.t_s);
+        // The grid takes every reading older than the window, at the pose corrected so far.
+        while inserted < readings.len() && readings[inserted].t_s < window_start - GAP_S {
+            if let Some(p) = placed(&readings[inserted], odometry, frames, &poses, layout) {
+                counting.insert(&p);
+            }
+            inserted += 1;
+        }
+        let window: Vec<&SonarReading> = readings[inserted..]
+            .iter()
+            .take_while(|r| r.t_s <= frame.t_s)
+            .filter(|r| echo(r) && r.t_s >= window_start)
+            .collect();
+        let pose = (k > 0)
+            .then(|| {
+                let map = counting.map();
+                let arcs = arcs(&window, odometry, frame.odom, layout);
+                match_arcs(&map, &arcs, predicted)
+            })
+            .flatten();
+        match pose {
+            Some((z, r))
+                if {
+                    let innovation = Vector3::new(
+                        z.x - predicted.x,
+                        z.y - predicted.y,
+                        wrap_angle(z.theta - predicted.theta),
+                    );
+                    (covariance + r)
+                        .try_inverse()
+                        .is_some_and(|s| innovation.dot(&(s * innovation)) < MATCH_GATE_CHI2)
+                } =>
+            {
+                // The prediction and the match, each with its covariance (a Kalman update).
+                let gain = covariance * (covariance + r).try_inverse()?;
+                let innovation = Vector3::new(
+                    z.x - predicted.x,
+                    z.y - predicted.y,
+                    wrap_angle(z.theta - predicted.theta),
+                );
+                let d = gain * innovation;
+                poses.push(Pose2::new(
+                    predicted.x + d[0],
+                    predicted.y + d[1],
+                    wrap_angle(predicted.theta + d[2]),
+                ));
+                covariance = (Matrix3::identity() - gain) * covariance;
+                covariance = 0.5 * (covariance + covariance.transpose());
+                matched.push((k, z, r));
+            }
+            _ => poses.push(predicted),
+        }
+    }
+    Some(ScanMatches { poses, matched })
+}
+
+/// The covariance of `pose ∘ delta` from `pose`'s and the odometry's over `delta`.
+fn propagated(
+    covariance: &Matrix3<f64>,
+    pose: Pose2,
+    delta: Pose2,
+    config: &FuseConfig,
+) -> Matrix3<f64> {
+    let (s, c) = pose.theta.sin_cos();
+    let f = Matrix3::new(
+        1.0,
+        0.0,
+        -s * delta.x - c * delta.y,
+        0.0,
+        1.0,
+        c * delta.x - s * delta.y,
+        0.0,
+        0.0,
+        1.0,
+    );
+    let g = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+    let q = odometry_covariance(
+        delta.x.hypot(delta.y),
+        wrap_angle(delta.theta).abs(),
+        config,
+    );
+    f * covariance * f.transpose() + g * q * g.transpose()
+}
+
+/// A reading placed in the world along the trajectory corrected so far: the correction of the
+/// last keyframe at or before it, applied to its odometry pose.
+fn placed(
+    reading: &SonarReading,
+    odometry: &[StampedPose],
+    frames: &[Keyframe],
+    poses: &[Pose2],
+    layout: &SonarLayout,
+) -> Option<PlacedReading> {
+    let sensor = layout.sensors.get(reading.sensor)?;
+    let j = frames[..poses.len()]
+        .partition_point(|kf| kf.t_s <= reading.t_s)
+        .checked_sub(1)?;
+    let correction = poses[j].compose(&frames[j].odom.inverse());
+    let odom = pose_at(odometry, reading.t_s)?;
+    Some(PlacedReading {
+        t_s: reading.t_s,
+        world_from_sensor: correction
+            .compose(&odom)
+            .compose(&sensor.robot_from_sensor()),
+        range_m: reading.range_m,
+    })
+}
+
+/// Each reading's echo arc as points in the frame of the robot at odometry pose `now`.
+fn arcs(
+    window: &[&SonarReading],
+    odometry: &[StampedPose],
+    now: Pose2,
+    layout: &SonarLayout,
+) -> Vec<Vec<(f64, f64)>> {
+    let half = match layout.beam {
+        BeamModel::Cone => 0.5 * layout.cone_rad,
+        BeamModel::Ray => 0.0,
+    };
+    let steps = (half / ARC_STEP_RAD).ceil() as i32;
+    window
+        .iter()
+        .filter_map(|r| {
+            let sensor = layout.sensors.get(r.sensor)?;
+            let at = now
+                .between(&pose_at(odometry, r.t_s)?)
+                .compose(&sensor.robot_from_sensor());
+            let range = r.range_m?;
+            Some(
+                (-steps..=steps)
+                    .map(|k| {
+                        let a = at.theta + half * k as f64 / steps.max(1) as f64;
+                        (at.x + range * a.cos(), at.y + range * a.sin())
+                    })
+                    .collect(),
+            )
+        })
+        .collect()
+}
+
+/// The pose near `predicted` at which the arcs meet the map's occupied cells, and its
+/// covariance: each pose of a grid around `predicted` weighed by the likelihood of the ranges'
+/// truncated residuals there, the weighted mean and spread (a corridor gives a long covariance
+/// along it); `None` when the map has seen too few of the arcs, when too few agree with the
+/// mean, or when the match leaves the position unsure in every direction.
+fn match_arcs(
+    map: &OccupancyMap,
+    arcs: &[Vec<(f64, f64)>],
+    predicted: Pose2,
+) -> Option<(Pose2, Matrix3<f64>)> {
+    let field = DistanceField::new(map);
+    let g = &map.geometry;
+    let world = |pose: Pose2, (s, c): (f64, f64), (x, y): (f64, f64)| {
+        (pose.x + c * x - s * y, pose.y + s * x + c * y)
+    };
+    // The arcs that fall where the grid has seen (at the predicted pose).
+    let sc = predicted.theta.sin_cos();
+    let seen: Vec<&Vec<(f64, f64)>> = arcs
+        .iter()
+        .filter(|arc| {
+            arc.iter().any(|&q| {
+                let (x, y) = world(predicted, sc, q);
+                g.cell_of(x, y)
+                    .is_some_and(|(col, row)| map.occupancy[row * g.width + col].is_some())
+            })
+        })
+        .collect();
+    if seen.len() < MIN_SEEN {
+        tracing::trace!(
+            "scan match: {} of {} ranges where the grid has seen",
+            seen.len(),
+            arcs.len()
+        );
+        return None;
+    }
+    let cost = |pose: Pose2| -> (f64, usize) {
+        let sc = pose.theta.sin_cos();
+        let mut sum = 0.0;
+        let mut inliers = 0;
+        for arc in &seen {
+            let residual = arc
+                .iter()
+                .map(|&q| {
+                    let (x, y) = world(pose, sc, q);
+                    field.at(x, y)
+                })
+                .fold(f64::INFINITY, f64::min);
+            sum += residual.min(TRUNCATE_M).powi(2);
+            inliers += usize::from(residual < INLIER_M);
+        }
+        (sum, inliers)
+    };
+    // Coarse over the whole search, then fine over one coarse step around its mean.
+    let (coarse_mean, coarse_spread) = weighed(predicted, (REACH_M, REACH_RAD), COARSE_STEP, &cost);
+    let centre = offset(predicted, &coarse_mean);
+    let (fine_mean, fine_spread) = weighed(centre, COARSE_STEP, FINE_STEP, &cost);
+    let pose = offset(centre, &fine_mean);
+    // The coarse spread says how far the ranges let the pose wander; the fine one, and the
+    // fine grid's steps, how well they place it.
+    let covariance = coarse_spread
+        + fine_spread
+        + Matrix3::from_diagonal(&Vector3::new(
+            FINE_STEP.0.powi(2) / 12.0,
+            FINE_STEP.0.powi(2) / 12.0,
+            FINE_STEP.1.powi(2) / 12.0,
+        ));
+    let mean = Vector3::new(
+        pose.x - predicted.x,
+        pose.y - predicted.y,
+        wrap_angle(pose.theta - predicted.theta),
+    );
+    let (_, inliers) = cost(pose);
+    let position = covariance.fixed_view::<2, 2>(0, 0).symmetric_eigenvalues();
+    tracing::trace!(
+        "scan match: {inliers} of {} inliers, moved {:.3} m {:.2} deg, sigmas {:.3} {:.3} m {:.2} deg",
+        seen.len(),
+        mean[0].hypot(mean[1]),
+        mean[2].to_degrees(),
+        position.min().sqrt(),
+        position.max().sqrt(),
+        covariance[(2, 2)].sqrt().to_degrees()
+    );
+    (inliers as f64 >= MIN_INLIER_SHARE * seen.len() as f64
+        && position.min() < MAX_MATCH_SIGMA_M.powi(2))
+    .then_some((pose, covariance))
+}
+
+/// `pose` moved by `d` (x, y, heading; in the world frame).
+fn offset(pose: Pose2, d: &Vector3<f64>) -> Pose2 {
+    Pose2::new(pose.x + d[0], pose.y + d[1], wrap_angle(pose.theta + d[2]))
+}
+
+/// The poses of a grid around `centre` (within `reach`, at `step`) weighed by the likelihood of
+/// the ranges' residuals there (`cost`: summed truncated squares): the weighted mean offset from
+/// `centre` and the weighted spread about it.
+fn weighed(
+    centre: Pose2,
+    reach: (f64, f64),
+    step: (f64, f64),
+    cost: &(impl Fn(Pose2) -> (f64, usize) + Sync),
+) -> (Vector3<f64>, Matrix3<f64>) {
+    let scored: Vec<(Vector3<f64>, f64)> = grid(centre, reach, step)
+        .into_par_iter()
+        .map(|p| {
+            let d = Vector3::new(
+                p.x - centre.x,
+                p.y - centre.y,
+                wrap_angle(p.theta - centre.theta),
+            );
+            (d, cost(p).0)
+        })
+        .collect();
+    let least = scored.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
+    let weights: Vec<f64> = scored
+        .iter()
+        .map(|(_, c)| (-(c - least) / (2.0 * RANGE_SIGMA_M.powi(2))).exp())
+        .collect();
+    let total: f64 = weights.iter().sum();
+    let mean = scored
+        .iter()
+        .zip(&weights)
+        .map(|((d, _), w)| d * *w)
+        .sum::<Vector3<f64>>()
+        / total;
+    let spread = scored
+        .iter()
+        .zip(&weights)
+        .map(|((d, _), w)| (d - mean) * (d - mean).transpose() * *w)
+        .sum::<Matrix3<f64>>()
+        / total;
+    (mean, spread)
+}
+
+/// Poses on a grid around `centre`: positions within `reach.0` and headings within `reach.1`, at
+/// `step` (metres, radians).
+fn grid(centre: Pose2, reach: (f64, f64), step: (f64, f64)) -> Vec<Pose2> {
+    let n = |reach: f64, step: f64| (reach / step).round() as i32;
+    let (nm, nr) = (n(reach.0, step.0), n(reach.1, step.1));
+    let mut out = Vec::new();
+    for i in -nm..=nm {
+        for j in -nm..=nm {
+            for k in -nr..=nr {
+                out.push(Pose2::new(
+                    centre.x + i as f64 * step.0,
+                    centre.y + j as f64 * step.0,
+                    centre.theta + k as f64 * step.1,
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// Distance to the nearest occupied cell's centre, tabled at a quarter of the grid's cell and
+/// capped at [`TRUNCATE_M`].
+struct DistanceField {
+    origin: [f64; 2],
+    cell_m: f64,
+    cols: usize,
+    rows: usize,
+    d: Vec<f32>,
+}
+
+impl DistanceField {
+    fn new(map: &OccupancyMap) -> Self {
+        let g = &map.geometry;
+        let cell_m = g.resolution_m / FIELD_SUBCELLS as f64;
+        let (cols, rows) = (g.width * FIELD_SUBCELLS, g.height * FIELD_SUBCELLS);
+        let mut d = vec![TRUNCATE_M as f32; cols * rows];
+        let reach = (TRUNCATE_M / cell_m).ceil() as i64;
+        for idx in (0..map.occupancy.len()).filter(|&i| map.is_occupied(i)) {
+            let (col, row) = (idx % g.width, idx / g.width);
+            let centre = g.centre(col, row);
+            let (c0, r0) = ((col * FIELD_SUBCELLS) as i64, (row * FIELD_SUBCELLS) as i64);
+            for r in (r0 - reach).max(0)..(r0 + FIELD_SUBCELLS as i64 + reach).min(rows as i64) {
+                for c in (c0 - reach).max(0)..(c0 + FIELD_SUBCELLS as i64 + reach).min(cols as i64)
+                {
+                    let x = g.origin_m[0] + (c as f64 + 0.5) * cell_m;
+                    let y = g.origin_m[1] + (r as f64 + 0.5) * cell_m;
+                    let cell = &mut d[r as usize * cols + c as usize];
+                    *cell = cell.min((x - centre[0]).hypot(y - centre[1]) as f32);
+                }
+            }
+        }
+        Self {
+            origin: g.origin_m,
+            cell_m,
+            cols,
+            rows,
+            d,
+        }
+    }
+
+    /// The distance from `(x, y)` to the nearest occupied cell, capped.
+    fn at(&self, x: f64, y: f64) -> f64 {
+        let (c, r) = (
+            (x - self.origin[0]) / self.cell_m,
+            (y - self.origin[1]) / self.cell_m,
+        );
+        if c < 0.0 || r < 0.0 || c >= self.cols as f64 || r >= self.rows as f64 {
+            return TRUNCATE_M;
+        }
+        f64::from(self.d[r as usize * self.cols + c as usize])
+    }
+}
