@@ -147,6 +147,45 @@ pub(super) fn sequential(
     Some(ScanMatches { poses, matched })
 }
 
+/// How well a run's ranges agree with one another placed along `trajectory`: the share of the
+/// readings with an echo whose arc comes within [`INLIER_M`] of an occupied cell of the counting
+/// grid (on `grid`) of all of them. A trajectory that places a wall's echoes where the wall was
+/// seen from elsewhere scores higher; `None` when the grid cannot be made.
+pub(super) fn agreement(
+    trajectory: &[StampedPose],
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+    grid: &GridConfig,
+) -> Option<f64> {
+    let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
+    let placed: Vec<PlacedReading> = crate::sonar::place_readings(readings, layout, trajectory);
+    for p in &placed {
+        counting.insert(p);
+    }
+    let field = DistanceField::new(&counting.map());
+    let half = match layout.beam {
+        BeamModel::Cone => 0.5 * layout.cone_rad,
+        BeamModel::Ray => 0.0,
+    };
+    let steps = (half / ARC_STEP_RAD).ceil() as i32;
+    let (mut echoes, mut agree) = (0usize, 0usize);
+    for p in &placed {
+        let Some(range) = p.range_m.filter(|&m| m < layout.max_range_m - 1e-6) else {
+            continue;
+        };
+        let at = p.world_from_sensor;
+        let residual = (-steps..=steps)
+            .map(|k| {
+                let a = at.theta + half * k as f64 / steps.max(1) as f64;
+                field.at(at.x + range * a.cos(), at.y + range * a.sin())
+            })
+            .fold(f64::INFINITY, f64::min);
+        echoes += 1;
+        agree += usize::from(residual < INLIER_M);
+    }
+    (echoes > 0).then(|| agree as f64 / echoes as f64)
+}
+
 /// The covariance of `pose ∘ delta` from `pose`'s and the odometry's over `delta`.
 fn propagated(
     covariance: &Matrix3<f64>,
