@@ -280,10 +280,15 @@ impl RangeWindow {
 }
 
 /// Poses on a grid around `centre`: positions within `reach.0` and headings within `reach.1`, at
-/// `step` (metres, radians).
+/// `step` (metres, radians); the steps each way rounded up.
 fn grid(centre: Pose2, reach: (f64, f64), step: (f64, f64)) -> Vec<Pose2> {
     let n = |reach: f64, step: f64| (reach / step).ceil() as i32;
-    let (nm, nr) = (n(reach.0, step.0), n(reach.1, step.1));
+    pose_grid(centre, (n(reach.0, step.0), n(reach.1, step.1)), step)
+}
+
+/// Poses on a grid around `centre`: `nm` steps of `step.0` each way in x and y, `nr` of `step.1`
+/// in heading.
+pub(super) fn pose_grid(centre: Pose2, (nm, nr): (i32, i32), step: (f64, f64)) -> Vec<Pose2> {
     let mut out = Vec::new();
     for i in -nm..=nm {
         for j in -nm..=nm {

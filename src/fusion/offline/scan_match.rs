@@ -163,27 +163,33 @@ pub(super) fn agreement(
         counting.insert(p);
     }
     let field = DistanceField::new(&counting.map());
-    let half = match layout.beam {
-        BeamModel::Cone => 0.5 * layout.cone_rad,
-        BeamModel::Ray => 0.0,
-    };
-    let steps = (half / ARC_STEP_RAD).ceil() as i32;
     let (mut echoes, mut agree) = (0usize, 0usize);
     for p in &placed {
         let Some(range) = p.range_m.filter(|&m| m < layout.max_range_m - 1e-6) else {
             continue;
         };
         let at = p.world_from_sensor;
-        let residual = (-steps..=steps)
-            .map(|k| {
-                let a = at.theta + half * k as f64 / steps.max(1) as f64;
-                field.at(at.x + range * a.cos(), at.y + range * a.sin())
-            })
+        let residual = arc(at, range, layout)
+            .map(|(x, y)| field.at(x, y))
             .fold(f64::INFINITY, f64::min);
         echoes += 1;
         agree += usize::from(residual < INLIER_M);
     }
     (echoes > 0).then(|| agree as f64 / echoes as f64)
+}
+
+/// The points of an echo's arc at `range` from a sensor at `at`: across the beam's cone every
+/// [`ARC_STEP_RAD`] or so, or the one point down a laser's ray.
+fn arc(at: Pose2, range: f64, layout: &SonarLayout) -> impl Iterator<Item = (f64, f64)> {
+    let half = match layout.beam {
+        BeamModel::Cone => 0.5 * layout.cone_rad,
+        BeamModel::Ray => 0.0,
+    };
+    let steps = (half / ARC_STEP_RAD).ceil() as i32;
+    (-steps..=steps).map(move |k| {
+        let a = at.theta + half * k as f64 / steps.max(1) as f64;
+        (at.x + range * a.cos(), at.y + range * a.sin())
+    })
 }
 
 /// The covariance of `pose ∘ delta` from `pose`'s and the odometry's over `delta`.
@@ -245,11 +251,6 @@ fn arcs(
     now: Pose2,
     layout: &SonarLayout,
 ) -> Vec<Vec<(f64, f64)>> {
-    let half = match layout.beam {
-        BeamModel::Cone => 0.5 * layout.cone_rad,
-        BeamModel::Ray => 0.0,
-    };
-    let steps = (half / ARC_STEP_RAD).ceil() as i32;
     window
         .iter()
         .filter_map(|r| {
@@ -258,14 +259,7 @@ fn arcs(
                 .between(&pose_at(odometry, r.t_s)?)
                 .compose(&sensor.robot_from_sensor());
             let range = r.range_m?;
-            Some(
-                (-steps..=steps)
-                    .map(|k| {
-                        let a = at.theta + half * k as f64 / steps.max(1) as f64;
-                        (at.x + range * a.cos(), at.y + range * a.sin())
-                    })
-                    .collect(),
-            )
+            Some(arc(at, range, layout).collect())
         })
         .collect()
 }
@@ -404,23 +398,10 @@ fn weighed(
 }
 
 /// Poses on a grid around `centre`: positions within `reach.0` and headings within `reach.1`, at
-/// `step` (metres, radians).
+/// `step` (metres, radians); the steps each way rounded to the nearest.
 fn grid(centre: Pose2, reach: (f64, f64), step: (f64, f64)) -> Vec<Pose2> {
     let n = |reach: f64, step: f64| (reach / step).round() as i32;
-    let (nm, nr) = (n(reach.0, step.0), n(reach.1, step.1));
-    let mut out = Vec::new();
-    for i in -nm..=nm {
-        for j in -nm..=nm {
-            for k in -nr..=nr {
-                out.push(Pose2::new(
-                    centre.x + i as f64 * step.0,
-                    centre.y + j as f64 * step.0,
-                    centre.theta + k as f64 * step.1,
-                ));
-            }
-        }
-    }
-    out
+    crate::fusion::wall_fix::pose_grid(centre, (n(reach.0, step.0), n(reach.1, step.1)), step)
 }
 
 /// Distance to the nearest occupied cell's centre, tabled at a quarter of the grid's cell and
