@@ -331,3 +331,42 @@ fn a_broken_lidar_csv_is_an_error_naming_the_file_and_line() {
         assert!(!out.exists());
     }
 }
+
+/// Issue 31, item 2: corners derived from the full laser scans by `scripts/laser_corners.py`
+/// (independent of stereotag's code: wall pieces of each scan, their crossings and ends, kept
+/// when seen by 3 scans over 5 s) confirm the corners of the aces lidar map (6 of 7), where
+/// random occupied cells would not (3%).
+#[test]
+fn a_laser_confirms_the_lidar_maps_corners() {
+    let log =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/radish/aces-corrected.log.gz");
+    let dir = tempfile::tempdir().unwrap();
+    let (run, out) = (dir.path().join("run"), dir.path().join("map"));
+    let (code, err) = stereotag(&[
+        "-q",
+        "import",
+        "--carmen",
+        log.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, err) = map_on_truth(&run, &out, true, &[]);
+    assert_eq!(code, 0, "{err}");
+    let scored = std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/laser_corners.py"))
+        .args([&log, &out])
+        .output()
+        .expect("python3 (with numpy and PyYAML) must be on PATH");
+    assert!(
+        scored.status.success(),
+        "{}",
+        String::from_utf8_lossy(&scored.stderr)
+    );
+    let r: Value = serde_json::from_slice(&scored.stdout).unwrap();
+    eprintln!("aces lidar map against the laser's corners: {r}");
+    let precision = r["precision"].as_f64().unwrap();
+    let baseline = r["occupied_cells_precision_baseline"].as_f64().unwrap();
+    assert!(r["reference_corners"].as_f64().unwrap() >= 50.0, "{r}");
+    assert!(precision >= 0.8 && precision >= 5.0 * baseline, "{r}");
+}
