@@ -728,6 +728,28 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
         "{} landmarks surveyed.\n\n",
         scene.survey.landmarks.len()
     ));
+    let offline = &scene.survey.offline;
+    if let Some([before, after]) = offline.sonar_agreement {
+        md.push_str(&if offline.kept == crate::fusion::OfflineKept::Nothing {
+            format!(
+                "No tags and no visual turns: the sonar's own correction made its echoes agree \
+                 with one another only {:.0}% → {:.0}%, so it is not kept: the offline \
+                 trajectory is the odometry.\n\n",
+                100.0 * before,
+                100.0 * after
+            )
+        } else {
+            format!(
+                "No tags and no visual turns: the sonar corrected the odometry (its latest \
+                 ranges matched its older readings at {} of {} keyframes; its echoes agree with \
+                 one another {:.0}% along the odometry, {:.0}% along the correction).\n\n",
+                offline.sonar_matches,
+                offline.keyframes,
+                100.0 * before,
+                100.0 * after
+            )
+        });
+    }
     if let Some(r) = error_over_sigma(scene) {
         md.push_str(&format!(
             "The plot's *online σ* is the filter's own 1-σ position uncertainty (its longest \
