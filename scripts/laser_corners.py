@@ -39,6 +39,9 @@ import sys
 
 import numpy as np
 
+sys.path.insert(0, __import__("os").path.dirname(__file__))
+from building_check import read_pgm  # noqa: E402 (the same directory's PGM reader)
+
 MAX_RANGE_M = 10.0
 SPLIT_M = 0.08
 MIN_RETURNS = 6
@@ -104,6 +107,22 @@ def split(p, lo, hi, out):
         out.append((lo, hi))
 
 
+def wall_pieces(pts, lo, hi):
+    """The straight pieces of pts[lo:hi] (split and merged), each a wall (centroid, direction,
+    first and past-the-last index) or None."""
+    pieces = []
+    split(pts, lo, hi, pieces)
+    walls = []
+    for a, b in pieces:
+        q = pts[a:b]
+        if b - a < MIN_RETURNS or np.hypot(*(q[-1] - q[0])) < MIN_LENGTH_M:
+            walls.append(None)
+            continue
+        c, d, rms = fit_line(q)
+        walls.append((c, d, a, b) if rms <= MAX_RMS_M else None)
+    return walls
+
+
 def scan_corners(ranges, angles, step):
     """Corners of one scan in the laser frame: crossings and wall ends, as (x, y, kind)."""
     ok = (ranges > 0.05) & (ranges < MAX_RANGE_M)
@@ -127,30 +146,13 @@ def scan_corners(ranges, angles, step):
     walls = []  # every straight piece of the scan, in beam order (None: not a wall)
     ends = []  # (run index, which end, the wall at it)
     for r, (lo, hi) in enumerate(runs):
-        pieces = []
-        split(pts, lo, hi, pieces)
         first = len(walls)
-        for a, b in pieces:
-            q = pts[a:b]
-            if b - a < MIN_RETURNS or np.hypot(*(q[-1] - q[0])) < MIN_LENGTH_M:
-                walls.append(None)
-                continue
-            c, d, rms = fit_line(q)
-            walls.append((c, d, a, b) if rms <= MAX_RMS_M else None)
+        walls.extend(wall_pieces(pts, lo, hi))
         ends.append((r, 0, walls[first]))
         ends.append((r, 1, walls[-1]))
     # Crossings of pieces that follow each other in the whole scan's split (a corner whose
     # second wall is seen at a grazing angle breaks the runs): their lines cross near both.
-    whole = []
-    split(pts, 0, len(pts), whole)
-    scan_walls = []
-    for a, b in whole:
-        q = pts[a:b]
-        if b - a < MIN_RETURNS or np.hypot(*(q[-1] - q[0])) < MIN_LENGTH_M:
-            scan_walls.append(None)
-            continue
-        c, d, rms = fit_line(q)
-        scan_walls.append((c, d, a, b) if rms <= MAX_RMS_M else None)
+    scan_walls = wall_pieces(pts, 0, len(pts))
     for w0, w1 in zip(scan_walls, scan_walls[1:]):
         if w0 is None or w1 is None:
             continue
@@ -233,23 +235,7 @@ def read_map(map_dir):
     meta = yaml.safe_load(open(f"{map_dir}/map.yaml"))
     res = float(meta["resolution"])
     origin = [float(v) for v in meta["origin"][:2]]
-    with open(f"{map_dir}/{meta['image']}", "rb") as f:
-        data = f.read()
-    # P5 PGM: four header tokens (comments skipped), one whitespace byte, then the pixels.
-    tokens, pos = [], 0
-    while len(tokens) < 4:
-        while data[pos:pos + 1].isspace():
-            pos += 1
-        if data[pos:pos + 1] == b"#":
-            pos = data.index(b"\n", pos) + 1
-            continue
-        end = pos
-        while not data[end:end + 1].isspace():
-            end += 1
-        tokens.append(data[pos:end])
-        pos = end
-    w, h = int(tokens[1]), int(tokens[2])
-    img = np.frombuffer(data[pos + 1:pos + 1 + w * h], dtype=np.uint8).reshape(h, w)
+    img = read_pgm(f"{map_dir}/{meta['image']}")
     p = (255.0 - img) / 255.0
     occupied = p > float(meta["occupied_thresh"])
     known = occupied | (p < float(meta["free_thresh"]))

@@ -26,6 +26,17 @@ fn map_on_truth(run: &Path, out: &Path, quiet: bool, extra: &[&str]) -> (i32, St
     stereotag(&args)
 }
 
+/// `stereotag import --carmen LOG --out RUN`.
+fn import_carmen(log: &Path, run: &Path) -> (i32, String) {
+    stereotag(&[
+        "import",
+        "--carmen",
+        log.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ])
+}
+
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -283,13 +294,7 @@ fn a_broken_lidar_csv_is_an_error_naming_the_file_and_line() {
     )
     .unwrap();
     let run = dir.path().join("run");
-    let (code, err) = stereotag(&[
-        "import",
-        "--carmen",
-        log.to_str().unwrap(),
-        "--out",
-        run.to_str().unwrap(),
-    ]);
+    let (code, err) = import_carmen(&log, &run);
     assert_eq!(code, 0, "{err}");
     let csv = std::fs::read_to_string(run.join("lidar.csv")).unwrap();
     // The log's largest range (81.91 here) is the laser's no-return value.
@@ -342,14 +347,7 @@ fn a_laser_confirms_the_lidar_maps_corners() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/radish/aces-corrected.log.gz");
     let dir = tempfile::tempdir().unwrap();
     let (run, out) = (dir.path().join("run"), dir.path().join("map"));
-    let (code, err) = stereotag(&[
-        "-q",
-        "import",
-        "--carmen",
-        log.to_str().unwrap(),
-        "--out",
-        run.to_str().unwrap(),
-    ]);
+    let (code, err) = import_carmen(&log, &run);
     assert_eq!(code, 0, "{err}");
     let (code, err) = map_on_truth(&run, &out, true, &[]);
     assert_eq!(code, 0, "{err}");
