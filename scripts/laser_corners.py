@@ -352,4 +352,8 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except (OSError, ValueError, KeyError, IndexError) as e:
+        print(f"laser_corners.py: {e!r}", file=sys.stderr)
+        sys.exit(2)
