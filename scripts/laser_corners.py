@@ -354,6 +354,9 @@ def main():
 if __name__ == "__main__":
     try:
         sys.exit(main())
-    except (OSError, ValueError, KeyError, IndexError) as e:
-        print(f"laser_corners.py: {e!r}", file=sys.stderr)
+    except OSError as e:
+        print(f"laser_corners.py: {e.filename}: {e.strerror}", file=sys.stderr)
+        sys.exit(2)
+    except (ValueError, KeyError, IndexError) as e:
+        print(f"laser_corners.py: cannot read the log or the map: {e!r}", file=sys.stderr)
         sys.exit(2)
