@@ -94,7 +94,7 @@ pub fn survey(
             run_offline_sonar(&obs, &online, fuse, &sonar, &mapping.grid)
         });
         tracing::info!(
-            "no tag sightings and no visual turns: the sonar matched its older readings at {} of {} keyframes",
+            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {} of {} keyframes",
             offline.sonar_matches,
             offline.keyframes
         );

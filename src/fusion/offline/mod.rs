@@ -433,7 +433,7 @@ fn solve(
         tracing::warn!(
             "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns{}): it keeps the online estimate and estimates no odometry calibration",
             match sonar {
-                SonarUse::ScanMatch(..) => ", no place where the sonar matched its own older readings",
+                SonarUse::ScanMatch(..) => ", no place where the ranges matched their own older readings",
                 _ => "",
             }
         );
