@@ -17,8 +17,9 @@ use std::collections::BTreeMap;
 
 /// The default layout of a survey: the top-down map (with the 3D scene, the online map and the
 /// Hough accumulator in tabs), the error plots over the whole run and the report on top; the
-/// stereo pair below.
-fn layout(frame: &MapFrame, tag_frame: Option<&TagFrame>) -> Layout {
+/// stereo pair below, when the run has pictures (a run without keeps the whole height for the
+/// rest).
+fn layout(frame: &MapFrame, tag_frame: Option<&TagFrame>, pictures: bool) -> Layout {
     let map_view = |name: &str, origin: &str| frame.view(name, origin);
     let (lo, hi) = frame.extent;
     let centre = [
@@ -77,15 +78,16 @@ fn layout(frame: &MapFrame, tag_frame: Option<&TagFrame>) -> Layout {
             None => live.into(),
         }
     };
-    let cameras = row([camera("left"), camera("right")], &[]);
+    let top = row([maps, errors, report.into()], &[0.46, 0.32, 0.22]);
     Layout {
-        root: column(
-            [
-                row([maps, errors, report.into()], &[0.46, 0.32, 0.22]),
-                cameras,
-            ],
-            &[0.6, 0.4],
-        ),
+        root: if pictures {
+            column(
+                [top, row([camera("left"), camera("right")], &[])],
+                &[0.6, 0.4],
+            )
+        } else {
+            top
+        },
         timeline: "time",
         play: PlayState::Following,
     }
@@ -189,7 +191,7 @@ impl Recorder {
         let rec = self.stream();
         let frame = MapFrame::new(&scene.survey.corrected.counting);
         let tag_frame = TagFrame::find(scene);
-        layout(&frame, tag_frame.as_ref()).send(rec)?;
+        layout(&frame, tag_frame.as_ref(), !scene.run.stereo.is_empty()).send(rec)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         log_world(rec, scene.world)?;
         log_trajectories(rec, scene)?;
