@@ -405,16 +405,7 @@ fn a_board_of_ordinary_tags_in_reversed_order_calibrates_the_rig() {
     eprintln!("tag board: {m}; left {}", report["left"]);
     assert!(m["rms_px"].as_f64().unwrap() <= 0.1, "{m}");
     assert!(m["views_used"].as_u64().unwrap() >= 28, "{m}");
-    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
-        assert!(
-            common::worst_share(&report, cam, t) <= 1e-3,
-            "{cam}: {}",
-            report[cam]
-        );
-    }
-    let baseline = m["baseline_m"].as_f64().unwrap();
-    let true_baseline = truth.right_from_left.translation.vector.norm();
-    assert!((baseline - true_baseline).abs() <= 1e-3 * true_baseline);
+    common::assert_rig_within_a_thousandth(&report, &truth);
     // Tags found per image, reported.
     assert!(
         report["images"][0]["tags"].as_u64().unwrap() >= 30,

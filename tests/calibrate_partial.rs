@@ -85,16 +85,7 @@ fn chessboards_seen_in_part_calibrate_the_rig_and_one_camera() {
     // one camera each.
     assert_eq!(m["views_used"].as_u64().unwrap(), 7 + 26, "{m}");
     assert!(m["rms_px"].as_f64().unwrap() <= 0.1, "{m}");
-    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
-        assert!(
-            common::worst_share(&report, cam, t) <= 1e-3,
-            "{cam}: {}",
-            report[cam]
-        );
-    }
-    let baseline = m["baseline_m"].as_f64().unwrap();
-    let true_baseline = truth.right_from_left.translation.vector.norm();
-    assert!((baseline - true_baseline).abs() <= 1e-3 * true_baseline);
+    common::assert_rig_within_a_thousandth(&report, &truth);
     // The cut image's 24 corners, used; no miss.
     let first = &report["images"][0];
     assert_eq!(first["corners"], 24, "{first}");

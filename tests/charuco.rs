@@ -108,7 +108,7 @@ fn a_rendered_charuco_board_calibrates_the_rig() {
     assert!(m["rms_px"].as_f64().unwrap() <= 0.06, "{m}");
     assert!(m["outliers"].as_u64().unwrap() <= 2, "{m}");
     assert!(m["views_used"].as_u64().unwrap() >= 22, "{m}");
-    assert_rig_within_a_thousandth(&report, &truth);
+    common::assert_rig_within_a_thousandth(&report, &truth);
     // Markers counted per image; the corners out as EuRoC CSV and mrcal's corners.vnl (7 x 10
     // inner corners an image).
     assert!(
@@ -119,20 +119,6 @@ fn a_rendered_charuco_board_calibrates_the_rig() {
     let vnl = std::fs::read_to_string(out.join("corners.vnl")).unwrap();
     assert_eq!(vnl.lines().count(), 1 + 48 * 70);
     assert!(out.join("corners/left").read_dir().unwrap().count() >= 22);
-}
-
-/// Both cameras' fx, fy, cx, cy and the baseline within a thousandth of the truth.
-fn assert_rig_within_a_thousandth(report: &Value, truth: &stereotag::camera::StereoRig) {
-    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
-        assert!(
-            common::worst_share(report, cam, t) <= 1e-3,
-            "{cam}: {}",
-            report[cam]
-        );
-    }
-    let baseline = report["metrics"]["baseline_m"].as_f64().unwrap();
-    let true_baseline = truth.right_from_left.translation.vector.norm();
-    assert!((baseline - true_baseline).abs() <= 1e-3 * true_baseline);
 }
 
 #[test]
@@ -209,7 +195,7 @@ fn several_boards_in_one_view_each_get_their_pose() {
     // both cameras).
     assert!(m["views_used"].as_u64().unwrap() >= 36, "{m}");
     assert!(m["rms_px"].as_f64().unwrap() <= 0.1, "{m}");
-    assert_rig_within_a_thousandth(&report, &truth);
+    common::assert_rig_within_a_thousandth(&report, &truth);
     assert_eq!(report["images"][0]["used"], Value::Bool(true));
     // A tag on two boards is refused, naming the file.
     let bad = dir.path().join("bad.yaml");

@@ -102,3 +102,21 @@ pub fn worst_share(
     .map(|(k, t)| (report[cam][*k].as_f64().unwrap() - t).abs() / t)
     .fold(0.0, f64::max)
 }
+
+/// Both cameras' fx, fy, cx, cy and the baseline of a calibration report within a thousandth of
+/// the truth.
+pub fn assert_rig_within_a_thousandth(
+    report: &serde_json::Value,
+    truth: &stereotag::camera::StereoRig,
+) {
+    for (cam, t) in [("left", &truth.left), ("right", &truth.right)] {
+        assert!(
+            worst_share(report, cam, t) <= 1e-3,
+            "{cam}: {}",
+            report[cam]
+        );
+    }
+    let baseline = report["metrics"]["baseline_m"].as_f64().unwrap();
+    let true_baseline = truth.right_from_left.translation.vector.norm();
+    assert!((baseline - true_baseline).abs() <= 1e-3 * true_baseline);
+}
