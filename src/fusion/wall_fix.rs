@@ -62,15 +62,18 @@ pub(super) struct RangeWindow {
     field: Option<DistanceField>,
 }
 
-/// Distance to the nearest surveyed wall face, tabled on a grid over the walls and a sensor's
-/// reach around them (beyond it, and beyond [`FIELD_CAP_M`], the cap).
+/// A distance tabled on a grid of square cells from `origin` (the lower-left corner, metres),
+/// row-major from the bottom row, capped at `cap` (and `cap` off the table): here to the nearest
+/// surveyed wall face, over the walls and a sensor's reach around them ([`FIELD_CAP_M`]); in
+/// [`crate::fusion::offline`] to the nearest occupied cell of a grid.
 #[derive(Debug, Clone)]
-struct DistanceField {
-    origin: (f64, f64),
-    cell_m: f64,
-    cols: usize,
-    rows: usize,
-    d: Vec<f32>,
+pub(super) struct DistanceField {
+    pub(super) origin: (f64, f64),
+    pub(super) cell_m: f64,
+    pub(super) cols: usize,
+    pub(super) rows: usize,
+    pub(super) d: Vec<f32>,
+    pub(super) cap: f64,
 }
 
 /// Distances are tabled up to this, metres (more than any truncation used).
@@ -98,6 +101,7 @@ impl DistanceField {
                 cols: 0,
                 rows: 0,
                 d: Vec::new(),
+                cap: FIELD_CAP_M,
             };
         }
         let margin = reach_m + FIELD_CAP_M;
@@ -137,17 +141,18 @@ impl DistanceField {
             cols,
             rows,
             d,
+            cap: FIELD_CAP_M,
         }
     }
 
-    /// The distance from `(x, y)` to the nearest wall, capped.
-    fn at(&self, x: f64, y: f64) -> f64 {
+    /// The distance tabled at `(x, y)`: the cap off the table.
+    pub(super) fn at(&self, x: f64, y: f64) -> f64 {
         let (c, r) = (
             (x - self.origin.0) / self.cell_m,
             (y - self.origin.1) / self.cell_m,
         );
         if c < 0.0 || r < 0.0 || c >= self.cols as f64 || r >= self.rows as f64 {
-            return FIELD_CAP_M;
+            return self.cap;
         }
         f64::from(self.d[r as usize * self.cols + c as usize])
     }

@@ -12,6 +12,7 @@
 
 use super::keyframes::Keyframe;
 use crate::fusion::measurement::odometry_covariance;
+use crate::fusion::wall_fix::DistanceField;
 use crate::fusion::FuseConfig;
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::grid::{CountingGrid, GridConfig, OccupancyGrid, OccupancyMap};
@@ -162,7 +163,7 @@ pub(super) fn agreement(
     for p in &placed {
         counting.insert(p);
     }
-    let field = DistanceField::new(&counting.map());
+    let field = occupied_distances(&counting.map());
     let (mut echoes, mut agree) = (0usize, 0usize);
     for p in &placed {
         let Some(range) = p.range_m.filter(|&m| m < layout.max_range_m - 1e-6) else {
@@ -274,7 +275,6 @@ fn match_arcs(
     arcs: &[Vec<(f64, f64)>],
     predicted: Pose2,
 ) -> Option<(Pose2, Matrix3<f64>)> {
-    let field = DistanceField::new(map);
     let g = &map.geometry;
     let world = |pose: Pose2, (s, c): (f64, f64), (x, y): (f64, f64)| {
         (pose.x + c * x - s * y, pose.y + s * x + c * y)
@@ -299,6 +299,7 @@ fn match_arcs(
         );
         return None;
     }
+    let field = occupied_distances(map);
     let cost = |pose: Pose2| -> (f64, usize) {
         let sc = pose.theta.sin_cos();
         let mut sum = 0.0;
@@ -406,53 +407,31 @@ fn grid(centre: Pose2, reach: (f64, f64), step: (f64, f64)) -> Vec<Pose2> {
 
 /// Distance to the nearest occupied cell's centre, tabled at a quarter of the grid's cell and
 /// capped at [`TRUNCATE_M`].
-struct DistanceField {
-    origin: [f64; 2],
-    cell_m: f64,
-    cols: usize,
-    rows: usize,
-    d: Vec<f32>,
-}
-
-impl DistanceField {
-    fn new(map: &OccupancyMap) -> Self {
-        let g = &map.geometry;
-        let cell_m = g.resolution_m / FIELD_SUBCELLS as f64;
-        let (cols, rows) = (g.width * FIELD_SUBCELLS, g.height * FIELD_SUBCELLS);
-        let mut d = vec![TRUNCATE_M as f32; cols * rows];
-        let reach = (TRUNCATE_M / cell_m).ceil() as i64;
-        for idx in (0..map.occupancy.len()).filter(|&i| map.is_occupied(i)) {
-            let (col, row) = (idx % g.width, idx / g.width);
-            let centre = g.centre(col, row);
-            let (c0, r0) = ((col * FIELD_SUBCELLS) as i64, (row * FIELD_SUBCELLS) as i64);
-            for r in (r0 - reach).max(0)..(r0 + FIELD_SUBCELLS as i64 + reach).min(rows as i64) {
-                for c in (c0 - reach).max(0)..(c0 + FIELD_SUBCELLS as i64 + reach).min(cols as i64)
-                {
-                    let x = g.origin_m[0] + (c as f64 + 0.5) * cell_m;
-                    let y = g.origin_m[1] + (r as f64 + 0.5) * cell_m;
-                    let cell = &mut d[r as usize * cols + c as usize];
-                    *cell = cell.min((x - centre[0]).hypot(y - centre[1]) as f32);
-                }
+fn occupied_distances(map: &OccupancyMap) -> DistanceField {
+    let g = &map.geometry;
+    let cell_m = g.resolution_m / FIELD_SUBCELLS as f64;
+    let (cols, rows) = (g.width * FIELD_SUBCELLS, g.height * FIELD_SUBCELLS);
+    let mut d = vec![TRUNCATE_M as f32; cols * rows];
+    let reach = (TRUNCATE_M / cell_m).ceil() as i64;
+    for idx in (0..map.occupancy.len()).filter(|&i| map.is_occupied(i)) {
+        let (col, row) = (idx % g.width, idx / g.width);
+        let centre = g.centre(col, row);
+        let (c0, r0) = ((col * FIELD_SUBCELLS) as i64, (row * FIELD_SUBCELLS) as i64);
+        for r in (r0 - reach).max(0)..(r0 + FIELD_SUBCELLS as i64 + reach).min(rows as i64) {
+            for c in (c0 - reach).max(0)..(c0 + FIELD_SUBCELLS as i64 + reach).min(cols as i64) {
+                let x = g.origin_m[0] + (c as f64 + 0.5) * cell_m;
+                let y = g.origin_m[1] + (r as f64 + 0.5) * cell_m;
+                let cell = &mut d[r as usize * cols + c as usize];
+                *cell = cell.min((x - centre[0]).hypot(y - centre[1]) as f32);
             }
         }
-        Self {
-            origin: g.origin_m,
-            cell_m,
-            cols,
-            rows,
-            d,
-        }
     }
-
-    /// The distance from `(x, y)` to the nearest occupied cell, capped.
-    fn at(&self, x: f64, y: f64) -> f64 {
-        let (c, r) = (
-            (x - self.origin[0]) / self.cell_m,
-            (y - self.origin[1]) / self.cell_m,
-        );
-        if c < 0.0 || r < 0.0 || c >= self.cols as f64 || r >= self.rows as f64 {
-            return TRUNCATE_M;
-        }
-        f64::from(self.d[r as usize * self.cols + c as usize])
+    DistanceField {
+        origin: (g.origin_m[0], g.origin_m[1]),
+        cell_m,
+        cols,
+        rows,
+        d,
+        cap: TRUNCATE_M,
     }
 }
