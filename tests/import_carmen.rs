@@ -263,11 +263,10 @@ fn radish_map_score(log: &str, as_sonar: Option<&str>) -> (f64, f64, usize, Valu
 fn radish_lidar_maps_agree_with_the_full_laser() {
     for log in ["freiburg-079-corrected.log.gz", "aces-corrected.log.gz"] {
         let (precision, recall, _, report) = radish_map_score(log, None);
-        // Issue 30 asks 0.95 for both; the recall is 0.91 on freiburg-079 (docs/RESULTS.md): the
-        // reference cells the laser's own counting grid calls free are thin, see-through things
-        // (chair and table legs) that most beams through their 20 cm cells pass by.
+        // Issue 30's figure. Measured: freiburg-079 0.997 / 0.957, aces 0.957 / 0.997 (the laser's
+        // hit weight and its two-return floor, `sonar::grid::RAY_HIT_WEIGHT`).
         assert!(precision >= 0.95, "{log}: precision {precision}");
-        assert!(recall >= 0.9, "{log}: recall {recall}");
+        assert!(recall >= 0.95, "{log}: recall {recall}");
         let m = &report["metrics"];
         assert_eq!(m["echoes.off_grid"].as_f64(), Some(0.0), "{log}: {m}");
         assert!(m["walls"].as_f64().unwrap_or(0.0) > 5.0, "{log}: {m}");

@@ -132,10 +132,14 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         mark_legend: vec![("Hough corner", crate::picture::colours::CORNER)],
         ..Default::default()
     };
+    let sensor = match output.metrics.get("ranging.lidar") {
+        Some(&lidar) if lidar > 0.0 => "laser",
+        _ => "sonar",
+    };
     io::save_map_png(
         &dir.join("map.png"),
         &map.counting,
-        "map.png: sonar map (simple counting) with its Hough corners",
+        &format!("map.png: {sensor} map (simple counting) with its Hough corners"),
         &corners,
     )?;
     io::save_ros_map(dir, "map_log_odds", &map.log_odds)?;
