@@ -96,9 +96,14 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
         eprintln!("{log}: {walls} walls, {m}");
         // freiburg-079's dense scans give its walls; aces (440 scans over 23 min, one every 3 s)
         // gives a few with the defaults tuned on the simulator: issue 31's subject.
+        // The report gives the walls' count and length; a map without any says so.
+        assert_eq!(m["walls"].as_f64(), Some(walls as f64), "{log}: {m}");
+        let length = m["walls.length_m"].as_f64().unwrap();
         if log.starts_with("freiburg") {
             assert!(walls > 20, "{log}: {walls} walls");
+            assert!(length > 100.0, "{log}: {m}");
         }
+        assert!(length > 0.0 || walls == 0, "{log}: {m}");
         // The evidence floor follows the sampling: freiburg-079 (a reading every 9 cm of
         // travel) keeps the default 6, aces (a scan every 3 s, about a metre) gets 2.
         let floor = m["grid.min_evidence"].as_f64().unwrap();
@@ -271,6 +276,33 @@ fn radish_lidar_maps_agree_with_the_full_laser() {
         assert_eq!(m["echoes.off_grid"].as_f64(), Some(0.0), "{log}: {m}");
         assert!(m["walls"].as_f64().unwrap_or(0.0) > 5.0, "{log}: {m}");
     }
+}
+
+#[test]
+fn a_map_without_walls_says_so() {
+    // aces as five frontal sonars: a scan every 3 s, a reading every 0.7 m of travel, too few
+    // echoes a face for the wall step (issue 31).
+    let data = Path::new("../shared/data/radish/aces-corrected.log.gz");
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let (code, err) = stereotag(&[
+        "import",
+        "--carmen",
+        data.to_str().unwrap(),
+        "--as-sonar",
+        "frontal5",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let map = dir.path().join("map");
+    let (code, err) = map_on_truth(&run, &map, false, &[]);
+    assert_eq!(code, 0, "{err}");
+    let m = &json(&map.join("report.json"))["metrics"];
+    assert_eq!(m["walls"].as_f64(), Some(0.0), "{m}");
+    assert_eq!(m["walls.length_m"].as_f64(), Some(0.0), "{m}");
+    assert!(err.contains("no straight wall was fitted"), "{err}");
+    assert!(err.contains("a reading every 0.7"), "{err}");
 }
 
 #[test]

@@ -171,11 +171,18 @@ impl SonarMap {
     }
 
     /// What `report.json` says of the data the map kept and left out: the echoes off the grid,
-    /// [`Hidden::metrics`], the floor used and the run's sampling.
+    /// [`Hidden::metrics`], the floor used, the run's sampling and the walls' summed and longest
+    /// length.
     pub fn coverage_metrics(&self) -> Vec<(String, f64)> {
+        let lengths = self.walls.iter().map(WallSegment::length_m);
         let mut m = vec![
             ("echoes.off_grid".to_string(), self.echoes_off_grid as f64),
             ("grid.min_evidence".to_string(), self.min_evidence as f64),
+            (
+                "walls.length_m".to_string(),
+                lengths.clone().fold(0.0, |a, l| a + l),
+            ),
+            ("walls.longest_m".to_string(), lengths.fold(0.0, f64::max)),
         ];
         m.extend(self.hidden.metrics().map(|(k, v)| (k.to_string(), v)));
         m.extend(
@@ -188,7 +195,8 @@ impl SonarMap {
     /// What to tell the user when a setting hid most of what it could have shown: the evidence
     /// floor more cells than it left known, the Hough threshold over three times the peaks it
     /// kept (the simulated museum, sampled every 5-10 cm, has 1.6 times as many low peaks as
-    /// kept ones: its walls; a real log sampled every 3 s, aces, 3.9 times).
+    /// kept ones: its walls; a real log sampled every 3 s, aces, 3.9 times); and a map with
+    /// echoes but no wall fitted.
     pub fn hidden_warnings(&self) -> Vec<String> {
         let h = &self.hidden;
         let mut out = Vec::new();
@@ -199,6 +207,16 @@ impl SonarMap {
             out.push(format!(
                 "the evidence floor ({} readings a cell: mapping.grid.min_evidence, following the run's sampling{spacing}) leaves {} cells unknown that some reading saw, more than the {} it shows; a lower floor shows more of the map, with less evidence a cell",
                 self.min_evidence, h.cells_below_floor, h.cells_known
+            ));
+        }
+        if self.walls.is_empty() && self.echoes >= crate::sonar::walls::MIN_READINGS {
+            let spacing = self.sampling_spacing_m.map_or(String::new(), |s| {
+                format!(" (this run: a reading every {s:.2} m of travel)")
+            });
+            out.push(format!(
+                "no straight wall was fitted: a wall needs {} echoes off its face with no gap over {} m between them{spacing}; `localize` will have no walls to hold the robot to between tags, and `plan` none to predict with",
+                crate::sonar::walls::MIN_READINGS,
+                crate::sonar::walls::MAX_GAP_M
             ));
         }
         if h.peaks_below_threshold > 3 * h.peaks_kept.max(2) {

@@ -20,9 +20,9 @@ use std::f64::consts::TAU;
 /// to the wall's line: 4.5 cm.
 const SUPPORT_M: f64 = 0.045;
 /// A wall needs this many supporting readings: 12.
-const MIN_READINGS: usize = 12;
+pub(crate) const MIN_READINGS: usize = 12;
 /// A wall is split where no echo came from it over this length: 0.5 m.
-const MAX_GAP_M: f64 = 0.5;
+pub(crate) const MAX_GAP_M: f64 = 0.5;
 /// The sensors that saw a wall must have been spread this far along it, so that its direction
 /// comes from the ranges and not from the 1 degree Hough cell (a robot turning on the spot sees a
 /// wall from one place): 0.5 m.
@@ -66,6 +66,11 @@ pub struct WallSegment {
 }
 
 impl WallSegment {
+    /// The face's length, metres.
+    pub fn length_m(&self) -> f64 {
+        (self.to_m[0] - self.from_m[0]).hypot(self.to_m[1] - self.from_m[1])
+    }
+
     /// The unit normal.
     pub fn normal(&self) -> [f64; 2] {
         let (s, c) = self.normal_rad.sin_cos();
