@@ -51,6 +51,7 @@ impl Fixture {
                 world: Path::new("samples/office/world.yaml"),
                 out: &survey,
                 seed: Some(1),
+                rig: None,
                 detect: DetectOptions::survey(Backend::ApriltagC),
                 force: false,
                 recording: RecordingRequest::none(),

@@ -53,16 +53,24 @@ fn read_report(dir: &Path) -> Value {
 
 /// The demo (the office simulated with pictures, then surveyed and recorded) into `out`.
 fn run_demo(out: &Path, seed: u64) -> Value {
-    demo_of(Path::new("samples/office/world.yaml"), out, seed, true)
+    demo_of(
+        Path::new("samples/office/world.yaml"),
+        None,
+        out,
+        seed,
+        true,
+    )
 }
 
-/// The demo's steps on `world` into `out`, recorded if `record`.
-fn demo_of(world: &Path, out: &Path, seed: u64, record: bool) -> Value {
+/// The demo's steps on `world` (pictures with `rig`, else the default one) into `out`, recorded
+/// if `record`.
+fn demo_of(world: &Path, rig: Option<&Path>, out: &Path, seed: u64, record: bool) -> Value {
     stereotag::workflow::demo::demo(
         &stereotag::workflow::demo::DemoRequest {
             world,
             out,
             seed: Some(seed),
+            rig,
             detect: DetectOptions::survey(Backend::ApriltagC),
             force: false,
             recording: if record {
@@ -1030,7 +1038,13 @@ fn a_wrong_mounting_is_estimated_and_corrected() {
 fn tags_at_any_height_and_orientation_are_surveyed_in_full() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("apartment");
-    let report = demo_of(Path::new("samples/apartment/world.yaml"), &out, 1, false);
+    let report = demo_of(
+        Path::new("samples/apartment/world.yaml"),
+        None,
+        &out,
+        1,
+        false,
+    );
     let (median, turned, ate) = (
         metric(&report, "landmarks.median_error_m"),
         metric(&report, "landmarks.median_orientation_error_deg"),
@@ -1071,6 +1085,48 @@ fn tags_at_any_height_and_orientation_are_surveyed_in_full() {
     let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
     let normal = q * nalgebra::Vector3::x();
     assert!((normal.z.asin() - pitch).abs() < 1e-6, "normal {normal:?}");
+}
+
+/// Issue 34's ceiling tags: the loft's four tags on the ceiling, facing down and each turned its
+/// own way, seen by a camera looking 30 degrees up, are surveyed with their yaw (the heading of
+/// the printed tag's top) and pitch (face down). Seed 1 (docs/RESULTS.md gives seeds 1-5).
+#[test]
+fn tags_on_the_ceiling_are_surveyed_with_their_orientation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("loft");
+    let rig = Path::new("calibration/rigs/upward.yaml");
+    let report = demo_of(
+        Path::new("samples/loft/world.yaml"),
+        Some(rig),
+        &out,
+        1,
+        false,
+    );
+    let (median, turned, worst, ate) = (
+        metric(&report, "landmarks.median_error_m"),
+        metric(&report, "landmarks.median_orientation_error_deg"),
+        metric(&report, "landmarks.max_orientation_error_deg"),
+        metric(&report, "ate_m.offline"),
+    );
+    eprintln!(
+        "loft seed 1: landmarks {median:.4} m, {turned:.2} deg (largest {worst:.2}); offline ATE {ate:.4} m"
+    );
+    assert_eq!(metric(&report, "landmarks.count"), 4.0);
+    assert!(median <= 0.02, "position median {median}");
+    assert!(turned <= 2.0, "orientation median {turned}");
+    assert!(worst <= 5.0, "largest orientation error {worst}");
+    assert!(ate <= 0.025, "offline ATE {ate}");
+    let file: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("landmarks.json")).unwrap())
+            .unwrap();
+    for l in file["landmarks"].as_array().unwrap() {
+        let pitch = l["pitch_rad"].as_f64().unwrap();
+        assert!(
+            (pitch + 90f64.to_radians()).abs() < 3f64.to_radians(),
+            "{l}"
+        );
+        assert!(l["position_m"][2].as_f64().unwrap() > 2.4, "{l}");
+    }
 }
 
 /// Issue 33: a tag moved after the first loop is still caught as moved, now that a re-sighting

@@ -16,6 +16,11 @@ pub struct Demo {
     /// Random seed of the simulation (default: the world file's).
     #[arg(long)]
     seed: Option<u64>,
+    /// The stereo rig of the pictures (a Kalibr camchain with the mounting; default:
+    /// calibration/rigs/default.yaml; calibration/rigs/upward.yaml looks 30 degrees up, for
+    /// samples/loft's tags on the ceiling).
+    #[arg(long)]
+    rig: Option<PathBuf>,
     /// The tag detector's decimation (default 1.5, the survey's; 1 = full resolution, slower,
     /// finds the farthest tags as well).
     #[arg(long)]
@@ -41,6 +46,7 @@ impl Demo {
                 world: &self.world,
                 out: &self.out,
                 seed: self.seed,
+                rig: self.rig.as_deref(),
                 detect: DetectOptions {
                     decimate: self.decimate.unwrap_or(survey_defaults.decimate),
                     min_contrast: self.min_contrast.unwrap_or(survey_defaults.min_contrast),

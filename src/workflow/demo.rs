@@ -20,6 +20,8 @@ pub struct DemoRequest<'a> {
     pub out: &'a Path,
     /// The simulation's seed (default: the world file's).
     pub seed: Option<u64>,
+    /// The stereo rig the pictures are taken with (default: [`DEFAULT_RIG`]).
+    pub rig: Option<&'a Path>,
     /// How the survey detects tags.
     pub detect: DetectOptions,
     /// Replace the output directory if it exists.
@@ -37,7 +39,7 @@ pub struct DemoOutput {
     pub survey: SurveyOutput,
 }
 
-/// Simulates `world` with the default rig and capture policy into `out/run`, then surveys that
+/// Simulates `world` with the rig asked for (else the default one) and the default capture policy into `out/run`, then surveys that
 /// run into `out`.
 pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOutput> {
     super::sightings::check_decimate(request.detect.decimate)?; // before the simulation, not after
@@ -52,7 +54,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
                 ..SimSettings::default()
             },
             pictures: Some(Pictures {
-                rig: Path::new(DEFAULT_RIG),
+                rig: request.rig.unwrap_or(Path::new(DEFAULT_RIG)),
                 policy: CapturePolicy::default(),
                 default_mounting: false,
             }),
