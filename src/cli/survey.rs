@@ -88,7 +88,8 @@ pub struct DetectArgs {
     /// Detector backend.
     #[arg(long, value_enum, default_value = "apriltag-c")]
     backend: Backend,
-    /// Tag families to look for (default: the world's or the survey's, else tag36h11).
+    /// Tag families to look for (default: the world's or the survey's and those the
+    /// --tag-sizes table names, else tag36h11).
     #[arg(long)]
     family: Vec<String>,
     /// Decimation before quad detection [default: 1.5 with the C library, 1 with kornia]. 1 is
@@ -101,7 +102,8 @@ pub struct DetectArgs {
     #[arg(long)]
     tag_size_m: Option<f64>,
     /// Tag sizes per tag (YAML: `default: 0.16` and `tags:` a list of `{id, size_m}` with an
-    /// optional `family`); a world file's sizes come first, --tag-size-m is the default.
+    /// optional `family`, whose families are looked for when --family is not given); a world
+    /// file's sizes come first, --tag-size-m is the default.
     #[arg(long, value_name = "FILE")]
     tag_sizes: Option<std::path::PathBuf>,
     /// Smallest white-to-black grey difference around a 4x4 tile for it to be searched (both

@@ -147,13 +147,15 @@ fn compress_while_detecting(pairs: usize, pixels: usize) -> bool {
     pairs.saturating_mul(2 * pixels) > KEPT_DECODED_BYTES
 }
 
-/// The families to look for: those asked, else the world's, else tag36h11.
+/// The families to look for: those asked, else the world's and those the tag sizes table names
+/// (`--tag-sizes`), else tag36h11.
 fn families(options: &DetectOptions, world: Option<&World>) -> Vec<TagFamily> {
     let mut families = options.families.clone();
     if families.is_empty() {
         families = world
             .map(|w| w.tags.iter().map(|t| t.family).collect())
             .unwrap_or_default();
+        families.extend(options.tag_sizes.by_tag.keys().map(|t| t.family));
         families.sort();
         families.dedup();
     }
@@ -531,6 +533,24 @@ impl<T> Drop for Pooled<'_, T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_families_come_from_the_flags_else_the_world_and_the_sizes_table() {
+        let mut options = DetectOptions::survey(crate::visual::tags::Backend::ApriltagC);
+        assert_eq!(families(&options, None), vec![TagFamily::Tag36h11]);
+        for family in [TagFamily::Tag25h9, TagFamily::TagStandard41h12] {
+            options
+                .tag_sizes
+                .by_tag
+                .insert(crate::visual::tags::TagId { family, id: 3 }, 0.08);
+        }
+        assert_eq!(
+            families(&options, None),
+            vec![TagFamily::Tag25h9, TagFamily::TagStandard41h12]
+        );
+        options.families = vec![TagFamily::Tag16h5];
+        assert_eq!(families(&options, None), vec![TagFamily::Tag16h5]);
+    }
 
     #[test]
     fn sightings_below_the_floor_or_far_above_the_walls_are_left_out() {
