@@ -5,6 +5,8 @@
 # each landmark's error against the world's tags (the anchored ones and the others).
 #   scripts/anchor_seeds.sh [WORLD] [SEEDS...]   e.g. scripts/anchor_seeds.sh samples/museum/world.yaml 1 2 3 4 5
 set -euo pipefail
+# FLAGS: more survey flags, e.g. FLAGS="--decimate 1" (full resolution).
+FLAGS=${FLAGS:-}
 world=${1:-samples/office/world.yaml}
 shift || true
 seeds=("$@")
@@ -39,7 +41,7 @@ for r in rows:
     out.append(f"{r[0]},{c*dx + s*dy:.6f},{-s*dx + c*dy:.6f},{math.atan2(math.sin(th - th0), math.cos(th - th0)):.6f}")
 open(p, "w").write("\n".join(out) + "\n")
 PY
-  "$bin" -q survey --run "$tmp/run$s" --out "$tmp/survey$s" --anchors "$tmp/anchors.yaml" --no-rerun >/dev/null
+  "$bin" -q survey --run "$tmp/run$s" --out "$tmp/survey$s" --anchors "$tmp/anchors.yaml" --no-rerun $FLAGS >/dev/null
   python3 - "$world" "$tmp/survey$s" "$s" <<'PY'
 import json, math, statistics, sys, yaml
 tags = {t["id"]: t for t in yaml.safe_load(open(sys.argv[1]))["tags"]}
