@@ -26,15 +26,14 @@ fn map_on_truth(run: &Path, out: &Path, quiet: bool, extra: &[&str]) -> (i32, St
     stereotag(&args)
 }
 
-/// `stereotag import --carmen LOG --out RUN`.
-fn import_carmen(log: &Path, run: &Path) -> (i32, String) {
-    stereotag(&[
-        "import",
-        "--carmen",
-        log.to_str().unwrap(),
-        "--out",
-        run.to_str().unwrap(),
-    ])
+/// `stereotag import --carmen LOG [--as-sonar LAYOUT] --out RUN`.
+fn import_carmen(log: &Path, as_sonar: Option<&str>, run: &Path) -> (i32, String) {
+    let mut args = vec!["import", "--carmen", log.to_str().unwrap()];
+    if let Some(layout) = as_sonar {
+        args.extend(["--as-sonar", layout]);
+    }
+    args.extend(["--out", run.to_str().unwrap()]);
+    stereotag(&args)
 }
 
 fn json(path: &Path) -> Value {
@@ -55,15 +54,7 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
         );
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("run");
-        let (code, err) = stereotag(&[
-            "import",
-            "--carmen",
-            data.to_str().unwrap(),
-            "--as-sonar",
-            layout,
-            "--out",
-            run.to_str().unwrap(),
-        ]);
+        let (code, err) = import_carmen(&data, Some(layout), &run);
         assert_eq!(code, 0, "{log}: {err}");
         let summary = json(&run.join("import.json"));
         let scans = summary["scans"].as_u64().unwrap();
@@ -148,30 +139,14 @@ fn a_broken_carmen_line_is_an_error_naming_the_file_and_line_and_nothing_is_writ
     )
     .unwrap();
     let run = dir.path().join("run");
-    let (code, err) = stereotag(&[
-        "import",
-        "--carmen",
-        log.to_str().unwrap(),
-        "--as-sonar",
-        "frontal5",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
+    let (code, err) = import_carmen(&log, Some("frontal5"), &run);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("broken.log:3") && err.contains("FLASER: 3 fields, 13 expected"),
         "{err}"
     );
     assert!(!run.exists());
-    let (code, err) = stereotag(&[
-        "import",
-        "--carmen",
-        log.to_str().unwrap(),
-        "--as-sonar",
-        "ring99",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
+    let (code, err) = import_carmen(&log, Some("ring99"), &run);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("frontal5 and pioneer16"), "{err}");
 }
@@ -222,12 +197,7 @@ fn radish_map_score(log: &str, as_sonar: Option<&str>) -> (f64, f64, usize, Valu
         .join(log);
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let mut args = vec!["import", "--carmen", data.to_str().unwrap()];
-    if let Some(layout) = as_sonar {
-        args.extend(["--as-sonar", layout]);
-    }
-    args.extend(["--out", run.to_str().unwrap()]);
-    let (code, err) = stereotag(&args);
+    let (code, err) = import_carmen(&data, as_sonar, &run);
     assert_eq!(code, 0, "{log}: {err}");
     let out = dir.path().join("map");
     let mapped = stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
@@ -285,15 +255,7 @@ fn a_map_without_walls_says_so() {
     let data = Path::new("../shared/data/radish/aces-corrected.log.gz");
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let (code, err) = stereotag(&[
-        "import",
-        "--carmen",
-        data.to_str().unwrap(),
-        "--as-sonar",
-        "frontal5",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
+    let (code, err) = import_carmen(data, Some("frontal5"), &run);
     assert_eq!(code, 0, "{err}");
     let map = dir.path().join("map");
     let (code, err) = map_on_truth(&run, &map, false, &[]);
@@ -325,7 +287,7 @@ fn a_broken_lidar_csv_is_an_error_naming_the_file_and_line() {
     )
     .unwrap();
     let run = dir.path().join("run");
-    let (code, err) = import_carmen(&log, &run);
+    let (code, err) = import_carmen(&log, None, &run);
     assert_eq!(code, 0, "{err}");
     let csv = std::fs::read_to_string(run.join("lidar.csv")).unwrap();
     // The log's largest range (81.91 here) is the laser's no-return value.
@@ -378,7 +340,7 @@ fn a_laser_confirms_the_lidar_maps_corners() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/radish/aces-corrected.log.gz");
     let dir = tempfile::tempdir().unwrap();
     let (run, out) = (dir.path().join("run"), dir.path().join("map"));
-    let (code, err) = import_carmen(&log, &run);
+    let (code, err) = import_carmen(&log, None, &run);
     assert_eq!(code, 0, "{err}");
     let (code, err) = map_on_truth(&run, &out, true, &[]);
     assert_eq!(code, 0, "{err}");
