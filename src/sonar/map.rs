@@ -7,7 +7,8 @@ use crate::sonar::grid::{
     CountingGrid, GridConfig, GridError, LogOddsGrid, OccupancyGrid, OccupancyMap,
 };
 use crate::sonar::hough::{
-    classify_features, features_offline, features_online, Accumulator, Feature, HoughConfig,
+    classify_features, features_offline, features_online, on_a_wall, Accumulator, Feature,
+    HoughConfig, STRONG_PEAK,
 };
 use crate::sonar::walls::{map_walls, WallSegment};
 use crate::sonar::{PlacedReading, SonarLayout, SonarLog};
@@ -131,11 +132,14 @@ pub struct Hidden {
     pub peaks_below_threshold: usize,
     /// Readings at or beyond the sonar's range (`max_range_m`), taken as no echo.
     pub readings_beyond_range: usize,
+    /// Offline features dropped for lying on no wall's line (rule 6 of [`crate::sonar::hough`],
+    /// `mapping.hough.features_on_walls`).
+    pub features_off_walls: usize,
 }
 
 impl Hidden {
     /// The metrics for `report.json` (`hidden.*`).
-    pub fn metrics(&self) -> [(&'static str, f64); 5] {
+    pub fn metrics(&self) -> [(&'static str, f64); 6] {
         [
             ("hidden.cells_known", self.cells_known as f64),
             ("hidden.cells_below_floor", self.cells_below_floor as f64),
@@ -148,6 +152,7 @@ impl Hidden {
                 "hidden.readings_beyond_range",
                 self.readings_beyond_range as f64,
             ),
+            ("hidden.features_off_walls", self.features_off_walls as f64),
         ]
     }
 }
@@ -338,11 +343,15 @@ pub fn map_trajectory(
             Ok((log_odds, offline, accumulator, walls, times))
         },
     );
-    let (log_odds, offline, accumulator, walls, rest_times) = rest?;
+    let (log_odds, mut offline, accumulator, walls, rest_times) = rest?;
+    let features_found = offline.len();
     let threshold = config
         .hough
         .offline_threshold
         .unwrap_or(config.hough.threshold);
+    if config.hough.features_on_walls && !walls.is_empty() {
+        offline.retain(|f| f.votes >= STRONG_PEAK * threshold || on_a_wall(f, &walls));
+    }
     // Being a local maximum does not depend on the threshold: one pass at half of it.
     let low = accumulator.peaks(threshold.div_ceil(2), config.hough.peak_radius_cells);
     let peaks_kept = low.iter().filter(|f| f.votes >= threshold).count();
@@ -352,6 +361,7 @@ pub fn map_trajectory(
         peaks_kept,
         peaks_below_threshold: low.len() - peaks_kept,
         readings_beyond_range,
+        features_off_walls: features_found - offline.len(),
     };
     timings_s.extend(online_times);
     timings_s.extend(rest_times);
