@@ -214,7 +214,11 @@ fn hold_tail(
         .into_iter()
         .filter(|r| r.t_s <= last_t)
         .collect();
-    let walls = walls_of(layout, &readings, mapping)?;
+    let walls = walls_of(
+        layout,
+        &readings,
+        &mapping.for_run(&run.sonar_log(), &run.odometry),
+    )?;
     offline.trajectory = hold_tail_to_walls(
         &run.odometry,
         visual,
@@ -238,5 +242,5 @@ fn walls_of(
     mapping: &MappingConfig,
 ) -> Result<Vec<crate::sonar::walls::WallSegment>, GridError> {
     let grid = counting_map(layout, readings, mapping)?;
-    Ok(layout_walls(layout, readings, &grid))
+    Ok(layout_walls(layout, readings, &grid, &mapping.walls))
 }

@@ -10,7 +10,7 @@ use crate::sonar::hough::{
     classify_features, features_offline, features_online, on_a_wall, Accumulator, Feature,
     HoughConfig, STRONG_PEAK,
 };
-use crate::sonar::walls::{map_walls, WallSegment};
+use crate::sonar::walls::{map_walls, WallConfig, WallSegment};
 use crate::sonar::{PlacedReading, SonarLayout, SonarLog};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -24,6 +24,8 @@ pub struct MappingConfig {
     pub grid: GridConfig,
     /// Hough corner features.
     pub hough: HoughConfig,
+    /// Straight walls.
+    pub walls: WallConfig,
 }
 
 /// Travel between one sensor's readings up to which the evidence floor is used as set: 0.15 m.
@@ -52,8 +54,10 @@ impl MappingConfig {
     /// The settings for `sonar`'s readings along `trajectory`. With `grid.floor_follows_sampling`
     /// (and a sonar's cones: a laser counts beams), a run sampled sparser than every
     /// [`FLOOR_SPACING_M`] gets the floor `min_evidence * FLOOR_SPACING_M / spacing`, rounded,
-    /// [`LOWEST_FLOOR`] at least: a cell is seen by fewer readings, in proportion. The settings
-    /// returned follow nothing more (applying this twice changes nothing).
+    /// [`LOWEST_FLOOR`] at least: a cell is seen by fewer readings, in proportion; with
+    /// `walls.follow_sampling`, the wall step's readings and gap follow it too
+    /// ([`WallConfig::for_spacing`]). The settings returned follow nothing more (applying this
+    /// twice changes nothing).
     pub fn for_run(&self, sonar: &SonarLog<'_>, trajectory: &[StampedPose]) -> MappingConfig {
         self.for_spacing(sonar.layout, sampling_spacing_m(sonar, trajectory))
     }
@@ -61,20 +65,18 @@ impl MappingConfig {
     /// [`Self::for_run`] with the run's spacing already measured.
     fn for_spacing(&self, layout: &SonarLayout, spacing: Option<f64>) -> MappingConfig {
         let mut config = self.clone();
+        // A laser counts beams, not a sonar's cones: its settings stay as set.
+        let cones = layout.beam == crate::sonar::BeamModel::Cone;
+        config.walls = config.walls.for_spacing(spacing.filter(|_| cones));
         if !config.grid.floor_follows_sampling {
             return config;
         }
         config.grid.floor_follows_sampling = false;
-        if layout.beam != crate::sonar::BeamModel::Cone {
-            return config;
-        }
-        if let Some(spacing) = spacing {
-            if spacing > FLOOR_SPACING_M {
-                let scaled = (config.grid.min_evidence as f64 * FLOOR_SPACING_M / spacing).round();
-                config.grid.min_evidence = (scaled as u32)
-                    .max(LOWEST_FLOOR)
-                    .min(config.grid.min_evidence);
-            }
+        if let Some(spacing) = spacing.filter(|&s| cones && s > FLOOR_SPACING_M) {
+            let scaled = (config.grid.min_evidence as f64 * FLOOR_SPACING_M / spacing).round();
+            config.grid.min_evidence = (scaled as u32)
+                .max(LOWEST_FLOOR)
+                .min(config.grid.min_evidence);
         }
         config
     }
@@ -111,6 +113,8 @@ pub struct SonarMap {
     pub sampling_spacing_m: Option<f64>,
     /// The evidence floor used ([`MappingConfig::for_run`]).
     pub min_evidence: u32,
+    /// The wall step's settings used ([`MappingConfig::for_run`]).
+    pub wall_config: WallConfig,
     /// Seconds per stage.
     pub timings_s: BTreeMap<String, f64>,
 }
@@ -214,14 +218,14 @@ impl SonarMap {
                 self.min_evidence, h.cells_below_floor, h.cells_known
             ));
         }
-        if self.walls.is_empty() && self.echoes >= crate::sonar::walls::MIN_READINGS {
+        if self.walls.is_empty() && self.echoes >= self.wall_config.min_readings {
             let spacing = self.sampling_spacing_m.map_or(String::new(), |s| {
                 format!(" (this run: a reading every {s:.2} m of travel)")
             });
             out.push(format!(
-                "no straight wall was fitted: a wall needs {} echoes off its face with no gap over {} m between them{spacing}; `localize` will have no walls to hold the robot to between tags, and `plan` none to predict with",
-                crate::sonar::walls::MIN_READINGS,
-                crate::sonar::walls::MAX_GAP_M
+                "no straight wall was fitted: a wall needs {} echoes off its face with no gap over {:.2} m between them (mapping.walls){spacing}; `localize` will have no walls to hold the robot to between tags, and `plan` none to predict with",
+                self.wall_config.min_readings,
+                self.wall_config.max_gap_m
             ));
         }
         if h.peaks_below_threshold > 3 * h.peaks_kept.max(2) {
@@ -282,6 +286,7 @@ pub fn map_trajectory(
     let layout = sonar.layout;
     let spacing = sampling_spacing_m(sonar, trajectory);
     let config = &config.for_spacing(layout, spacing);
+    config.walls.validate()?;
     let mut timings_s = BTreeMap::new();
     let start = Instant::now();
     let readings = timed("place_readings", &mut timings_s, || {
@@ -338,7 +343,13 @@ pub fn map_trajectory(
                 (offline, accumulator)
             });
             let walls = timed("walls", &mut times, || {
-                map_walls(&line_echoes, half, layout.max_range_m, &counting)
+                map_walls(
+                    &line_echoes,
+                    half,
+                    layout.max_range_m,
+                    &counting,
+                    &config.walls,
+                )
             });
             Ok((log_odds, offline, accumulator, walls, times))
         },
@@ -381,6 +392,7 @@ pub fn map_trajectory(
         hidden,
         sampling_spacing_m: spacing,
         min_evidence: config.grid.min_evidence,
+        wall_config: config.walls.clone(),
         timings_s,
     })
 }
@@ -413,7 +425,8 @@ pub fn layout_walls(
     layout: &SonarLayout,
     readings: &[PlacedReading],
     map: &OccupancyMap,
+    config: &WallConfig,
 ) -> Vec<WallSegment> {
     let (echoes, half) = layout.echoes_for_lines(readings);
-    map_walls(&echoes, half, layout.max_range_m, map)
+    map_walls(&echoes, half, layout.max_range_m, map, config)
 }

@@ -19,10 +19,90 @@ use std::f64::consts::TAU;
 /// A reading supports a wall when its tangent at the wall's angle (within one cell) is this close
 /// to the wall's line: 4.5 cm.
 const SUPPORT_M: f64 = 0.045;
-/// A wall needs this many supporting readings: 12.
-pub(crate) const MIN_READINGS: usize = 12;
-/// A wall is split where no echo came from it over this length: 0.5 m.
-pub(crate) const MAX_GAP_M: f64 = 0.5;
+/// A wall needs this many supporting readings: 12 ([`WallConfig::min_readings`]).
+pub const MIN_READINGS: usize = 12;
+/// A wall is split where no echo came from it over this length: 0.5 m
+/// ([`WallConfig::max_gap_m`]).
+pub const MAX_GAP_M: f64 = 0.5;
+/// The fewest supporting readings a wall needs however sparse the run: 5 (aces as five frontal
+/// sonars, a reading every 0.73 m: 23 faces, every one on the full laser's walls).
+pub const FEWEST_READINGS: usize = 5;
+/// A sparse run's gap is this many times its spacing: 2.5 (a face's reading may be missed: a
+/// scan of aces often finds no echo off a given face).
+pub const GAP_SPACINGS: f64 = 2.5;
+
+/// Settings of the wall step: the `walls:` part of the mapping settings.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct WallConfig {
+    /// Supporting readings a face needs (ours: 12).
+    pub min_readings: usize,
+    /// A face is split where no echo came from it over this length, metres (ours: 0.5 m).
+    pub max_gap_m: f64,
+    /// Whether a face may lie on cells the grid leaves unknown (not only on occupied ones) for
+    /// the part of its length it must lie on: off by default, on for a sparse run (its cells
+    /// under the evidence floor are most of the map).
+    pub on_unknown_cells: bool,
+    /// Whether these follow how densely the run samples (`MappingConfig::for_run`): as set for
+    /// runs with a reading every 15 cm of travel or closer; for a sparser run, `min_readings`
+    /// scaled down as the evidence floor is (5 at least), a gap of 2.5 times the spacing
+    /// (`max_gap_m` at least) and `on_unknown_cells` on. On by default.
+    pub follow_sampling: bool,
+}
+
+impl Default for WallConfig {
+    fn default() -> Self {
+        Self {
+            min_readings: MIN_READINGS,
+            max_gap_m: MAX_GAP_M,
+            on_unknown_cells: false,
+            follow_sampling: true,
+        }
+    }
+}
+
+impl WallConfig {
+    /// The settings for a run with a reading every `spacing_m` of travel (one sensor's), with
+    /// `follow_sampling`; the settings returned follow nothing more.
+    pub fn for_spacing(&self, spacing_m: Option<f64>) -> WallConfig {
+        let mut out = WallConfig {
+            follow_sampling: false,
+            ..self.clone()
+        };
+        let spacing_m = spacing_m.unwrap_or(0.0);
+        if self.follow_sampling && spacing_m > crate::sonar::map::FLOOR_SPACING_M {
+            let scaled = self.min_readings as f64 * crate::sonar::map::FLOOR_SPACING_M / spacing_m;
+            out.min_readings = (scaled.round() as usize)
+                .max(FEWEST_READINGS)
+                .min(self.min_readings);
+            out.max_gap_m = self.max_gap_m.max(GAP_SPACINGS * spacing_m);
+            out.on_unknown_cells = true;
+        }
+        out
+    }
+
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), crate::sonar::grid::GridError> {
+        let bad = |key, value: f64, reason| {
+            Err(crate::sonar::grid::GridError::Invalid { key, value, reason })
+        };
+        if self.min_readings < 3 {
+            return bad(
+                "walls.min_readings",
+                self.min_readings as f64,
+                "a face needs 3 readings at least",
+            );
+        }
+        if !(self.max_gap_m.is_finite() && self.max_gap_m > 0.0) {
+            return bad(
+                "walls.max_gap_m",
+                self.max_gap_m,
+                "must be a positive number of metres",
+            );
+        }
+        Ok(())
+    }
+}
 /// The sensors that saw a wall must have been spread this far along it, so that its direction
 /// comes from the ranges and not from the 1 degree Hough cell (a robot turning on the spot sees a
 /// wall from one place): 0.5 m.
@@ -34,8 +114,9 @@ const SHADOW_DIST_M: f64 = 0.3;
 /// ... and this close to its extent is dropped: 0.6 m (the robot turns 0.5-0.9 m before a
 /// corner, so the faces end short of it).
 const SHADOW_ALONG_M: f64 = 0.6;
-/// A face must lie on occupied grid cells for this part of its length: 0.8 (a concave corner's
-/// tip echoes like a 45 degree face across the corner, on free cells).
+/// A face must lie on occupied grid cells (or unknown ones, [`WallConfig::on_unknown_cells`]) for
+/// this part of its length: 0.8 (a concave corner's tip echoes like a 45 degree face across the
+/// corner, on free cells).
 const MIN_ON_GRID: f64 = 0.8;
 /// Walls searched at most.
 const MAX_WALLS: usize = 400;
@@ -179,6 +260,7 @@ pub fn map_walls(
     half_cone_rad: f64,
     max_range_m: f64,
     map: &OccupancyMap,
+    config: &WallConfig,
 ) -> Vec<WallSegment> {
     let mut echoes: Vec<Echo> = readings
         .iter()
@@ -228,7 +310,7 @@ pub fn map_walls(
         let Some((best, count)) = strongest.next(&votes) else {
             break;
         };
-        if (count as usize) < MIN_READINGS {
+        if (count as usize) < config.min_readings {
             break;
         }
         let step = ANGLE_STEP_DEG.to_radians();
@@ -245,8 +327,8 @@ pub fn map_walls(
             used[i] = true;
         }
         votes.counts[best] = 0;
-        for piece in split(&echoes, &support, normal) {
-            if let Some(w) = fit(&echoes, &piece, normal, offset) {
+        for piece in split(&echoes, &support, normal, config.max_gap_m) {
+            if let Some(w) = fit(&echoes, &piece, normal, offset, config.min_readings) {
                 walls.push(w);
             }
         }
@@ -261,7 +343,9 @@ pub fn map_walls(
         for end in [&mut w.from_m, &mut w.to_m] {
             *end = [end[0] + centre[0], end[1] + centre[1]];
         }
-        if on_grid(&w, map) >= MIN_ON_GRID && !kept.iter().any(|k| shadows(k, &w)) {
+        if on_grid(&w, map, config.on_unknown_cells) >= MIN_ON_GRID
+            && !kept.iter().any(|k| shadows(k, &w))
+        {
             kept.push(w);
         }
     }
@@ -318,9 +402,9 @@ fn median_position(echoes: &[Echo]) -> Option<[f64; 2]> {
     (!echoes.is_empty()).then(|| [median(0), median(1)])
 }
 
-/// The part of a face's length that lies on occupied cells (within half a cell across it) or off
-/// the grid.
-fn on_grid(w: &WallSegment, map: &OccupancyMap) -> f64 {
+/// The part of a face's length that lies on occupied cells (within half a cell across it), or
+/// unknown ones with `unknown`, or off the grid.
+fn on_grid(w: &WallSegment, map: &OccupancyMap, unknown: bool) -> f64 {
     let g = &map.geometry;
     let length = (w.to_m[0] - w.from_m[0]).hypot(w.to_m[1] - w.from_m[1]);
     let steps = (length / (0.25 * g.resolution_m)).ceil().max(1.0) as usize;
@@ -333,10 +417,14 @@ fn on_grid(w: &WallSegment, map: &OccupancyMap) -> f64 {
                 w.from_m[0] + f * (w.to_m[0] - w.from_m[0]),
                 w.from_m[1] + f * (w.to_m[1] - w.from_m[1]),
             ];
-            // Off the grid (a wall on its edge) the grid cannot tell.
+            // Off the grid (a wall on its edge), or on a cell it does not know when asked (a
+            // sparse run's cells under the evidence floor), the grid cannot tell.
             [-half, 0.0, half].iter().any(|e| {
                 g.cell_of(p[0] + e * n[0], p[1] + e * n[1])
-                    .is_none_or(|(c, r)| map.is_occupied(r * g.width + c))
+                    .is_none_or(|(c, r)| {
+                        let i = r * g.width + c;
+                        map.is_occupied(i) || (unknown && map.occupancy[i].is_none())
+                    })
             })
         })
         .count();
@@ -375,9 +463,8 @@ fn foot_along(e: &Echo, normal: f64) -> f64 {
     -s * e.s[0] + c * e.s[1]
 }
 
-/// The supporting readings in pieces along the line, split where no echo came over
-/// [`MAX_GAP_M`].
-fn split(echoes: &[Echo], support: &[usize], normal: f64) -> Vec<Vec<usize>> {
+/// The supporting readings in pieces along the line, split where no echo came over `max_gap_m`.
+fn split(echoes: &[Echo], support: &[usize], normal: f64, max_gap_m: f64) -> Vec<Vec<usize>> {
     let mut sorted: Vec<(f64, usize)> = support
         .iter()
         .map(|&i| (foot_along(&echoes[i], normal), i))
@@ -387,7 +474,7 @@ fn split(echoes: &[Echo], support: &[usize], normal: f64) -> Vec<Vec<usize>> {
     let mut last = f64::NEG_INFINITY;
     for (u, i) in sorted {
         match pieces.last_mut() {
-            Some(p) if u - last <= MAX_GAP_M => p.push(i),
+            Some(p) if u - last <= max_gap_m => p.push(i),
             _ => pieces.push(vec![i]),
         }
         last = u;
@@ -397,12 +484,19 @@ fn split(echoes: &[Echo], support: &[usize], normal: f64) -> Vec<Vec<usize>> {
 
 /// Least-squares line of one piece: minimises `sum (n(a) . s_i - r_i - c)^2` over the normal `a`
 /// and offset `c` (Gauss-Newton from the Hough cell), then drops readings off by more than
-/// [`SUPPORT_M`] and fits again. `None` for too few readings or sensors too bunched along it.
-fn fit(echoes: &[Echo], piece: &[usize], normal: f64, offset: f64) -> Option<WallSegment> {
+/// [`SUPPORT_M`] and fits again. `None` for fewer than `min_readings` or sensors too bunched
+/// along it.
+fn fit(
+    echoes: &[Echo],
+    piece: &[usize],
+    normal: f64,
+    offset: f64,
+    min_readings: usize,
+) -> Option<WallSegment> {
     let mut members: Vec<usize> = piece.to_vec();
     let (mut a, mut c) = (normal, offset);
     for round in 0..2 {
-        if members.len() < MIN_READINGS {
+        if members.len() < min_readings {
             return None;
         }
         let along: Vec<f64> = members.iter().map(|&i| foot_along(&echoes[i], a)).collect();
@@ -498,6 +592,35 @@ mod tests {
     }
 
     #[test]
+    fn the_wall_step_follows_a_sparse_runs_sampling() {
+        let set = WallConfig::default();
+        // Dense (the samples, freiburg-079): as set.
+        let dense = set.for_spacing(Some(0.09));
+        assert_eq!((dense.min_readings, dense.max_gap_m), (12, 0.5));
+        assert!(!dense.on_unknown_cells && !dense.follow_sampling);
+        // aces as sonar, a reading every 0.73 m: 12 x 0.15 / 0.73 = 2.5 readings, 5 at least.
+        let sparse = set.for_spacing(Some(0.73));
+        assert_eq!(sparse.min_readings, FEWEST_READINGS);
+        assert!((sparse.max_gap_m - 1.825).abs() < 1e-12);
+        assert!(sparse.on_unknown_cells);
+        assert_eq!(sparse.for_spacing(Some(2.0)), sparse, "follows once");
+        // 0.25 m: 12 x 0.6 = 7.2 -> 7 readings, the gap 0.625 m.
+        let between = set.for_spacing(Some(0.25));
+        assert_eq!(between.min_readings, 7);
+        let fixed = WallConfig {
+            follow_sampling: false,
+            ..set.clone()
+        };
+        assert_eq!(fixed.for_spacing(Some(0.73)).min_readings, 12);
+        assert!(set.validate().is_ok());
+        let bad = WallConfig {
+            min_readings: 2,
+            ..set
+        };
+        assert!(bad.validate().is_err());
+    }
+
+    #[test]
     fn a_laser_ray_meets_a_face_where_its_line_crosses_it() {
         // The face y = 2 seen from below: normal -y, offset -2, from x = -5 to 5.
         let w = WallSegment {
@@ -546,7 +669,8 @@ mod tests {
         let mut grid =
             crate::sonar::grid::CountingGrid::for_layout(GridConfig::default(), &layout).unwrap();
         grid.insert_all(&placed);
-        let walls = crate::sonar::map::layout_walls(&layout, &placed, &grid.map());
+        let walls =
+            crate::sonar::map::layout_walls(&layout, &placed, &grid.map(), &WallConfig::default());
         assert!(!walls.is_empty());
         let w = &walls[0];
         assert!(
@@ -559,7 +683,13 @@ mod tests {
     #[test]
     fn a_wall_followed_is_one_segment_on_its_line() {
         let readings = along_wall();
-        let walls = map_walls(&readings, 15f64.to_radians(), 2.1, &grid_of(&readings));
+        let walls = map_walls(
+            &readings,
+            15f64.to_radians(),
+            2.1,
+            &grid_of(&readings),
+            &WallConfig::default(),
+        );
         let w = walls.first().expect("a wall");
         // The face looks down (-y), towards the robot: normal -90 degrees, n . q = -2.
         assert!(
@@ -597,8 +727,20 @@ mod tests {
             .collect();
         let grid = grid_of(&readings);
         let (a, b) = (
-            map_walls(&readings, 15f64.to_radians(), 2.1, &grid),
-            map_walls(&moved, 15f64.to_radians(), 2.1, &grid),
+            map_walls(
+                &readings,
+                15f64.to_radians(),
+                2.1,
+                &grid,
+                &WallConfig::default(),
+            ),
+            map_walls(
+                &moved,
+                15f64.to_radians(),
+                2.1,
+                &grid,
+                &WallConfig::default(),
+            ),
         );
         assert_eq!(a.len(), b.len());
         for (a, b) in a.iter().zip(&b) {
@@ -626,8 +768,20 @@ mod tests {
             range_m: Some(1.0),
         });
         let (a, b) = (
-            map_walls(&readings, 15f64.to_radians(), 2.1, &grid),
-            map_walls(&glitched, 15f64.to_radians(), 2.1, &grid),
+            map_walls(
+                &readings,
+                15f64.to_radians(),
+                2.1,
+                &grid,
+                &WallConfig::default(),
+            ),
+            map_walls(
+                &glitched,
+                15f64.to_radians(),
+                2.1,
+                &grid,
+                &WallConfig::default(),
+            ),
         );
         assert!(!b.is_empty());
         assert!(
@@ -647,6 +801,13 @@ mod tests {
                 range_m: Some(1.0),
             })
             .collect();
-        assert!(map_walls(&readings, 15f64.to_radians(), 2.1, &grid_of(&readings)).is_empty());
+        assert!(map_walls(
+            &readings,
+            15f64.to_radians(),
+            2.1,
+            &grid_of(&readings),
+            &WallConfig::default()
+        )
+        .is_empty());
     }
 }
