@@ -7,7 +7,7 @@ use crate::sonar::grid::{
     CountingGrid, GridConfig, GridError, LogOddsGrid, OccupancyGrid, OccupancyMap,
 };
 use crate::sonar::hough::{
-    classify_features, features_offline, features_online, on_a_wall, Accumulator, Feature,
+    classify_features, features_offline, features_online, off_the_walls, Accumulator, Feature,
     HoughConfig, STRONG_PEAK,
 };
 use crate::sonar::walls::{map_walls, WallConfig, WallSegment};
@@ -361,7 +361,7 @@ pub fn map_trajectory(
         .offline_threshold
         .unwrap_or(config.hough.threshold);
     if config.hough.features_on_walls && !walls.is_empty() {
-        offline.retain(|f| f.votes >= STRONG_PEAK * threshold || on_a_wall(f, &walls));
+        offline.retain(|f| f.votes >= STRONG_PEAK * threshold || !off_the_walls(f, &walls));
     }
     // Being a local maximum does not depend on the threshold: one pass at half of it.
     let low = accumulator.peaks(threshold.div_ceil(2), config.hough.peak_radius_cells);
