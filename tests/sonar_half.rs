@@ -92,6 +92,27 @@ fn office_with_ground_truth_poses_maps_the_walls() {
     .unwrap();
     let odo_scores = score_sonar_map(&odo, run, &loaded.world);
     assert!(odo_scores.counting.occupied_precision < gt_scores.counting.occupied_precision);
+
+    // The threshold hides no corner here; set too high, it says which it hid (the corners' peaks
+    // have 80-460 votes: at 400, one kept and those of 200-399 hidden).
+    assert_eq!(gt.hidden.features_below_threshold, 0, "{:?}", gt.hidden);
+    assert!(gt.hidden_warnings().is_empty(), "{:?}", gt.hidden_warnings());
+    let mut high = loaded.mapping.clone().unwrap();
+    high.hough.offline_threshold = Some(400);
+    let high = map_trajectory(
+        &run.sonar_log(),
+        run.trajectory(PoseSource::GroundTruth).unwrap(),
+        &high,
+    )
+    .unwrap();
+    let hidden = high.hidden;
+    assert!(hidden.features_kept <= 2, "{hidden:?}");
+    assert!(hidden.features_below_threshold >= 3, "{hidden:?}");
+    let warnings = high.hidden_warnings();
+    assert!(
+        warnings.iter().any(|w| w.contains("mapping.hough.threshold")),
+        "{warnings:?}"
+    );
 }
 
 #[test]

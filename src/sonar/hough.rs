@@ -374,24 +374,26 @@ pub fn locate_features(
     map: &OccupancyMap,
     config: &HoughConfig,
 ) -> Vec<Feature> {
-    let mut out = Vec::new();
-    for f in peaks {
-        let f = match place_peak(arcs, upto, (f.x_m, f.y_m), map) {
-            PeakPlace::Corner(x_m, y_m) | PeakPlace::WallEnd(x_m, y_m) => Feature { x_m, y_m, ..f },
-            PeakPlace::MidWall => continue,
-            PeakPlace::Unknown => {
-                if f.spread_deg >= config.min_spread_deg && !is_mid_wall(&f, map) {
-                    f
-                } else {
-                    continue;
+    // Each peak on its own (in parallel, in order: the same features on any number of threads).
+    peaks
+        .into_par_iter()
+        .filter_map(|f| {
+            let f = match place_peak(arcs, upto, (f.x_m, f.y_m), map) {
+                PeakPlace::Corner(x_m, y_m) | PeakPlace::WallEnd(x_m, y_m) => {
+                    Feature { x_m, y_m, ..f }
                 }
-            }
-        };
-        if firmest_near(map, (f.x_m, f.y_m)) >= STATIC_OCCUPANCY {
-            out.push(f);
-        }
-    }
-    out
+                PeakPlace::MidWall => return None,
+                PeakPlace::Unknown => {
+                    if f.spread_deg >= config.min_spread_deg && !is_mid_wall(&f, map) {
+                        f
+                    } else {
+                        return None;
+                    }
+                }
+            };
+            (firmest_near(map, (f.x_m, f.y_m)) >= STATIC_OCCUPANCY).then_some(f)
+        })
+        .collect()
 }
 
 /// Rule 6: a feature lies within this distance of a fitted wall face's line: 0.2 m (a corner
@@ -530,23 +532,56 @@ pub fn features_online(
     merge_features(found, config.merge_radius_m)
 }
 
-/// Offline features: one accumulator over the whole run, its peaks located with all readings.
-/// Returns the accumulator too (for display).
+/// The offline pass: one accumulator over the whole run, its peaks located with all readings.
+#[derive(Debug, Clone)]
+pub struct OfflineFeatures {
+    /// The features.
+    pub features: Vec<Feature>,
+    /// What the threshold hid: the features its peaks with at least half the threshold's votes,
+    /// but fewer than it, would have given, located and merged the same way, away from every
+    /// feature kept (a lower threshold would show these).
+    pub below_threshold: Vec<Feature>,
+    /// The accumulator (for display).
+    pub accumulator: Accumulator,
+}
+
+/// Offline features: one accumulator over the whole run, its peaks located with all readings;
+/// also those its threshold hid ([`OfflineFeatures::below_threshold`]).
 pub fn features_offline(
     readings: &[PlacedReading],
     half_cone_rad: f64,
     map: &OccupancyMap,
     config: &HoughConfig,
-) -> (Vec<Feature>, Accumulator) {
+) -> OfflineFeatures {
     let mut acc = Accumulator::new(config);
     for r in readings {
         acc.vote(r, half_cone_rad, config.arc_sample_m);
     }
     let threshold = config.offline_threshold.unwrap_or(config.threshold);
-    let peaks = acc.peaks(threshold, config.peak_radius_cells);
+    // Being a local maximum does not depend on the threshold: one pass at half of it.
+    let (peaks, weak): (Vec<Feature>, Vec<Feature>) = acc
+        .peaks(threshold.div_ceil(2), config.peak_radius_cells)
+        .into_iter()
+        .partition(|f| f.votes >= threshold);
     let arcs = Arcs::new(readings, half_cone_rad);
     let located = locate_features(peaks, &arcs, readings.len(), map, config);
-    (merge_features(located, config.merge_radius_m), acc)
+    let features = merge_features(located, config.merge_radius_m);
+    let below_threshold = merge_features(
+        locate_features(weak, &arcs, readings.len(), map, config),
+        config.merge_radius_m,
+    )
+    .into_iter()
+    .filter(|w| {
+        features
+            .iter()
+            .all(|f| (f.x_m - w.x_m).hypot(f.y_m - w.y_m) >= config.merge_radius_m)
+    })
+    .collect();
+    OfflineFeatures {
+        features,
+        below_threshold,
+        accumulator: acc,
+    }
 }
 
 /// Ring around a feature inspected for wall cells by [`is_mid_wall`]: 0.25 to 0.7 m.

@@ -8,7 +8,7 @@ use crate::sonar::grid::{
 };
 use crate::sonar::hough::{
     classify_features, features_offline, features_online, off_the_walls, Accumulator, Feature,
-    HoughConfig, STRONG_PEAK,
+    HoughConfig, OfflineFeatures, STRONG_PEAK,
 };
 use crate::sonar::walls::{map_walls, WallConfig, WallSegment};
 use crate::sonar::{PlacedReading, SonarLayout, SonarLog};
@@ -129,11 +129,12 @@ pub struct Hidden {
     /// Cells with some evidence but less than the floor (`mapping.grid.min_evidence`), left
     /// unknown.
     pub cells_below_floor: usize,
-    /// Peaks of the offline Hough accumulator at or above its threshold.
-    pub peaks_kept: usize,
-    /// Peaks with at least half the threshold's votes but fewer than it
-    /// (`mapping.hough.offline_threshold`, else `threshold`), not considered.
-    pub peaks_below_threshold: usize,
+    /// Offline features kept.
+    pub features_kept: usize,
+    /// Offline features the threshold (`mapping.hough.offline_threshold`, else `threshold`) hid:
+    /// from peaks with at least half its votes, that pass every other rule
+    /// ([`crate::sonar::hough::OfflineFeatures::below_threshold`]).
+    pub features_below_threshold: usize,
     /// Readings at or beyond the sonar's range (`max_range_m`), taken as no echo.
     pub readings_beyond_range: usize,
     /// Offline features dropped for lying on no wall's line (rule 6 of [`crate::sonar::hough`],
@@ -147,10 +148,10 @@ impl Hidden {
         [
             ("hidden.cells_known", self.cells_known as f64),
             ("hidden.cells_below_floor", self.cells_below_floor as f64),
-            ("hidden.peaks_kept", self.peaks_kept as f64),
+            ("hidden.features_kept", self.features_kept as f64),
             (
-                "hidden.peaks_below_threshold",
-                self.peaks_below_threshold as f64,
+                "hidden.features_below_threshold",
+                self.features_below_threshold as f64,
             ),
             (
                 "hidden.readings_beyond_range",
@@ -228,10 +229,10 @@ impl SonarMap {
                 self.wall_config.max_gap_m
             ));
         }
-        if h.peaks_below_threshold > 3 * h.peaks_kept.max(2) {
+        if h.features_below_threshold > h.features_kept.max(2) {
             out.push(format!(
-                "the Hough threshold (mapping.hough.threshold) passes over {} peaks with at least half its votes and keeps {}: a sparsely sampled run gives fewer votes a corner; a lower threshold finds more corners, and more false ones",
-                h.peaks_below_threshold, h.peaks_kept
+                "the Hough threshold (mapping.hough.threshold, or offline_threshold) hides {} corner features with at least half its votes that pass every other rule, more than the {} it keeps: a sparsely sampled run gives fewer votes a corner; a lower threshold shows them, with less evidence each",
+                h.features_below_threshold, h.features_kept
             ));
         }
         out
@@ -336,11 +337,10 @@ pub fn map_trajectory(
                 grid.insert_all(&readings);
                 Ok::<_, GridError>(grid.map())
             })?;
-            let (offline, accumulator) = timed("hough_offline", &mut times, || {
-                let (mut offline, accumulator) =
-                    features_offline(&line_echoes, half, &counting, &config.hough);
-                classify_features(&mut offline, &counting);
-                (offline, accumulator)
+            let offline = timed("hough_offline", &mut times, || {
+                let mut offline = features_offline(&line_echoes, half, &counting, &config.hough);
+                classify_features(&mut offline.features, &counting);
+                offline
             });
             let walls = timed("walls", &mut times, || {
                 map_walls(
@@ -351,26 +351,30 @@ pub fn map_trajectory(
                     &config.walls,
                 )
             });
-            Ok((log_odds, offline, accumulator, walls, times))
+            Ok((log_odds, offline, walls, times))
         },
     );
-    let (log_odds, mut offline, accumulator, walls, rest_times) = rest?;
+    let (log_odds, pass, walls, rest_times) = rest?;
+    let OfflineFeatures {
+        features: mut offline,
+        below_threshold: mut hidden_features,
+        accumulator,
+    } = pass;
     let features_found = offline.len();
     let threshold = config
         .hough
         .offline_threshold
         .unwrap_or(config.hough.threshold);
     if config.hough.features_on_walls && !walls.is_empty() {
-        offline.retain(|f| f.votes >= STRONG_PEAK * threshold || !off_the_walls(f, &walls));
+        let keep = |f: &Feature| f.votes >= STRONG_PEAK * threshold || !off_the_walls(f, &walls);
+        offline.retain(keep);
+        hidden_features.retain(keep);
     }
-    // Being a local maximum does not depend on the threshold: one pass at half of it.
-    let low = accumulator.peaks(threshold.div_ceil(2), config.hough.peak_radius_cells);
-    let peaks_kept = low.iter().filter(|f| f.votes >= threshold).count();
     let hidden = Hidden {
         cells_known: counting.occupancy.iter().filter(|c| c.is_some()).count(),
         cells_below_floor,
-        peaks_kept,
-        peaks_below_threshold: low.len() - peaks_kept,
+        features_kept: offline.len(),
+        features_below_threshold: hidden_features.len(),
         readings_beyond_range,
         features_off_walls: features_found - offline.len(),
     };
