@@ -96,7 +96,11 @@ fn office_with_ground_truth_poses_maps_the_walls() {
     // The threshold hides no corner here; set too high, it says which it hid (the corners' peaks
     // have 80-460 votes: at 400, one kept and those of 200-399 hidden).
     assert_eq!(gt.hidden.features_below_threshold, 0, "{:?}", gt.hidden);
-    assert!(gt.hidden_warnings().is_empty(), "{:?}", gt.hidden_warnings());
+    assert!(
+        gt.hidden_warnings().is_empty(),
+        "{:?}",
+        gt.hidden_warnings()
+    );
     let mut high = loaded.mapping.clone().unwrap();
     high.hough.offline_threshold = Some(400);
     let high = map_trajectory(
@@ -110,7 +114,9 @@ fn office_with_ground_truth_poses_maps_the_walls() {
     assert!(hidden.features_below_threshold >= 3, "{hidden:?}");
     let warnings = high.hidden_warnings();
     assert!(
-        warnings.iter().any(|w| w.contains("mapping.hough.threshold")),
+        warnings
+            .iter()
+            .any(|w| w.contains("mapping.hough.threshold")),
         "{warnings:?}"
     );
 }

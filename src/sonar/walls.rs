@@ -585,6 +585,17 @@ mod tests {
         out
     }
 
+    /// The walls of `readings` of 30 degree cones with 2.1 m range on `grid`, default settings.
+    fn walls_on(readings: &[PlacedReading], grid: &OccupancyMap) -> Vec<WallSegment> {
+        map_walls(
+            readings,
+            15f64.to_radians(),
+            2.1,
+            grid,
+            &WallConfig::default(),
+        )
+    }
+
     fn grid_of(readings: &[PlacedReading]) -> OccupancyMap {
         let mut grid = CountingGrid::new(GridConfig::default(), 30f64.to_radians(), 2.1).unwrap();
         grid.insert_all(readings);
@@ -683,13 +694,7 @@ mod tests {
     #[test]
     fn a_wall_followed_is_one_segment_on_its_line() {
         let readings = along_wall();
-        let walls = map_walls(
-            &readings,
-            15f64.to_radians(),
-            2.1,
-            &grid_of(&readings),
-            &WallConfig::default(),
-        );
+        let walls = walls_on(&readings, &grid_of(&readings));
         let w = walls.first().expect("a wall");
         // The face looks down (-y), towards the robot: normal -90 degrees, n . q = -2.
         assert!(
@@ -726,22 +731,7 @@ mod tests {
             })
             .collect();
         let grid = grid_of(&readings);
-        let (a, b) = (
-            map_walls(
-                &readings,
-                15f64.to_radians(),
-                2.1,
-                &grid,
-                &WallConfig::default(),
-            ),
-            map_walls(
-                &moved,
-                15f64.to_radians(),
-                2.1,
-                &grid,
-                &WallConfig::default(),
-            ),
-        );
+        let (a, b) = (walls_on(&readings, &grid), walls_on(&moved, &grid));
         assert_eq!(a.len(), b.len());
         for (a, b) in a.iter().zip(&b) {
             let n = a.normal();
@@ -767,22 +757,7 @@ mod tests {
             world_from_sensor: Pose2::new(f64::NAN, 1.0, 0.0),
             range_m: Some(1.0),
         });
-        let (a, b) = (
-            map_walls(
-                &readings,
-                15f64.to_radians(),
-                2.1,
-                &grid,
-                &WallConfig::default(),
-            ),
-            map_walls(
-                &glitched,
-                15f64.to_radians(),
-                2.1,
-                &grid,
-                &WallConfig::default(),
-            ),
-        );
+        let (a, b) = (walls_on(&readings, &grid), walls_on(&glitched, &grid));
         assert!(!b.is_empty());
         assert!(
             (a[0].normal_rad - b[0].normal_rad).abs() < 0.01,
@@ -801,13 +776,6 @@ mod tests {
                 range_m: Some(1.0),
             })
             .collect();
-        assert!(map_walls(
-            &readings,
-            15f64.to_radians(),
-            2.1,
-            &grid_of(&readings),
-            &WallConfig::default()
-        )
-        .is_empty());
+        assert!(walls_on(&readings, &grid_of(&readings)).is_empty());
     }
 }
