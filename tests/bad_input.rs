@@ -276,6 +276,26 @@ fn yaml_unknown_key() {
 }
 
 #[test]
+fn mapping_settings_out_of_range_name_the_file_and_key() {
+    // A setting the sampling would later loosen is checked as given.
+    for (walls, expect) in [
+        ("{min_readings: 1}", "walls.min_readings"),
+        ("{max_gap_m: -1}", "walls.max_gap_m"),
+    ] {
+        check(
+            "run.yaml",
+            &format!("format: stereotag-run/1\nrobot:\n  sonar: {{name: a, sensors: [{{x_m: 0, y_m: 0, bearing_rad: 0}}]}}\nmapping:\n  walls: {walls}\n"),
+            expect,
+        );
+    }
+    check(
+        "run.yaml",
+        "format: stereotag-run/1\nrobot:\n  sonar: {name: a, sensors: [{x_m: 0, y_m: 0, bearing_rad: 0}]}\nmapping:\n  grid: {resolution_m: 0}\n",
+        "grid.resolution_m",
+    );
+}
+
+#[test]
 fn run_from_another_version() {
     check("run.yaml", "format: stereotag-run/0\nrobot:\n  sonar: {name: a, sensors: [{x_m: 0, y_m: 0, bearing_rad: 0}]}\n", "this stereotag reads");
 }

@@ -279,6 +279,27 @@ pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     std::fs::write(path, bytes).map_err(|e| IoError::file(path, e))
 }
 
+/// The mapping settings of a YAML file (`stereotag config --default mapping`, `map --config`),
+/// checked.
+pub fn load_mapping_config(path: &Path) -> Result<crate::sonar::map::MappingConfig, IoError> {
+    let config = parse_yaml(path, &read_text(path)?)?;
+    check_mapping(path, &config, "")?;
+    Ok(config)
+}
+
+/// Checks mapping settings read from `path` (under `key`, e.g. `mapping.`), naming the file.
+pub(crate) fn check_mapping(
+    path: &Path,
+    config: &crate::sonar::map::MappingConfig,
+    key: &str,
+) -> Result<(), IoError> {
+    config
+        .grid
+        .validate()
+        .and_then(|()| config.walls.validate())
+        .map_err(|e| IoError::content(path, format!("{key}{e}")))
+}
+
 /// The fusion settings of a YAML file (`stereotag config --default fuse`), checked, or the
 /// defaults when no file is given.
 pub fn load_fuse_config(path: Option<&Path>) -> Result<crate::fusion::FuseConfig, IoError> {

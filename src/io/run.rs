@@ -267,6 +267,9 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     }
     let meta_path = dir.join("run.yaml");
     let meta: RunMeta = parse_yaml(&meta_path, &read_text(&meta_path)?)?;
+    if let Some(m) = &meta.mapping {
+        super::check_mapping(&meta_path, m, "`mapping`: ")?;
+    }
     if meta.format != RUN_FORMAT {
         return Err(IoError::content(
             &meta_path,

@@ -228,9 +228,7 @@ pub fn load_world(path: &Path) -> Result<LoadedWorld, IoError> {
     }
     check_placements(path, &file)?;
     if let Some(m) = &file.mapping {
-        m.grid
-            .validate()
-            .map_err(|e| IoError::content(path, format!("`mapping.grid`: {e}")))?;
+        super::check_mapping(path, m, "`mapping`: ")?;
     }
     let start = Pose2::new(file.start.x_m, file.start.y_m, file.start.theta_rad);
     let world = World::new(walls, file.tags, file.targets, file.people, start);

@@ -77,7 +77,7 @@ impl Default for GridConfig {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum GridError {
     /// A setting is out of range.
-    #[error("grid setting `{key}` = {value} is invalid: {reason}")]
+    #[error("mapping setting `{key}` = {value} is invalid: {reason}")]
     Invalid {
         /// The key.
         key: &'static str,
@@ -143,7 +143,7 @@ impl GridConfig {
         let bad = |key, value: f64, reason| Err(GridError::Invalid { key, value, reason });
         if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
             return bad(
-                "resolution_m",
+                "grid.resolution_m",
                 self.resolution_m,
                 "must be a positive number of metres",
             );
@@ -153,7 +153,7 @@ impl GridConfig {
             || self.width_cells * self.height_cells > 100_000_000
         {
             return bad(
-                "width_cells",
+                "grid.width_cells",
                 self.width_cells as f64,
                 "grid must have between 1 and 1e8 cells",
             );
@@ -162,13 +162,13 @@ impl GridConfig {
             || !(0.0..=1.0).contains(&self.free_threshold)
         {
             return bad(
-                "occupied_threshold",
+                "grid.occupied_threshold",
                 self.occupied_threshold,
                 "thresholds must lie in [0, 1]",
             );
         }
         if !self.origin_m.iter().all(|v| v.is_finite()) {
-            return bad("origin_m", self.origin_m[0], "must be finite");
+            return bad("grid.origin_m", self.origin_m[0], "must be finite");
         }
         Ok(())
     }

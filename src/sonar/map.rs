@@ -285,9 +285,10 @@ pub fn map_trajectory(
     config: &MappingConfig,
 ) -> Result<SonarMap, GridError> {
     let layout = sonar.layout;
+    // The settings as given, before the sampling moves them.
+    config.walls.validate()?;
     let spacing = sampling_spacing_m(sonar, trajectory);
     let config = &config.for_spacing(layout, spacing);
-    config.walls.validate()?;
     let mut timings_s = BTreeMap::new();
     let start = Instant::now();
     let readings = timed("place_readings", &mut timings_s, || {

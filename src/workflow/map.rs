@@ -58,7 +58,7 @@ pub struct MapOutput {
 pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     let run = load_run(request.run_dir)?;
     let given = match request.config {
-        Some(p) => Some(io::parse_yaml::<MappingConfig>(p, &io::read_text(p)?)?),
+        Some(p) => Some(io::load_mapping_config(p)?),
         None => None,
     };
     let config = super::mapping_of_run(&run, given);
