@@ -107,7 +107,7 @@ fn near_steps(
     let p = r.world_from_sensor;
     let cone = cone_range(p.theta, half_cone_rad);
     let (dx, dy) = (centre.0 - p.x, centre.1 - p.y);
-    let d = dx.hypot(dy);
+    let d = (dx * dx + dy * dy).sqrt();
     if (range * d <= 1e-9) || (range * d).is_nan() {
         return cone;
     }
@@ -276,11 +276,14 @@ impl<'a> Arcs<'a> {
     }
 }
 
-/// Whether a reading's arc can reach within [`SEARCH_RADIUS_M`] of `centre`.
+/// Whether a reading's arc can reach within [`SEARCH_RADIUS_M`] of `centre` (squared, with a
+/// micrometre to spare: the exact test is [`push_tangents`]'s).
 fn may_touch(r: &PlacedReading, centre: (f64, f64)) -> bool {
     r.range_m.is_some_and(|range| {
         let p = r.world_from_sensor;
-        (p.x - centre.0).hypot(p.y - centre.1) <= range + SEARCH_RADIUS_M
+        let (dx, dy) = (p.x - centre.0, p.y - centre.1);
+        let reach = range + SEARCH_RADIUS_M + 1e-6;
+        dx * dx + dy * dy <= reach * reach
     })
 }
 
@@ -359,7 +362,7 @@ fn walls_on(local: &mut LocalGrid, tangents: &[Tangent]) -> Vec<LocalWall> {
         sum_offset[i] += offset;
     }
     let mut walls: Vec<LocalWall> = Vec::new();
-    let mut strongest = Strongest::of_cells(grid, touched);
+    let mut strongest = Strongest::of_cells(grid, touched, MIN_WALL_VOTES);
     while walls.len() < MAX_WALLS {
         // The most votes, the first cell with them on a tie.
         let Some((best, v)) = strongest.next(grid) else {

@@ -147,23 +147,24 @@ impl LineVotes {
 pub struct Strongest(BinaryHeap<(u32, Reverse<usize>)>);
 
 impl Strongest {
-    /// The cells with votes of `votes`.
-    pub fn new(votes: &LineVotes) -> Self {
+    /// The cells of `votes` with `at_least` votes (1 at least): a caller that stops below a
+    /// count leaves the cells under it out of the heap (most cells of a grid hold a vote or two).
+    pub fn new(votes: &LineVotes, at_least: u32) -> Self {
         let cells = votes.counts.iter().enumerate();
         Self(
             cells
-                .filter(|(_, &c)| c > 0)
+                .filter(|(_, &c)| c >= at_least.max(1))
                 .map(|(i, &c)| (c, Reverse(i)))
                 .collect(),
         )
     }
 
-    /// The cells `cells` of `votes` (those with votes among them).
-    pub fn of_cells(votes: &LineVotes, cells: &[usize]) -> Self {
+    /// The cells `cells` of `votes` (those with `at_least` votes among them, 1 at least).
+    pub fn of_cells(votes: &LineVotes, cells: &[usize], at_least: u32) -> Self {
         let counts = cells.iter().map(|&i| (votes.counts[i], i));
         Self(
             counts
-                .filter(|&(c, _)| c > 0)
+                .filter(|&(c, _)| c >= at_least.max(1))
                 .map(|(c, i)| (c, Reverse(i)))
                 .collect(),
         )
@@ -205,9 +206,9 @@ mod tests {
     #[test]
     fn the_strongest_cell_is_the_first_with_the_most_votes() {
         let mut votes = LineVotes::new(2, 3, 0.045);
-        assert_eq!(Strongest::new(&votes).next(&votes), None);
+        assert_eq!(Strongest::new(&votes, 1).next(&votes), None);
         votes.counts = vec![1, 4, 0, 4, 2, 0];
-        let mut strongest = Strongest::new(&votes);
+        let mut strongest = Strongest::new(&votes, 1);
         assert_eq!(strongest.next(&votes), Some((1, 4)));
         assert!((votes.offset_m(1) - 0.0).abs() < 1e-12);
         // Counts going down: the heap's stale entries give way to the cells' counts now.
@@ -215,10 +216,10 @@ mod tests {
         votes.counts[3] = 1;
         assert_eq!(strongest.next(&votes), Some((4, 2)));
         assert_eq!(
-            Strongest::of_cells(&votes, &[0, 3]).next(&votes),
+            Strongest::of_cells(&votes, &[0, 3], 1).next(&votes),
             Some((0, 1))
         );
         let empty = LineVotes::new(0, 3, 0.0);
-        assert_eq!(Strongest::new(&empty).next(&empty), None);
+        assert_eq!(Strongest::new(&empty, 1).next(&empty), None);
     }
 }

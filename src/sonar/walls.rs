@@ -302,7 +302,7 @@ pub fn map_walls(
     for e in &echoes {
         vote(&mut votes, e, half_cone_rad, 1);
     }
-    let mut strongest = Strongest::new(&votes);
+    let mut strongest = Strongest::new(&votes, config.min_readings as u32);
     let by_beam = BeamBins::new(&echoes);
     let mut used = vec![false; echoes.len()];
     let mut walls = Vec::new();
