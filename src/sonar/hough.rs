@@ -419,13 +419,12 @@ pub const WALL_JUDGE_REACH_M: f64 = 2.0;
 /// office's default exploration with ground-truth poses (seeds 1-5), every offline feature off the
 /// walls was on the path of the sample's walking person or outside the building.
 pub fn off_the_walls(f: &Feature, walls: &[crate::sonar::walls::WallSegment]) -> bool {
-    use nalgebra::Point2;
-    let p = Point2::new(f.x_m, f.y_m);
-    let near = |w: &&crate::sonar::walls::WallSegment| {
+    let p = nalgebra::Point2::new(f.x_m, f.y_m);
+    let near = |w: &crate::sonar::walls::WallSegment| {
         let face = crate::geometry::Segment::new(w.from_m.into(), w.to_m.into());
         (face.closest_point(p) - p).norm() <= WALL_JUDGE_REACH_M
     };
-    walls.iter().any(|w| near(&w)) && !on_a_wall(f, walls)
+    walls.iter().any(near) && !on_a_wall(f, walls)
 }
 
 /// Whether `f` lies on the line of one of `walls`, within [`WALL_LINE_REACH_M`] of it and

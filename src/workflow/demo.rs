@@ -39,8 +39,8 @@ pub struct DemoOutput {
     pub survey: SurveyOutput,
 }
 
-/// Simulates `world` with the rig asked for (else the default one) and the default capture policy into `out/run`, then surveys that
-/// run into `out`.
+/// Simulates `world` with the rig asked for (else the default one) and the default capture
+/// policy into `out/run`, then surveys that run into `out`.
 pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOutput> {
     super::sightings::check_decimate(request.detect.decimate)?; // before the simulation, not after
     let dir = OutputDir::create(request.out, request.force)?;

@@ -148,14 +148,19 @@ fn compress_while_detecting(pairs: usize, pixels: usize) -> bool {
 }
 
 /// The families to look for: those asked, else the world's and those the tag sizes table names
-/// (`--tag-sizes`), else tag36h11.
+/// (`--tag-sizes`; with no world, its default size stands for tags of the default family,
+/// tag36h11), else tag36h11.
 fn families(options: &DetectOptions, world: Option<&World>) -> Vec<TagFamily> {
     let mut families = options.families.clone();
     if families.is_empty() {
         families = world
             .map(|w| w.tags.iter().map(|t| t.family).collect())
             .unwrap_or_default();
-        families.extend(options.tag_sizes.by_tag.keys().map(|t| t.family));
+        let sizes = &options.tag_sizes;
+        families.extend(sizes.by_tag.keys().map(|t| t.family));
+        if world.is_none() && sizes.default_m.is_some() {
+            families.push(TagFamily::Tag36h11);
+        }
         families.sort();
         families.dedup();
     }
@@ -547,6 +552,16 @@ mod tests {
         assert_eq!(
             families(&options, None),
             vec![TagFamily::Tag25h9, TagFamily::TagStandard41h12]
+        );
+        // A default size is for the tags not listed: of the default family.
+        options.tag_sizes.default_m = Some(0.16);
+        assert_eq!(
+            families(&options, None),
+            vec![
+                TagFamily::Tag25h9,
+                TagFamily::Tag36h11,
+                TagFamily::TagStandard41h12
+            ]
         );
         options.families = vec![TagFamily::Tag16h5];
         assert_eq!(families(&options, None), vec![TagFamily::Tag16h5]);
