@@ -817,6 +817,41 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("no odometry_calibration"), "{err}");
+    // With no world to score the corners, `plan` says when its map is the odometry's alone: on
+    // the survey that corrected nothing, and on `map --poses odometry` (1.1 m from the ground
+    // truth), not on the survey the sonar corrected.
+    let odometry_only = |map_dir: &Path| -> Vec<String> {
+        let out = map_dir.with_extension("plan");
+        plan(map_dir, &out, None, false);
+        let planned: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+        let warnings = planned["warnings"].as_array().unwrap().iter();
+        warnings
+            .map(|w| w.as_str().unwrap().to_owned())
+            .filter(|w| w.contains("odometry"))
+            .collect()
+    };
+    let warned = odometry_only(&out);
+    assert!(
+        warned.len() == 1 && warned[0].contains("the survey corrected nothing"),
+        "{warned:?}"
+    );
+    assert_eq!(odometry_only(&corrected), Vec::<String>::new());
+    let raw_map = dir.path().join("map");
+    map(&run, &raw_map, PoseSource::Odometry);
+    let warned = odometry_only(&raw_map);
+    assert!(
+        warned.len() == 1 && warned[0].contains("placed by the run's odometry alone"),
+        "{warned:?}"
+    );
+    assert!(
+        warned[0].contains("m from the run's ground truth"),
+        "{warned:?}"
+    );
+    // A map on the ground truth is not.
+    let true_map = dir.path().join("true_map");
+    map(&run, &true_map, PoseSource::GroundTruth);
+    assert_eq!(odometry_only(&true_map), Vec::<String>::new());
 }
 
 /// The run's odometry moved to start at (0, 0, 0), as ROS odometry does: its frame is then not

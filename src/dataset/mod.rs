@@ -197,6 +197,16 @@ pub enum PoseSource {
     GroundTruth,
 }
 
+impl PoseSource {
+    /// `odometry` or `ground-truth`, as `map --poses` takes it.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::Odometry => "odometry",
+            Self::GroundTruth => "ground-truth",
+        }
+    }
+}
+
 /// A whole run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunDataset {

@@ -34,6 +34,8 @@ pub struct MapOutput {
     pub map: SonarMap,
     /// Scores (with a world) and counts.
     pub metrics: BTreeMap<String, f64>,
+    /// Which trajectory placed the readings (`report.json`'s `poses`).
+    pub poses: PoseSource,
 }
 
 /// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
@@ -120,7 +122,18 @@ pub fn map_and_score(
     let duration =
         run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
     metrics.insert("run.duration_s".into(), duration);
-    Ok(MapOutput { map, metrics })
+    // How far the robot drove by its odometry, which its drift grows with.
+    let path_m: f64 = run
+        .odometry
+        .windows(2)
+        .map(|w| (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y))
+        .sum();
+    metrics.insert("run.path_m".into(), path_m);
+    Ok(MapOutput {
+        map,
+        metrics,
+        poses,
+    })
 }
 
 /// Writes a map's files into `dir`.
@@ -156,7 +169,11 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         .iter()
         .map(|(k, v)| (k.clone(), v.is_finite().then_some(*v)))
         .collect();
-    let report = serde_json::json!({ "metrics": finite, "timings_s": map.timings_s });
+    let report = serde_json::json!({
+        "poses": output.poses.as_str(),
+        "metrics": finite,
+        "timings_s": map.timings_s,
+    });
     io::save_json(&dir.join("report.json"), &report)?;
     Ok(())
 }

@@ -117,9 +117,14 @@ pub const UNREACHABLE_WARN: f64 = 0.5;
 /// `plan` warns that its tag places may not be corners: 0.5.
 pub const POOR_CORNERS: f64 = 0.5;
 
+/// Error of the odometry against the run's ground truth (`report.json`'s `ate_m.trajectory`)
+/// below which a map on the odometry alone is not warned about: 5 cm.
+pub const GOOD_ODOMETRY_M: f64 = 0.05;
+
 /// What is wrong with planning on this map: the corners scored poorly against the world (from
-/// the map's `report.json`, when the map was scored), most free cells out of reach of any tag,
-/// no walls. Each is a sentence for the user.
+/// the map's `report.json`, when the map was scored) or, with no world to score them, a map
+/// placed by the odometry alone (a `map --poses odometry`, or a survey that corrected nothing);
+/// most free cells out of reach of any tag; no walls. Each is a sentence for the user.
 fn map_warnings(
     dir: &Path,
     files: &MapFiles,
@@ -127,18 +132,21 @@ fn map_warnings(
     walls: Option<usize>,
 ) -> Vec<String> {
     let mut warnings = Vec::new();
-    let report = dir.join("report.json");
-    let precision = std::fs::read_to_string(&report)
+    let report_path = dir.join("report.json");
+    let report = std::fs::read_to_string(&report_path)
         .ok()
         .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-        .and_then(|v| v["metrics"][files.precision_key].as_f64());
-    if let Some(p) = precision.filter(|&p| p < POOR_CORNERS) {
-        warnings.push(format!(
+        .unwrap_or_default();
+    let metric = |key: &str| report["metrics"][key].as_f64();
+    match metric(files.precision_key) {
+        Some(p) if p < POOR_CORNERS => warnings.push(format!(
             "{}: the map's corners score precision {p:.2} against the world ({} in {}): most are not corners, so the places proposed may not be either; map on better poses first (a survey's corrected map, or `map --poses ground-truth`)",
             files.corners.display(),
             files.precision_key,
-            report.display()
-        ));
+            report_path.display()
+        )),
+        Some(_) => {}
+        None => warnings.extend(odometry_only(files, &report)),
     }
     let reachable = prediction.free_cells - prediction.unreachable_cells;
     let out_of_reach = prediction.unreachable_cells as f64 / prediction.free_cells.max(1) as f64;
@@ -157,6 +165,47 @@ fn map_warnings(
         ));
     }
     warnings
+}
+
+/// With no world to score its corners: the warning for a map the odometry alone placed, whose
+/// drift smears walls and moves corners where the odometry is poor (`map --poses odometry`
+/// without a ground truth showing it within [`GOOD_ODOMETRY_M`], or a survey that corrected
+/// nothing). `None` for other maps, and for reports that do not say (written before `poses`).
+fn odometry_only(files: &MapFiles, report: &serde_json::Value) -> Option<String> {
+    let metric = |key: &str| report["metrics"][key].as_f64();
+    let error = metric("ate_m.trajectory");
+    // `map --poses ground-truth` only for a run that has it (scored against it).
+    let truth = if error.or(metric("ate_m.odometry")).is_some() {
+        ", or on `map --poses ground-truth`"
+    } else {
+        ""
+    };
+    let advice = format!("plan on a survey's corrected map instead (`stereotag survey` corrects the run with its tags, or with the sonar alone before any tag is up){truth}");
+    if files.corrected {
+        let nothing = metric("offline.nothing_to_correct") == Some(1.0)
+            || (metric("offline.kept_solution") == Some(0.0)
+                && metric("offline.sightings") == Some(0.0));
+        return nothing.then(|| {
+            format!(
+                "{}: the survey corrected nothing (no tag sighting, and no sonar match it kept): its corrected map is its odometry's, whose drift smears walls and moves corners; the places proposed may not be corners. Survey a run that sees tags, or that drives along its walls again (the sonar then corrects it){truth}",
+                files.map_yaml.display()
+            )
+        });
+    }
+    if report["poses"].as_str() != Some("odometry") {
+        return None;
+    }
+    if error.is_some_and(|e| e < GOOD_ODOMETRY_M) {
+        return None;
+    }
+    let travel = metric("run.path_m").map_or(String::new(), |m| format!(", {m:.0} m of travel"));
+    let against_truth = error.map_or(String::new(), |e| {
+        format!("; that odometry is {e:.2} m from the run's ground truth (ate_m.trajectory)")
+    });
+    Some(format!(
+        "{}: placed by the run's odometry alone (`map --poses odometry`{travel}) and not scored against a world{against_truth}: odometry drifts, which smears walls and moves corners, so the places proposed may not be corners; {advice}",
+        files.map_yaml.display()
+    ))
 }
 
 /// Plans tags on a map (or predicts the error with given tags) and, with `out`, writes
