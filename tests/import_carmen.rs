@@ -252,8 +252,11 @@ fn radish_lidar_maps_agree_with_the_full_laser() {
 fn a_sparse_run_has_walls_and_a_map_without_walls_says_so() {
     // aces as five frontal sonars: a scan every 3 s, a reading every 0.7 m of travel. The wall
     // step follows the sampling (issue 31): a face needs 5 readings (not 12), with gaps up to
-    // 1.8 m (not 0.5 m), and may lie on cells under the evidence floor. Measured: 23 faces, 148 m,
-    // each within 9 cm (median 1.9 cm) and 2.3 degrees of a face of the aces lidar map.
+    // 1.8 m (not 0.5 m), and may lie on cells under the evidence floor. Measured: 24 faces,
+    // 229 m, 0.96 of their length within 10 cm of a face of the aces lidar map, and 0.98 of the
+    // lidar faces' stretches the sonar faced with enough readings within 10 cm of one of them
+    // (`scripts/laser_walls.py`; 148 m and 0.89 before the support band followed the Hough
+    // cell's slack, session 51).
     let data = Path::new("../shared/data/radish/aces-corrected.log.gz");
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
@@ -264,7 +267,7 @@ fn a_sparse_run_has_walls_and_a_map_without_walls_says_so() {
     assert_eq!(code, 0, "{err}");
     let m = &json(&map.join("report.json"))["metrics"];
     assert!(m["walls"].as_f64().unwrap() >= 20.0, "{m}");
-    assert!(m["walls.length_m"].as_f64().unwrap() >= 120.0, "{m}");
+    assert!(m["walls.length_m"].as_f64().unwrap() >= 200.0, "{m}");
     assert!(!err.contains("no straight wall was fitted"), "{err}");
 
     // The wall step as set for densely sampled runs fits none, and says so.
@@ -375,4 +378,54 @@ fn a_laser_confirms_the_lidar_maps_corners() {
     let baseline = r["occupied_cells_precision_baseline"].as_f64().unwrap();
     assert!(r["reference_corners"].as_f64().unwrap() >= 50.0, "{r}");
     assert!(precision >= 0.8 && precision >= 5.0 * baseline, "{r}");
+}
+
+/// Issue 31, item 2: the sonar's walls on both real logs, as five frontal sonars, scored by
+/// `scripts/laser_walls.py` against the walls of the lidar map of the same log: of the stretches
+/// the sonar faced with the readings a face needs, 0.93 (freiburg-079) and 0.98 (aces) of the
+/// length have a sonar face within 10 cm; 0.80 and 0.96 of the sonar faces' length lies within
+/// 10 cm of a lidar face (the rest: furniture the laser sees past, and the 45-degree faces of
+/// concave corners' tips).
+#[test]
+fn a_laser_confirms_the_sonar_maps_walls() {
+    for (log, recall_at_least, precision_at_least) in [
+        ("freiburg-079-corrected.log.gz", 0.9, 0.75),
+        ("aces-corrected.log.gz", 0.95, 0.9),
+    ] {
+        let log = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/data/radish")
+            .join(log);
+        let dir = tempfile::tempdir().unwrap();
+        let mut maps = Vec::new();
+        for as_sonar in [None, Some("frontal5")] {
+            let name = as_sonar.unwrap_or("lidar");
+            let (run, out) = (
+                dir.path().join(name),
+                dir.path().join(format!("{name}_map")),
+            );
+            let (code, err) = import_carmen(&log, as_sonar, &run);
+            assert_eq!(code, 0, "{err}");
+            let (code, err) = map_on_truth(&run, &out, true, &[]);
+            assert_eq!(code, 0, "{err}");
+            maps.push((run, out));
+        }
+        let scored = std::process::Command::new("python3")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/laser_walls.py"))
+            .args([&maps[1].0, &maps[0].1, &maps[1].1])
+            .output()
+            .expect("python3 (with numpy and PyYAML) must be on PATH");
+        assert!(
+            scored.status.success(),
+            "{}",
+            String::from_utf8_lossy(&scored.stderr)
+        );
+        let r: Value = serde_json::from_slice(&scored.stdout).unwrap();
+        eprintln!("{}: sonar walls against the lidar's: {r}", log.display());
+        assert!(r["stretches_length_m"].as_f64().unwrap() >= 100.0, "{r}");
+        assert!(r["recall"].as_f64().unwrap() >= recall_at_least, "{r}");
+        assert!(
+            r["precision"].as_f64().unwrap() >= precision_at_least,
+            "{r}"
+        );
+    }
 }

@@ -316,19 +316,39 @@ pub fn map_walls(
         let step = ANGLE_STEP_DEG.to_radians();
         let normal = votes.angle_rad(best / votes.n_dist);
         let offset = votes.offset_m(best % votes.n_dist);
-        // Readings whose cone holds the normal (within a cell) and whose range fits the line.
-        let support = by_beam.facing(normal, half_cone_rad + step, |i| {
-            !used[i] && supports(&echoes[i], normal, offset, half_cone_rad + step)
+        // Readings whose cone holds the normal (within a cell) and whose range fits the line,
+        // within the band the cell's line may be off by ([`cell_slack_m`]).
+        let cone = half_cone_rad + step;
+        let near = by_beam.facing(normal, cone, |i| {
+            !used[i]
+                && supports(
+                    &echoes[i],
+                    normal,
+                    offset,
+                    cone,
+                    SUPPORT_M + cell_slack_m(&echoes[i], normal),
+                )
         });
-        // Whatever the outcome, these readings have voted: take their votes back, and the cell's
-        // own count, so the search moves on.
-        for &i in &support {
-            vote(&mut votes, &echoes[i], half_cone_rad, -1);
-            used[i] = true;
+        // Whatever the outcome, the readings on the cell's line have voted: take their votes
+        // back, and the cell's own count, so the search moves on. Those only in the band are
+        // taken when a face's fit keeps them.
+        let mut take = |i: usize, votes: &mut LineVotes| {
+            if !used[i] {
+                vote(votes, &echoes[i], half_cone_rad, -1);
+                used[i] = true;
+            }
+        };
+        for &i in &near {
+            if supports(&echoes[i], normal, offset, cone, SUPPORT_M) {
+                take(i, &mut votes);
+            }
         }
         votes.counts[best] = 0;
-        for piece in split(&echoes, &support, normal, config.max_gap_m) {
-            if let Some(w) = fit(&echoes, &piece, normal, offset, config.min_readings) {
+        for piece in split(&echoes, &near, normal, config.max_gap_m) {
+            if let Some((w, members)) = fit(&echoes, &piece, normal, offset, config.min_readings) {
+                for i in members {
+                    take(i, &mut votes);
+                }
                 walls.push(w);
             }
         }
@@ -449,12 +469,21 @@ fn shadows(strong: &WallSegment, weak: &WallSegment) -> bool {
         && u <= a.max(b) + SHADOW_ALONG_M
 }
 
-/// Whether an echo's tangent at the line's normal lies on the line.
-fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64) -> bool {
+/// Whether an echo's tangent at the line's normal lies on the line, within `within_m`.
+fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64, within_m: f64) -> bool {
     let off_axis = crate::geometry::wrap_angle(e.beam - normal - std::f64::consts::PI);
     let (s, c) = normal.sin_cos();
     off_axis.abs() <= half_cone_rad
-        && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= SUPPORT_M
+        && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= within_m
+}
+
+/// How far an accumulator cell's line may lie from its wall at an echo: the cell holds the
+/// wall's direction to half an [`ANGLE_STEP_DEG`], which turns the line about its point nearest
+/// the accumulator's centre, so the error grows with the distance along the line from there
+/// (a real building's corridor at no whole degree: 8 cm at 10 m, where a face's readings must
+/// lie within [`SUPPORT_M`] of its line).
+fn cell_slack_m(e: &Echo, normal: f64) -> f64 {
+    foot_along(e, normal).abs() * (0.5 * ANGLE_STEP_DEG).to_radians()
 }
 
 /// The foot of an echo's perpendicular on the line, as a position along it.
@@ -484,15 +513,15 @@ fn split(echoes: &[Echo], support: &[usize], normal: f64, max_gap_m: f64) -> Vec
 
 /// Least-squares line of one piece: minimises `sum (n(a) . s_i - r_i - c)^2` over the normal `a`
 /// and offset `c` (Gauss-Newton from the Hough cell), then drops readings off by more than
-/// [`SUPPORT_M`] and fits again. `None` for fewer than `min_readings` or sensors too bunched
-/// along it.
+/// [`SUPPORT_M`] and fits again. The face and the readings it kept; `None` for fewer than
+/// `min_readings` or sensors too bunched along it.
 fn fit(
     echoes: &[Echo],
     piece: &[usize],
     normal: f64,
     offset: f64,
     min_readings: usize,
-) -> Option<WallSegment> {
+) -> Option<(WallSegment, Vec<usize>)> {
     let mut members: Vec<usize> = piece.to_vec();
     let (mut a, mut c) = (normal, offset);
     for round in 0..2 {
@@ -552,14 +581,15 @@ fn fit(
     let hi = along.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     // The point of the line at position u along it: c n + u (-sin, cos).
     let at = |u: f64| [c * co - u * s, c * s + u * co];
-    Some(WallSegment {
+    let wall = WallSegment {
         normal_rad: a.rem_euclid(TAU),
         offset_m: c,
         from_m: at(lo),
         to_m: at(hi),
         readings: members.len(),
         rms_m: rms,
-    })
+    };
+    Some((wall, members))
 }
 
 #[cfg(test)]
@@ -713,6 +743,40 @@ mod tests {
             .expected_range([2.0, 2.5], -std::f64::consts::FRAC_PI_2, 0.26, 0.05)
             .is_none());
         assert!(w.expected_range([2.0, 1.5], 0.0, 0.26, 0.05).is_none());
+    }
+
+    #[test]
+    fn a_long_wall_at_no_whole_degree_is_one_face_on_its_line() {
+        // A 30 m corridor wall turned 5.4 degrees (a real building's), followed 1 m away: the
+        // accumulator holds its direction to half a degree, 5 cm off at its ends. The step fits
+        // one face along all of it.
+        let a = 5.4f64.to_radians();
+        let (u, left) = ([a.cos(), a.sin()], [-a.sin(), a.cos()]);
+        let readings: Vec<PlacedReading> = (-300..=300i32)
+            .map(|k| {
+                let along = k as f64 * 0.05;
+                let noise = 0.004 * ((k * 7).rem_euclid(5) as f64 - 2.0) / 2.0;
+                PlacedReading {
+                    t_s: k as f64,
+                    world_from_sensor: Pose2::new(
+                        along * u[0] - left[0],
+                        along * u[1] - left[1],
+                        a + std::f64::consts::FRAC_PI_2,
+                    ),
+                    range_m: Some(1.0 + noise),
+                }
+            })
+            .collect();
+        let walls = walls_on(&readings, &grid_of(&readings));
+        assert_eq!(walls.len(), 1, "{walls:?}");
+        let w = &walls[0];
+        assert!(w.length_m() > 29.5, "{w:?}");
+        assert!(w.readings > 590, "{w:?}");
+        // On the line through the origin along `u`, seen from its right.
+        for end in [w.from_m, w.to_m] {
+            let off = end[0] * left[0] + end[1] * left[1];
+            assert!(off.abs() < 0.01, "{w:?}");
+        }
     }
 
     #[test]
