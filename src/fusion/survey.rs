@@ -90,15 +90,9 @@ pub fn survey(
             layout: &run.meta.robot.sonar,
             walls: &[],
         };
-        let offline = timed("fuse_sonar", times, || {
+        timed("fuse_sonar", times, || {
             run_offline_sonar(&obs, &online, fuse, &sonar, &mapping.grid)
-        });
-        tracing::info!(
-            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {} of {} keyframes",
-            offline.sonar_matches,
-            offline.keyframes
-        );
-        offline
+        })
     } else {
         timed("fuse_offline", times, || {
             run_offline_anchored(&obs, &online, fuse, None, settings.anchors)

@@ -154,7 +154,8 @@ pub fn save_wpilib_layout(
     if let Some((lo, _)) = home.filter(|(lo, _)| lo[0] < -0.5 || lo[1] < -0.5) {
         tracing::info!(
             "{}: the home reaches ({:.1}, {:.1}) m, below the field's corner at the survey's origin; WPILib tools show only x, y >= 0",
-            path.display(),
+            // The file's name: it is written in a directory that becomes the output when whole.
+            path.file_name().unwrap_or(path.as_os_str()).to_string_lossy(),
             lo[0],
             lo[1]
         );

@@ -263,6 +263,11 @@ pub fn run_offline_sonar(
             ..next
         };
     }
+    tracing::info!(
+        "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {} of {} keyframes",
+        result.sonar_matches,
+        result.keyframes
+    );
     // Kept only when the run's ranges agree with one another clearly better along it than along
     // the odometry: matches off a biased grid can bend an already good odometry.
     let agreement = |trajectory: &[StampedPose]| {
