@@ -2,7 +2,7 @@
 //! directory (`run/` and the survey outputs beside it).
 
 use super::sightings::DetectOptions;
-use super::simulate::{simulate, Pictures, SimSettings, SimulateRequest, Simulated};
+use super::simulate::{simulate_untold, tell, Pictures, SimSettings, SimulateRequest, Simulated};
 use super::survey::{survey_into, SurveyOutput, SurveyRequest};
 use super::Result;
 use crate::io::{OutputDir, DEFAULT_RIG};
@@ -45,7 +45,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
     super::sightings::check_decimate(request.detect.decimate)?; // before the simulation, not after
     let dir = OutputDir::create(request.out, request.force)?;
     let run_dir = dir.path("run");
-    let simulated = simulate(
+    let simulated = simulate_untold(
         &SimulateRequest {
             world: request.world,
             out: &run_dir,
@@ -63,6 +63,7 @@ pub fn demo(request: &DemoRequest<'_>, progress: &dyn Progress) -> Result<DemoOu
         },
         progress,
     )?;
+    tell(&simulated, &request.out.join("run"));
     tracing::info!("{}; surveying", simulated.output.end_reason);
     let survey = survey_into(
         &SurveyRequest {

@@ -91,6 +91,17 @@ pub struct Simulated {
 /// Simulates a world and writes the run dataset (with `stereo/` and `rig.yaml` when pictures are
 /// taken) into a new directory. Progress: simulated seconds, then pictures rendered.
 pub fn simulate(request: &SimulateRequest<'_>, progress: &dyn Progress) -> Result<Simulated> {
+    let simulated = simulate_untold(request, progress)?;
+    tell(&simulated, request.out);
+    Ok(simulated)
+}
+
+/// [`simulate`] without its summary line: for a caller that writes the run inside an output
+/// directory under construction, and names the run where it will be ([`tell`]).
+pub(crate) fn simulate_untold(
+    request: &SimulateRequest<'_>,
+    progress: &dyn Progress,
+) -> Result<Simulated> {
     let loaded = io::load_world(request.world)?;
     // The rig and its mounting checked before the long work, not after.
     let rig = match &request.pictures {
@@ -100,6 +111,11 @@ pub fn simulate(request: &SimulateRequest<'_>, progress: &dyn Progress) -> Resul
     let dir = OutputDir::create(request.out, request.force)?;
     let simulated = simulate_into(request, &loaded, rig.as_ref(), &dir, progress)?;
     dir.commit()?;
+    Ok(simulated)
+}
+
+/// The summary line of a simulation written to `out`.
+pub(crate) fn tell(simulated: &Simulated, out: &Path) {
     let run = &simulated.output.run;
     tracing::info!(
         "simulated {} for {:.0} s ({}): {} sonar readings, {} poses -> {}",
@@ -108,9 +124,8 @@ pub fn simulate(request: &SimulateRequest<'_>, progress: &dyn Progress) -> Resul
         simulated.output.end_reason,
         run.sonar.len(),
         run.odometry.len(),
-        request.out.display()
+        out.display()
     );
-    Ok(simulated)
 }
 
 /// [`simulate`] into a directory under construction (not committed here), of a loaded world.
