@@ -316,41 +316,28 @@ pub fn map_walls(
         let step = ANGLE_STEP_DEG.to_radians();
         let normal = votes.angle_rad(best / votes.n_dist);
         let offset = votes.offset_m(best % votes.n_dist);
-        // Readings whose cone holds the normal (within a cell) and whose range fits the line,
-        // within the band the cell's line may be off by ([`cell_slack_m`]).
+        // Readings whose cone holds the normal (within a cell) and whose range fits the line.
         let cone = half_cone_rad + step;
-        let near = by_beam.facing(normal, cone, |i| {
-            !used[i]
-                && supports(
-                    &echoes[i],
-                    normal,
-                    offset,
-                    cone,
-                    SUPPORT_M + cell_slack_m(&echoes[i], normal),
-                )
+        let support = by_beam.facing(normal, cone, |i| {
+            !used[i] && supports(&echoes[i], normal, offset, cone, SUPPORT_M)
         });
-        // Whatever the outcome, the readings on the cell's line have voted: take their votes
-        // back, and the cell's own count, so the search moves on. Those only in the band are
-        // taken when a face's fit keeps them.
-        let mut take = |i: usize, votes: &mut LineVotes| {
-            if !used[i] {
-                vote(votes, &echoes[i], half_cone_rad, -1);
-                used[i] = true;
-            }
-        };
-        for &i in &near {
-            if supports(&echoes[i], normal, offset, cone, SUPPORT_M) {
-                take(i, &mut votes);
-            }
-        }
         votes.counts[best] = 0;
-        for piece in split(&echoes, &near, normal, config.max_gap_m) {
-            if let Some((w, members)) = fit(&echoes, &piece, normal, offset, config.min_readings) {
+        for mut piece in split(&echoes, &support, normal, config.max_gap_m) {
+            // A piece before it may have grown over this one's readings.
+            piece.retain(|&i| !used[i]);
+            let fitted = fit(&echoes, &piece, normal, offset, config.min_readings)
+                .map(|first| grow(&echoes, &by_beam, &used, first, cone, config));
+            if let Some((w, members)) = fitted {
                 for i in members {
-                    take(i, &mut votes);
+                    take(&mut votes, &mut used, &echoes[i], i, half_cone_rad);
                 }
                 walls.push(w);
             }
+        }
+        // Whatever the outcome, the readings on the cell's line have voted: take their votes
+        // back, and the cell's own count, so the search moves on.
+        for i in support {
+            take(&mut votes, &mut used, &echoes[i], i, half_cone_rad);
         }
     }
     // Strongest first; a weaker face along a stronger one is its cone-edge echoes or a corner's
@@ -477,13 +464,57 @@ fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64, within_m: f6
         && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= within_m
 }
 
-/// How far an accumulator cell's line may lie from its wall at an echo: the cell holds the
-/// wall's direction to half an [`ANGLE_STEP_DEG`], which turns the line about its point nearest
-/// the accumulator's centre, so the error grows with the distance along the line from there
-/// (a real building's corridor at no whole degree: 8 cm at 10 m, where a face's readings must
-/// lie within [`SUPPORT_M`] of its line).
-fn cell_slack_m(e: &Echo, normal: f64) -> f64 {
-    foot_along(e, normal).abs() * (0.5 * ANGLE_STEP_DEG).to_radians()
+/// Marks an echo used by a face (or looked at for one), its votes taken back.
+fn take(votes: &mut LineVotes, used: &mut [bool], e: &Echo, i: usize, half_cone_rad: f64) {
+    if !used[i] {
+        vote(votes, e, half_cone_rad, -1);
+        used[i] = true;
+    }
+}
+
+/// Rounds of [`grow`] at most.
+const GROW_ROUNDS: usize = 4;
+
+/// A face fitted to the readings near its Hough cell's line, grown along its own fitted line:
+/// the readings within [`SUPPORT_M`] of it, unused, in the piece (split at gaps) that holds most
+/// of the face's readings, fitted again, until it gains none. An accumulator cell holds a wall's
+/// direction to half an [`ANGLE_STEP_DEG`], so the cell's line leaves a long wall at no whole
+/// degree within a few metres (a real building's corridor: 8 cm off at 10 m), where the fitted
+/// line follows it; a wall that steps back or forth by more than [`SUPPORT_M`] stays two faces.
+fn grow(
+    echoes: &[Echo],
+    by_beam: &BeamBins,
+    used: &[bool],
+    (mut wall, mut members): (WallSegment, Vec<usize>),
+    cone: f64,
+    config: &WallConfig,
+) -> (WallSegment, Vec<usize>) {
+    for _ in 0..GROW_ROUNDS {
+        let (normal, offset) = (wall.normal_rad, wall.offset_m);
+        let band = by_beam.facing(normal, cone, |i| {
+            (!used[i] || members.binary_search(&i).is_ok())
+                && supports(&echoes[i], normal, offset, cone, SUPPORT_M)
+        });
+        let shared = |p: &Vec<usize>| {
+            p.iter()
+                .filter(|i| members.binary_search(i).is_ok())
+                .count()
+        };
+        let Some(piece) = split(echoes, &band, normal, config.max_gap_m)
+            .into_iter()
+            .max_by_key(shared)
+        else {
+            break;
+        };
+        if piece.len() <= members.len() {
+            break;
+        }
+        match fit(echoes, &piece, normal, offset, config.min_readings) {
+            Some((w, m)) if m.len() > members.len() => (wall, members) = (w, m),
+            _ => break,
+        }
+    }
+    (wall, members)
 }
 
 /// The foot of an echo's perpendicular on the line, as a position along it.
@@ -581,6 +612,7 @@ fn fit(
     let hi = along.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     // The point of the line at position u along it: c n + u (-sin, cos).
     let at = |u: f64| [c * co - u * s, c * s + u * co];
+    members.sort_unstable();
     let wall = WallSegment {
         normal_rad: a.rem_euclid(TAU),
         offset_m: c,
