@@ -161,6 +161,55 @@ pub fn wall_in_beam(
         .filter(|m| m.expected_m < sonar.layout.max_range_m)
 }
 
+/// How a run's ranges scatter about the walls they are matched with ([`wall_in_beam`]) along a
+/// trajectory: what `localize` will meet holding a later run to those walls.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RangeScatter {
+    /// Ranges matched with a face.
+    pub matched: usize,
+    /// Robust sigma of `range - expected` (1.4826 times the median absolute deviation), metres.
+    pub sigma_m: f64,
+    /// Share of the matched ranges more than [`RANGE_OFF_M`] off their face.
+    pub off_share: f64,
+    /// Median range matched, metres.
+    pub median_range_m: f64,
+}
+
+/// A matched range this far off its face (metres) is another object in the beam: 10 cm.
+pub const RANGE_OFF_M: f64 = 0.10;
+
+/// [`RangeScatter`] of `sonar`'s readings placed along `trajectory`; `None` with fewer than
+/// [`RANGE_SCATTER_MIN`] matched.
+pub fn range_scatter(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Option<RangeScatter> {
+    let (mut residuals, mut ranges): (Vec<f64>, Vec<f64>) = sonar
+        .readings
+        .iter()
+        .filter_map(|r| {
+            let m = wall_in_beam(sonar, r, pose_at(trajectory, r.t_s)?)?;
+            Some((m.range_m - m.expected_m, m.range_m))
+        })
+        .unzip();
+    if residuals.len() < RANGE_SCATTER_MIN {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        let mid = v.len() / 2;
+        *v.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    let centre = median(&mut residuals);
+    let mut spread: Vec<f64> = residuals.iter().map(|e| (e - centre).abs()).collect();
+    let off = residuals.iter().filter(|e| e.abs() > RANGE_OFF_M).count();
+    Some(RangeScatter {
+        matched: residuals.len(),
+        sigma_m: 1.4826 * median(&mut spread),
+        off_share: off as f64 / residuals.len() as f64,
+        median_range_m: median(&mut ranges),
+    })
+}
+
+/// Ranges [`range_scatter`] needs matched: 100.
+pub const RANGE_SCATTER_MIN: usize = 100;
+
 /// Fuses one sonar range against the nearest surveyed wall face in the beam; `Some(fused)` when
 /// a face is in the beam, `None` when there is none (or the filter already knows its distance to
 /// it better than the wall is known).
