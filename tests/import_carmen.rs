@@ -36,6 +36,25 @@ fn import_carmen(log: &Path, as_sonar: Option<&str>, run: &Path) -> (i32, String
     stereotag(&args)
 }
 
+/// The JSON a scoring script of `scripts/` prints, run with `args`.
+fn python_score(script: &str, args: &[&Path]) -> Value {
+    let scored = std::process::Command::new("python3")
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("scripts")
+                .join(script),
+        )
+        .args(args)
+        .output()
+        .expect("python3 (with numpy and PyYAML) must be on PATH");
+    assert!(
+        scored.status.success(),
+        "{script}: {}",
+        String::from_utf8_lossy(&scored.stderr)
+    );
+    serde_json::from_slice(&scored.stdout).unwrap()
+}
+
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -362,17 +381,7 @@ fn a_laser_confirms_the_lidar_maps_corners() {
     assert_eq!(code, 0, "{err}");
     let (code, err) = map_on_truth(&run, &out, true, &[]);
     assert_eq!(code, 0, "{err}");
-    let scored = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/laser_corners.py"))
-        .args([&log, &out])
-        .output()
-        .expect("python3 (with numpy and PyYAML) must be on PATH");
-    assert!(
-        scored.status.success(),
-        "{}",
-        String::from_utf8_lossy(&scored.stderr)
-    );
-    let r: Value = serde_json::from_slice(&scored.stdout).unwrap();
+    let r = python_score("laser_corners.py", &[&log, &out]);
     eprintln!("aces lidar map against the laser's corners: {r}");
     let precision = r["precision"].as_f64().unwrap();
     let baseline = r["occupied_cells_precision_baseline"].as_f64().unwrap();
@@ -409,17 +418,7 @@ fn a_laser_confirms_the_sonar_maps_walls() {
             assert_eq!(code, 0, "{err}");
             maps.push((run, out));
         }
-        let scored = std::process::Command::new("python3")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/laser_walls.py"))
-            .args([&maps[1].0, &maps[0].1, &maps[1].1])
-            .output()
-            .expect("python3 (with numpy and PyYAML) must be on PATH");
-        assert!(
-            scored.status.success(),
-            "{}",
-            String::from_utf8_lossy(&scored.stderr)
-        );
-        let r: Value = serde_json::from_slice(&scored.stdout).unwrap();
+        let r = python_score("laser_walls.py", &[&maps[1].0, &maps[0].1, &maps[1].1]);
         eprintln!("{}: sonar walls against the lidar's: {r}", log.display());
         assert!(r["stretches_length_m"].as_f64().unwrap() >= 100.0, "{r}");
         assert!(r["recall"].as_f64().unwrap() >= recall_at_least, "{r}");
