@@ -319,7 +319,7 @@ pub fn map_walls(
         // Readings whose cone holds the normal (within a cell) and whose range fits the line.
         let cone = half_cone_rad + step;
         let support = by_beam.facing(normal, cone, |i| {
-            !used[i] && supports(&echoes[i], normal, offset, cone, SUPPORT_M)
+            !used[i] && supports(&echoes[i], normal, offset, cone)
         });
         votes.counts[best] = 0;
         for mut piece in split(&echoes, &support, normal, config.max_gap_m) {
@@ -456,12 +456,12 @@ fn shadows(strong: &WallSegment, weak: &WallSegment) -> bool {
         && u <= a.max(b) + SHADOW_ALONG_M
 }
 
-/// Whether an echo's tangent at the line's normal lies on the line, within `within_m`.
-fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64, within_m: f64) -> bool {
+/// Whether an echo's tangent at the line's normal lies on the line.
+fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64) -> bool {
     let off_axis = crate::geometry::wrap_angle(e.beam - normal - std::f64::consts::PI);
     let (s, c) = normal.sin_cos();
     off_axis.abs() <= half_cone_rad
-        && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= within_m
+        && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= SUPPORT_M
 }
 
 /// Marks an echo used by a face (or looked at for one), its votes taken back.
@@ -493,7 +493,7 @@ fn grow(
         let (normal, offset) = (wall.normal_rad, wall.offset_m);
         let band = by_beam.facing(normal, cone, |i| {
             (!used[i] || members.binary_search(&i).is_ok())
-                && supports(&echoes[i], normal, offset, cone, SUPPORT_M)
+                && supports(&echoes[i], normal, offset, cone)
         });
         let shared = |p: &Vec<usize>| {
             p.iter()
