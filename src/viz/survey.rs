@@ -752,6 +752,21 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
             )
         });
     }
+    if let (Some(share), Some(sigma)) = (
+        get("walls.ranges_off_share"),
+        get("walls.range_residual_sigma_m"),
+    ) {
+        if share > crate::fusion::RANGE_OFF_WARN {
+            md.push_str(&format!(
+                "The run's ranges scatter about its walls (robust σ {:.1} cm) and {:.0}% lie \
+                 over {:.0} cm off them (furniture, door frames): holding a later run to these \
+                 walls may pull it off; compare `localize --no-walls`.\n\n",
+                100.0 * sigma,
+                100.0 * share,
+                100.0 * crate::fusion::RANGE_OFF_M
+            ));
+        }
+    }
     if let Some(r) = error_over_sigma(scene) {
         md.push_str(&format!(
             "The plot's *online σ* is the filter's own 1-σ position uncertainty (its longest \

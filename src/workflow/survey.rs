@@ -582,11 +582,6 @@ fn report_mounting(
     }
 }
 
-/// Share of a survey's ranges off their walls ([`fusion::RANGE_OFF_M`]) above which it warns
-/// that holding a later run to those walls may pull it off: 5% (the simulated homes: none; a
-/// real building's ranges off furniture and door frames: 16% on freiburg-079 as sonar).
-pub const RANGE_OFF_WARN: f64 = 0.05;
-
 /// How the survey's own ranges scatter about its corrected walls along its corrected
 /// trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
 /// `walls.ranges_matched`), and a warning when they scatter far more than `localize` assumes.
@@ -608,7 +603,7 @@ fn report_range_scatter(
     metrics.insert("walls.ranges_off_share".into(), scatter.off_share);
     metrics.insert("walls.ranges_matched".into(), scatter.matched as f64);
     let assumed = fuse.sonar_sigma_m + fuse.sonar_sigma_frac * scatter.median_range_m;
-    if scatter.off_share > RANGE_OFF_WARN || scatter.sigma_m > 2.0 * assumed {
+    if scatter.off_share > fusion::RANGE_OFF_WARN || scatter.sigma_m > 2.0 * assumed {
         tracing::warn!(
             "the run's ranges scatter about its walls with a robust sigma of {:.1} cm, and {:.0}% of them lie over {:.0} cm off (furniture, door frames), where localize assumes {:.1} cm (sonar_sigma_m, sonar_sigma_frac): holding a later run to these walls may pull it off; compare `localize --no-walls` (docs/RESULTS.md, \"Localising a real log\")",
             100.0 * scatter.sigma_m,
