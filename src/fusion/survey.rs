@@ -100,7 +100,7 @@ pub fn survey(
     };
     if fuse.walls_between_tags {
         offline = timed("fuse_walls", times, || {
-            walls_pass(run, &obs, &online, offline, settings)
+            walls_pass(run, &obs, &online, offline, settings, mapping)
         })?;
     }
     if fuse.hold_tail_to_walls {
@@ -144,11 +144,12 @@ fn walls_pass(
     online: &OnlineResult,
     offline: OfflineResult,
     settings: &SurveySettings<'_>,
+    // The settings following the run's sampling ([`MappingConfig::for_run`]).
+    mapping: &MappingConfig,
 ) -> Result<OfflineResult, GridError> {
     let layout = &run.meta.robot.sonar;
     let readings = run.placed_readings(&offline.trajectory);
-    let mapping = settings.mapping.for_run(&run.sonar_log(), &run.odometry);
-    let walls = walls_of(layout, &readings, &mapping)?;
+    let walls = walls_of(layout, &readings, mapping)?;
     let sonar = SonarInput {
         readings: &run.sonar,
         layout,

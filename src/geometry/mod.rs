@@ -7,7 +7,7 @@ pub mod homography;
 mod trajectory;
 
 pub use trajectory::{
-    odometry_jumps, pose_at, OdometryJump, StampedPose, JUMP_MIN_M, JUMP_SPEED_MPS,
+    odometry_jumps, path_length_m, pose_at, OdometryJump, StampedPose, JUMP_MIN_M, JUMP_SPEED_MPS,
 };
 
 use nalgebra::{Point2, Vector2};

@@ -43,6 +43,15 @@ pub struct OdometryJump {
     pub distance_m: f64,
 }
 
+/// Length of a trajectory's path, metres (steps that are not finite left out).
+pub fn path_length_m(trajectory: &[StampedPose]) -> f64 {
+    trajectory
+        .windows(2)
+        .map(|w| (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y))
+        .filter(|d| d.is_finite())
+        .sum()
+}
+
 /// An odometry step is a jump when it is longer than this, metres ...
 pub const JUMP_MIN_M: f64 = 1.0;
 /// ... and faster than this, metres per second (a home robot drives at most 1-2 m/s).

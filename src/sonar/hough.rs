@@ -430,16 +430,9 @@ pub fn off_the_walls(f: &Feature, walls: &[crate::sonar::walls::WallSegment]) ->
 /// Whether `f` lies on the line of one of `walls`, within [`WALL_LINE_REACH_M`] of it and
 /// [`WALL_END_REACH_M`] of its extent.
 pub fn on_a_wall(f: &Feature, walls: &[crate::sonar::walls::WallSegment]) -> bool {
-    walls.iter().any(|w| {
-        let n = w.normal();
-        let across = (n[0] * f.x_m + n[1] * f.y_m - w.offset_m).abs();
-        let along = |p: [f64; 2]| -n[1] * p[0] + n[0] * p[1];
-        let (a, b) = (along(w.from_m), along(w.to_m));
-        let u = along([f.x_m, f.y_m]);
-        across <= WALL_LINE_REACH_M
-            && u >= a.min(b) - WALL_END_REACH_M
-            && u <= a.max(b) + WALL_END_REACH_M
-    })
+    walls
+        .iter()
+        .any(|w| w.holds_near([f.x_m, f.y_m], WALL_LINE_REACH_M, WALL_END_REACH_M))
 }
 
 /// Rule 5: a feature stands on something that does not move: a cell within [`STATIC_REACH_M`]

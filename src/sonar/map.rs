@@ -41,11 +41,7 @@ pub const LOWEST_FLOOR: u32 = 2;
 /// Metres of travel between one sensor's readings, on average: the trajectory's length times the
 /// sensors over the readings. `None` without readings or travel.
 pub fn sampling_spacing_m(sonar: &SonarLog<'_>, trajectory: &[StampedPose]) -> Option<f64> {
-    let travel: f64 = trajectory
-        .windows(2)
-        .map(|w| (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y))
-        .filter(|d| d.is_finite())
-        .sum();
+    let travel = crate::geometry::path_length_m(trajectory);
     let per_sensor = sonar.readings.len() as f64 / sonar.layout.sensors.len().max(1) as f64;
     (travel > 0.0 && per_sensor > 0.0).then(|| travel / per_sensor)
 }

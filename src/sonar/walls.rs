@@ -164,6 +164,16 @@ impl WallSegment {
         -s * p[0] + c * p[1]
     }
 
+    /// Whether `p` lies within `across_m` of the face's line and within its ends extended by
+    /// `past_ends_m`.
+    pub fn holds_near(&self, p: [f64; 2], across_m: f64, past_ends_m: f64) -> bool {
+        let n = self.normal();
+        let across = n[0] * p[0] + n[1] * p[1] - self.offset_m;
+        let (a, b) = (self.along(self.from_m), self.along(self.to_m));
+        let u = self.along(p);
+        across.abs() <= across_m && u >= a.min(b) - past_ends_m && u <= a.max(b) + past_ends_m
+    }
+
     /// The range a sonar at `sensor` looking along `beam_rad` measures off this face when the face
     /// is in front of it, its normal within `half_cone_rad` of the beam's axis (reversed), and the
     /// foot of the perpendicular on the segment, `inset_m` inside its ends: `None` otherwise.
@@ -446,14 +456,7 @@ fn shadows(strong: &WallSegment, weak: &WallSegment) -> bool {
         0.5 * (weak.from_m[0] + weak.to_m[0]),
         0.5 * (weak.from_m[1] + weak.to_m[1]),
     ];
-    let n = strong.normal();
-    let across = n[0] * mid[0] + n[1] * mid[1] - strong.offset_m;
-    let (a, b) = (strong.along(strong.from_m), strong.along(strong.to_m));
-    let u = strong.along(mid);
-    angle <= SHADOW_ANGLE_DEG.to_radians()
-        && across.abs() <= SHADOW_DIST_M
-        && u >= a.min(b) - SHADOW_ALONG_M
-        && u <= a.max(b) + SHADOW_ALONG_M
+    angle <= SHADOW_ANGLE_DEG.to_radians() && strong.holds_near(mid, SHADOW_DIST_M, SHADOW_ALONG_M)
 }
 
 /// Whether an echo's tangent at the line's normal lies on the line.

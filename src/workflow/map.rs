@@ -123,12 +123,10 @@ pub fn map_and_score(
         run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
     metrics.insert("run.duration_s".into(), duration);
     // How far the robot drove by its odometry, which its drift grows with.
-    let path_m: f64 = run
-        .odometry
-        .windows(2)
-        .map(|w| (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y))
-        .sum();
-    metrics.insert("run.path_m".into(), path_m);
+    metrics.insert(
+        "run.path_m".into(),
+        crate::geometry::path_length_m(&run.odometry),
+    );
     Ok(MapOutput {
         map,
         metrics,
