@@ -605,6 +605,18 @@ fn a_later_run_localises_against_the_survey() {
         "localised {localised} in the changed home"
     );
     assert!(metric(&report, "ranges.gated_out") > 50.0);
+
+    // The same run once its world is gone (a real robot's run has none): the tags are checked
+    // against the sizes the survey used, so the same sightings are fused as with the world.
+    std::fs::remove_file(&moved_world).unwrap();
+    let without_world = localize_run(&moved_run, "loc_no_world", true, false);
+    for key in ["sightings.fused", "sightings.gated_out", "ate_m.localized"] {
+        assert_eq!(
+            metric(&without_world, key),
+            metric(&report, key),
+            "{key} without the world"
+        );
+    }
 }
 
 #[test]

@@ -4,6 +4,7 @@
 use crate::fusion::FuseConfig;
 use crate::geometry::wrap_angle;
 use crate::sonar::hough::Feature;
+use crate::visual::sightings::TagSizes;
 use crate::visual::tags::{TagFamily, TagId};
 use nalgebra::{Matrix2, Vector2};
 use serde::Serialize;
@@ -20,6 +21,25 @@ pub struct CornerMatch {
     /// Squared Mahalanobis distance of the match (0 when read from a file that lacks it).
     #[serde(default)]
     pub distance_chi2: f64,
+}
+
+/// The sizes the survey used for its tags (`size_m`), per tag, with no default: the size check
+/// of a later run's sightings when nothing else gives the printed sizes.
+pub fn surveyed_tag_sizes(landmarks: &[Landmark]) -> TagSizes {
+    TagSizes {
+        default_m: None,
+        by_tag: landmarks
+            .iter()
+            .filter(|l| l.size_m > 0.0)
+            .map(|l| {
+                let tag = TagId {
+                    family: l.family,
+                    id: l.id,
+                };
+                (tag, l.size_m)
+            })
+            .collect(),
+    }
 }
 
 /// A surveyed tag (as `landmarks.json` holds it, see `io::LandmarkRecord`).

@@ -48,7 +48,7 @@ pub use anchors::{
     anchor_frame, anchor_residuals, origin_anchor, Anchor, AnchorError, AnchorResidual,
 };
 pub use config::{FuseConfig, FuseConfigError};
-pub use landmark::{associate, Conflict, CornerMatch, Landmark};
+pub use landmark::{associate, surveyed_tag_sizes, Conflict, CornerMatch, Landmark};
 pub use localize::{
     hold_tail_to_walls, localize, localize_from, range_scatter, wall_in_beam, LocalizeResult,
     Localizer, PoseEstimate, RangeScatter, SightingOutcome, SonarInput, Start, WallMatch,

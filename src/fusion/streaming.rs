@@ -4,12 +4,12 @@
 //! is measured by the visual odometry; both go to a [`Localizer`].
 
 use crate::camera::{Rectification, StereoRig};
-use crate::fusion::{Localizer, PoseEstimate, SightingOutcome};
+use crate::fusion::{surveyed_tag_sizes, Localizer, PoseEstimate, SightingOutcome};
 use crate::geometry::Pose2;
 use crate::sonar::SonarReading;
 use crate::visual::sightings::{sightings_from_pair, TagSighting, TagSizes, TAG_HEIGHT_RANGE_M};
 use crate::visual::stereo::StereoConfig;
-use crate::visual::tags::{TagDetector, TagError, TagId};
+use crate::visual::tags::{TagDetector, TagError};
 use crate::visual::vo::{relative_motion, VisualTurn, VoConfig, VoImage};
 
 /// Why a stereo pair could not be used.
@@ -99,23 +99,7 @@ impl StereoLocalizer {
     /// out as in a survey.
     pub fn new(filter: Localizer, rig: StereoRig, detector: Box<dyn TagDetector + Send>) -> Self {
         let rect = rig.rectify();
-        let sizes = TagSizes {
-            default_m: None,
-            by_tag: filter
-                .landmarks()
-                .iter()
-                .filter(|l| l.size_m > 0.0)
-                .map(|l| {
-                    (
-                        TagId {
-                            family: l.family,
-                            id: l.id,
-                        },
-                        l.size_m,
-                    )
-                })
-                .collect(),
-        };
+        let sizes = surveyed_tag_sizes(filter.landmarks());
         Self {
             filter,
             rig,

@@ -28,7 +28,8 @@ pub struct LocalizeRequest<'a> {
     pub run_dir: &'a Path,
     /// The output directory.
     pub out: &'a Path,
-    /// A world file for the tag sizes (default: the one run.yaml names, if it exists).
+    /// A world file for the tag sizes (default: the one run.yaml names, if it exists; without
+    /// one, the sizes `detect` gives, else those the survey used).
     pub world: Option<&'a Path>,
     /// Fusion settings (YAML).
     pub config: Option<&'a Path>,
@@ -205,11 +206,18 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         Recording::Localization,
         &dir.path("localize.rrd"),
     )?;
+    let no_sizes_given = request.detect.tag_sizes == Default::default();
     let options = DetectOptions {
         families: if request.detect.families.is_empty() {
             surveyed.families()
         } else {
             request.detect.families.clone()
+        },
+        // The printed sizes: a world's first, else those given, else those the survey used.
+        tag_sizes: if no_sizes_given {
+            fusion::surveyed_tag_sizes(&surveyed.landmarks)
+        } else {
+            request.detect.tag_sizes.clone()
         },
         visual_odometry: config.visual_odometry,
         keep_images: false,

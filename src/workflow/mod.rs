@@ -217,14 +217,20 @@ pub fn mapping_of_run(
     config
 }
 
-/// The world file of a run: the one given, else the one run.yaml names if it exists.
+/// The world file of a run: the one given, else the one run.yaml names if it exists (with a
+/// warning when it names one that is not there: the run was moved, or its world deleted).
 pub fn world_of_run(given: Option<&Path>, run_dir: &Path, run: &RunDataset) -> Option<PathBuf> {
     given.map(Path::to_path_buf).or_else(|| {
-        run.meta
-            .world
-            .as_ref()
-            .map(|w| run_dir.join(w))
-            .filter(|p| p.exists())
+        let named = run_dir.join(run.meta.world.as_ref()?);
+        if named.exists() {
+            return Some(named);
+        }
+        tracing::warn!(
+            "{} names the world {}, which is not there: going on without it (nothing is scored against it, and tag sizes come from elsewhere); give --world to use it",
+            run_dir.join("run.yaml").display(),
+            named.display()
+        );
+        None
     })
 }
 
