@@ -43,9 +43,14 @@ def main():
             sys.exit(f"{src}:1: expected the header t_s,x_m,y_m,theta_rad")
         for n, line in enumerate(f, start=2):
             try:
-                rows.append([float(v) for v in line.split(",")])
+                row = [float(v) for v in line.split(",")]
             except ValueError:
+                row = []
+            if len(row) != 4:
                 sys.exit(f"{src}:{n}: not four numbers: {line.strip()}")
+            rows.append(row)
+    if not rows:
+        sys.exit(f"{src}: no odometry poses")
     rng = random.Random(a.seed)
     out = [rows[0][1:]]
     x, y, th = rows[0][1:]
