@@ -255,8 +255,8 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
 fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
     let mut md = metrics_markdown("stereotag localize", scene.metrics);
     let colours = format!(
-        "In the scene: odometry red{}, localized green{}; surveyed tags green dots, surveyed \
-         walls orange, the sonar ranges fused cyan (gated out red){}.\n\n",
+        "In the scene: odometry red{}, localized green{}; {}surveyed walls orange, the sonar \
+         ranges fused cyan (gated out red){}.\n\n",
         if scene.calibrated_odometry.is_some() {
             ", calibrated with the survey yellow"
         } else {
@@ -267,13 +267,22 @@ fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
         } else {
             ""
         },
+        if scene.landmarks.is_empty() {
+            ""
+        } else {
+            "surveyed tags green dots, "
+        },
         if scene.result.wall_fixed_t_s.is_empty() {
             ""
         } else {
             "; an orange dot where the pose was taken from the walls"
         }
     );
-    md.insert_str(md.find("| value").unwrap_or(0), &colours);
+    let warning = scene
+        .result
+        .ranges_warning()
+        .map_or(String::new(), |w| format!("**{w}.**\n\n"));
+    md.insert_str(md.find("| value").unwrap_or(0), &(colours + &warning));
     md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
     for b in scene.growth {
         md.push_str(&format!(
