@@ -89,7 +89,8 @@ impl LocalizeResult {
     }
 
     /// What to tell a user when over [`RANGES_GATED_WARN`] of the ranges matched with the
-    /// surveyed walls (at least [`RANGE_SCATTER_MIN`] of them) were gated out: the walls and
+    /// surveyed walls (at least [`RANGE_SCATTER_MIN`] of them, as many as the survey's scatter
+    /// needs) were gated out: the walls and
     /// the ranges disagree, and the few that pass the gate may pull the pose off while its sigma
     /// says it is sure. `None` otherwise.
     pub fn ranges_warning(&self) -> Option<String> {
@@ -228,8 +229,8 @@ pub fn range_scatter(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Opti
 pub const RANGE_OFF_WARN: f64 = 0.05;
 
 /// Share of a localisation's matched ranges gated out above which it is warned about: 20% (the
-/// simulated homes' later runs: 1-2%; freiburg-079 as sonar against its own survey: 31-32%;
-/// the office with a cabinet and a sofa put in after the survey: see `tests/survey.rs`).
+/// simulated homes' later runs: 0-1.5%; freiburg-079 as sonar against its own survey: 31-32%;
+/// the office with a cabinet and a sofa put in after the survey: 48%).
 pub const RANGES_GATED_WARN: f64 = 0.2;
 
 /// Ranges [`range_scatter`] needs matched: 100.
