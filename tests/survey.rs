@@ -503,12 +503,6 @@ fn a_later_run_localises_against_the_survey() {
     // (101 ranges fused); with the tags and visual odometry alone, 3.7 cm.
     assert!(metric(&report, "walls.surveyed") >= 5.0);
     assert!(metric(&report, "ranges.fused") >= 50.0);
-    let share = |r: &Value| {
-        let gated = metric(r, "ranges.gated_out");
-        gated / (gated + metric(r, "ranges.fused"))
-    };
-    // The walls agree with the ranges: localize does not warn (measured: none gated out).
-    assert!(share(&report) < stereotag::fusion::RANGES_GATED_WARN);
     assert!(localised <= 0.05, "localised {localised}");
     let tags_only = metric(
         &localize_run(&run, "loc_tags", false, false),
@@ -611,8 +605,6 @@ fn a_later_run_localises_against_the_survey() {
         "localised {localised} in the changed home"
     );
     assert!(metric(&report, "ranges.gated_out") > 50.0);
-    // The changed home: over the share of gated-out ranges localize warns at (measured: 48%).
-    assert!(share(&report) > stereotag::fusion::RANGES_GATED_WARN);
 
     // The same run once its world is gone (a real robot's run has none): the tags are checked
     // against the sizes the survey used, so the same sightings are fused as with the world.

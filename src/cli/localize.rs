@@ -139,9 +139,6 @@ fn print_summary(output: &LocalizeOutput) {
             walls.len(),
             result.ranges_gated_out()
         );
-        if let Some(w) = result.ranges_warning() {
-            tracing::warn!("{w}");
-        }
     }
     tracing::info!("error against distance since the last sighting:");
     for b in &output.growth {

@@ -87,22 +87,6 @@ impl LocalizeResult {
     pub fn ranges_gated_out(&self) -> usize {
         self.range_outcomes.len() - self.ranges_fused()
     }
-
-    /// What to tell a user when over [`RANGES_GATED_WARN`] of the ranges matched with the
-    /// surveyed walls (at least [`RANGE_SCATTER_MIN`] of them, as many as the survey's scatter
-    /// needs) were gated out: the walls and
-    /// the ranges disagree, and the few that pass the gate may pull the pose off while its sigma
-    /// says it is sure. `None` otherwise.
-    pub fn ranges_warning(&self) -> Option<String> {
-        let matched = self.range_outcomes.len();
-        let share = self.ranges_gated_out() as f64 / matched.max(1) as f64;
-        (matched >= RANGE_SCATTER_MIN && share > RANGES_GATED_WARN).then(|| {
-            format!(
-                "{:.0}% of the {matched} ranges matched with a surveyed wall were gated out: the home changed since the survey (furniture against a wall), or its ranges scatter off the walls; the pose may be pulled off while its sigma looks sure: compare `localize --no-walls`",
-                100.0 * share
-            )
-        })
-    }
 }
 
 /// A run's sonar and the surveyed walls its ranges are matched against when localising.
@@ -227,11 +211,6 @@ pub fn range_scatter(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Opti
 /// holding a later run to those walls may pull it off: 5% (the simulated homes: under 1%; a real
 /// building's ranges off furniture and door frames: 16% on freiburg-079 as sonar).
 pub const RANGE_OFF_WARN: f64 = 0.05;
-
-/// Share of a localisation's matched ranges gated out above which it is warned about: 20% (the
-/// simulated homes' later runs: 0-1.5%; freiburg-079 as sonar against its own survey: 31-32%;
-/// the office with a cabinet and a sofa put in after the survey: 48%).
-pub const RANGES_GATED_WARN: f64 = 0.2;
 
 /// Ranges [`range_scatter`] needs matched: 100.
 pub const RANGE_SCATTER_MIN: usize = 100;

@@ -278,11 +278,7 @@ fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
             "; an orange dot where the pose was taken from the walls"
         }
     );
-    let warning = scene
-        .result
-        .ranges_warning()
-        .map_or(String::new(), |w| format!("**{w}.**\n\n"));
-    md.insert_str(md.find("| value").unwrap_or(0), &(colours + &warning));
+    md.insert_str(md.find("| value").unwrap_or(0), &colours);
     md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
     for b in scene.growth {
         md.push_str(&format!(
