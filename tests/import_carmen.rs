@@ -452,6 +452,13 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
     let m = &json(&out.join("report.json"))["metrics"];
     assert!(m["walls.ranges_matched"].as_f64().unwrap() > 1000.0, "{m}");
     assert!(m["walls.ranges_off_share"].as_f64().unwrap() > 0.1, "{m}");
+    // The recording's opening gives the same warning, by the same rule, from these figures.
+    let get = |k: &str| m[k].as_f64().unwrap();
+    assert!(stereotag::fusion::scatter_too_wide(
+        get("walls.ranges_off_share"),
+        get("walls.range_residual_sigma_m"),
+        get("walls.range_sigma_assumed_m")
+    ));
     assert!(err.contains("scatter about its walls"), "{err}");
     assert!(err.contains("localize --no-walls"), "{err}");
 

@@ -178,6 +178,11 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
     assert!(metric(&report, "walls.ranges_matched") > 500.0);
     assert!(metric(&report, "walls.ranges_off_share") < 0.01);
     assert!(metric(&report, "walls.range_residual_sigma_m") < 0.025);
+    assert!(!stereotag::fusion::scatter_too_wide(
+        metric(&report, "walls.ranges_off_share"),
+        metric(&report, "walls.range_residual_sigma_m"),
+        metric(&report, "walls.range_sigma_assumed_m")
+    ));
     let turns = metric(&report, "visual.turns");
     let turn_rms = metric(&report, "visual.turn_error_rms_deg");
     assert!(turns > 500.0, "{turns} visual turns");

@@ -212,6 +212,13 @@ pub fn range_scatter(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Opti
 /// building's ranges off furniture and door frames: 16% on freiburg-079 as sonar).
 pub const RANGE_OFF_WARN: f64 = 0.05;
 
+/// Whether ranges scattering so about their walls warrant the warning that holding a later run
+/// to them may pull it off: over [`RANGE_OFF_WARN`] of them off, or a robust sigma over twice
+/// the `assumed_sigma_m` of `localize` (one rule for `survey`'s warning and its recording).
+pub fn scatter_too_wide(off_share: f64, sigma_m: f64, assumed_sigma_m: f64) -> bool {
+    off_share > RANGE_OFF_WARN || sigma_m > 2.0 * assumed_sigma_m
+}
+
 /// Ranges [`range_scatter`] needs matched: 100.
 pub const RANGE_SCATTER_MIN: usize = 100;
 

@@ -752,11 +752,12 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
             )
         });
     }
-    if let (Some(share), Some(sigma)) = (
+    if let (Some(share), Some(sigma), Some(assumed)) = (
         get("walls.ranges_off_share"),
         get("walls.range_residual_sigma_m"),
+        get("walls.range_sigma_assumed_m"),
     ) {
-        if share > crate::fusion::RANGE_OFF_WARN {
+        if crate::fusion::scatter_too_wide(share, sigma, assumed) {
             md.push_str(&format!(
                 "The run's ranges scatter about its walls (robust σ {:.1} cm) and {:.0}% lie \
                  over {:.0} cm off them (furniture, door frames): holding a later run to these \

@@ -584,7 +584,7 @@ fn report_mounting(
 
 /// How the survey's own ranges scatter about its corrected walls along its corrected
 /// trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
-/// `walls.ranges_matched`), and a warning when they scatter far more than `localize` assumes.
+/// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes), and a warning when they scatter far more than `localize` assumes.
 fn report_range_scatter(
     run: &RunDataset,
     result: &fusion::Survey,
@@ -603,7 +603,8 @@ fn report_range_scatter(
     metrics.insert("walls.ranges_off_share".into(), scatter.off_share);
     metrics.insert("walls.ranges_matched".into(), scatter.matched as f64);
     let assumed = fuse.sonar_sigma_m + fuse.sonar_sigma_frac * scatter.median_range_m;
-    if scatter.off_share > fusion::RANGE_OFF_WARN || scatter.sigma_m > 2.0 * assumed {
+    metrics.insert("walls.range_sigma_assumed_m".into(), assumed);
+    if fusion::scatter_too_wide(scatter.off_share, scatter.sigma_m, assumed) {
         tracing::warn!(
             "the run's ranges scatter about its walls with a robust sigma of {:.1} cm, and {:.0}% of them lie over {:.0} cm off (furniture, door frames), where localize assumes {:.1} cm (sonar_sigma_m, sonar_sigma_frac): holding a later run to these walls may pull it off; compare `localize --no-walls` (docs/RESULTS.md, \"Localising a real log\")",
             100.0 * scatter.sigma_m,
