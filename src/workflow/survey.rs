@@ -584,7 +584,8 @@ fn report_mounting(
 
 /// How the survey's own ranges scatter about its corrected walls along its corrected
 /// trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
-/// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes), and a warning when they scatter far more than `localize` assumes.
+/// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes), and a
+/// warning when they scatter far more than `localize` assumes ([`fusion::scatter_too_wide`]).
 fn report_range_scatter(
     run: &RunDataset,
     result: &fusion::Survey,
