@@ -68,11 +68,19 @@ def main():
         x, y = x + c * lx - s * ly, y + s * lx + c * ly
         th = math.remainder(th + turn, math.tau)
         out.append([x, y, th])
-    shutil.copytree(a.run, a.out)
-    with open(a.out / "odometry.csv", "w") as f:
-        f.write(header)
-        for (t, *_), (px, py, pth) in zip(rows, out):
-            f.write(f"{t:.4f},{px:.5f},{py:.5f},{pth:.6f}\n")
+    # Written beside OUT and renamed into place when whole: a failure leaves no half-written run.
+    partial = a.out.with_name(a.out.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    try:
+        shutil.copytree(a.run, partial)
+        with open(partial / "odometry.csv", "w") as f:
+            f.write(header)
+            for (t, *_), (px, py, pth) in zip(rows, out):
+                f.write(f"{t:.4f},{px:.5f},{py:.5f},{pth:.6f}\n")
+        partial.rename(a.out)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
     print(f"{a.out}: {len(rows)} odometry poses drifted (scale {a.scale}, turns {a.turn_scale}, "
           f"{a.bias_deg_per_m} deg/m)")
 
