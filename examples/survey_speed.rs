@@ -3,7 +3,7 @@
 use std::time::Instant;
 use stereotag::io;
 use stereotag::visual::stereo::detect_pair;
-use stereotag::visual::tags::{CDetector, DetectorConfig};
+use stereotag::visual::tags::{CDetector, DetectorConfig, TagDetector};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: RUN_DIR")?);
@@ -32,6 +32,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         found_right += b.len();
     }
     let detect = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut with_tags = 0;
+    for (l, _) in &pairs {
+        with_tags += usize::from(!det.detect(l)?.is_empty());
+    }
+    let left_only = t.elapsed().as_secs_f64();
+    println!("left images alone: {left_only:.2} s; {with_tags} of {} pairs show a tag", pairs.len());
     println!("{} pairs: decode {decode:.2} s, detect (decimate {decimate}, min contrast {min_contrast}) {detect:.2} s, {found} left and {found_right} right detections (one thread)", pairs.len());
     Ok(())
 }
