@@ -313,8 +313,10 @@ pub fn map_trajectory(
         .fold((0, 0), |(n, off), is_off| (n + 1, off + is_off as usize));
 
     // The log-odds grid, the two Hough passes and the walls read the same placed readings and
-    // counting grid and nothing of each other: the online Hough pass (the longest) runs on one
-    // core, the rest on the other. Each stage's time is its own, taken while the others run.
+    // counting grid and nothing of each other: the online Hough pass, the offline pass (after the
+    // log-odds grid) and the walls run alongside each other (a sonar run's online pass is the
+    // longest; a lidar run's offline pass and walls are, each a few seconds). Each stage's time
+    // is its own, taken while the others run.
     let (line_echoes, half) = layout.echoes_for_lines(&readings);
     let ((online, online_times), rest) = rayon::join(
         || {
@@ -328,26 +330,36 @@ pub fn map_trajectory(
             (online, times)
         },
         || -> Result<_, GridError> {
-            let mut times = BTreeMap::new();
-            let log_odds = timed("grid_log_odds", &mut times, || {
-                let mut grid = LogOddsGrid::for_layout(config.grid.clone(), layout)?;
-                grid.insert_all(&readings);
-                Ok::<_, GridError>(grid.map())
-            })?;
-            let offline = timed("hough_offline", &mut times, || {
-                let mut offline = features_offline(&line_echoes, half, &counting, &config.hough);
-                classify_features(&mut offline.features, &counting);
-                offline
-            });
-            let walls = timed("walls", &mut times, || {
-                map_walls(
-                    &line_echoes,
-                    half,
-                    layout.max_range_m,
-                    &counting,
-                    &config.walls,
-                )
-            });
+            let (grid_and_offline, (walls, walls_s)) = rayon::join(
+                || {
+                    let mut times = BTreeMap::new();
+                    let log_odds = timed("grid_log_odds", &mut times, || {
+                        let mut grid = LogOddsGrid::for_layout(config.grid.clone(), layout)?;
+                        grid.insert_all(&readings);
+                        Ok::<_, GridError>(grid.map())
+                    })?;
+                    let offline = timed("hough_offline", &mut times, || {
+                        let mut offline =
+                            features_offline(&line_echoes, half, &counting, &config.hough);
+                        classify_features(&mut offline.features, &counting);
+                        offline
+                    });
+                    Ok::<_, GridError>((log_odds, offline, times))
+                },
+                || {
+                    let started = Instant::now();
+                    let walls = map_walls(
+                        &line_echoes,
+                        half,
+                        layout.max_range_m,
+                        &counting,
+                        &config.walls,
+                    );
+                    (walls, started.elapsed().as_secs_f64())
+                },
+            );
+            let (log_odds, offline, mut times) = grid_and_offline?;
+            times.insert("walls".into(), walls_s);
             Ok((log_odds, offline, walls, times))
         },
     );

@@ -328,9 +328,8 @@ pub fn map_walls(
         let offset = votes.offset_m(best % votes.n_dist);
         // Readings whose cone holds the normal (within a cell) and whose range fits the line.
         let cone = half_cone_rad + step;
-        let support = by_beam.facing(normal, cone, |i| {
-            !used[i] && supports(&echoes[i], normal, offset, cone)
-        });
+        let line = Support::new(normal, offset, cone);
+        let support = by_beam.facing(normal, cone, |i| !used[i] && line.holds(&echoes[i]));
         votes.counts[best] = 0;
         for mut piece in split(&echoes, &support, normal, config.max_gap_m) {
             // A piece before it may have grown over this one's readings.
@@ -459,12 +458,36 @@ fn shadows(strong: &WallSegment, weak: &WallSegment) -> bool {
     angle <= SHADOW_ANGLE_DEG.to_radians() && strong.holds_near(mid, SHADOW_DIST_M, SHADOW_ALONG_M)
 }
 
-/// Whether an echo's tangent at the line's normal lies on the line.
-fn supports(e: &Echo, normal: f64, offset: f64, half_cone_rad: f64) -> bool {
-    let off_axis = crate::geometry::wrap_angle(e.beam - normal - std::f64::consts::PI);
-    let (s, c) = normal.sin_cos();
-    off_axis.abs() <= half_cone_rad
-        && (c * e.s[0] + s * e.s[1] - e.range - offset).abs() <= SUPPORT_M
+/// A line `n . p = offset` (`n` at `normal`) that echoes support when their tangent at the
+/// normal lies on it ([`Support::holds`]); the normal's sine and cosine are taken once for the
+/// many echoes a face is tested against.
+struct Support {
+    normal: f64,
+    sin: f64,
+    cos: f64,
+    offset: f64,
+    half_cone_rad: f64,
+}
+
+impl Support {
+    fn new(normal: f64, offset: f64, half_cone_rad: f64) -> Self {
+        let (sin, cos) = normal.sin_cos();
+        Self {
+            normal,
+            sin,
+            cos,
+            offset,
+            half_cone_rad,
+        }
+    }
+
+    /// Whether an echo's tangent at the line's normal lies on the line: its range fits the
+    /// line (tested first: most echoes of a bin lie elsewhere) and its cone holds the normal.
+    fn holds(&self, e: &Echo) -> bool {
+        (self.cos * e.s[0] + self.sin * e.s[1] - e.range - self.offset).abs() <= SUPPORT_M
+            && crate::geometry::wrap_angle(e.beam - self.normal - std::f64::consts::PI).abs()
+                <= self.half_cone_rad
+    }
 }
 
 /// Marks an echo used by a face (or looked at for one), its votes taken back.
@@ -494,9 +517,9 @@ fn grow(
 ) -> (WallSegment, Vec<usize>) {
     for _ in 0..GROW_ROUNDS {
         let (normal, offset) = (wall.normal_rad, wall.offset_m);
+        let line = Support::new(normal, offset, cone);
         let band = by_beam.facing(normal, cone, |i| {
-            (!used[i] || members.binary_search(&i).is_ok())
-                && supports(&echoes[i], normal, offset, cone)
+            line.holds(&echoes[i]) && (!used[i] || members.binary_search(&i).is_ok())
         });
         let shared = |p: &Vec<usize>| {
             p.iter()
