@@ -38,7 +38,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         with_tags += usize::from(!det.detect(l)?.is_empty());
     }
     let left_only = t.elapsed().as_secs_f64();
-    println!("left images alone: {left_only:.2} s; {with_tags} of {} pairs show a tag", pairs.len());
+    println!(
+        "left images alone: {left_only:.2} s; {with_tags} of {} pairs show a tag",
+        pairs.len()
+    );
     println!("{} pairs: decode {decode:.2} s, detect (decimate {decimate}, min contrast {min_contrast}) {detect:.2} s, {found} left and {found_right} right detections (one thread)", pairs.len());
     Ok(())
 }
