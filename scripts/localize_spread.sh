@@ -20,8 +20,11 @@ out=${2:-localize_spread}
 bin=${STEREOTAG:-${CARGO_TARGET_DIR:-target}/release/stereotag}
 [ -x "$bin" ] || cargo build --release
 here=$(cd "$(dirname "$0")" && pwd)
+# A directory this call makes is taken away again when the log does not import.
+[ -d "$out" ] || trap 'rm -rf "$out"' EXIT
 mkdir -p "$out"
 [ -f "$out/run/run.yaml" ] || "$bin" -q import --carmen "$log" --as-sonar frontal5 --out "$out/run" --force
+trap - EXIT
 [ -f "$out/survey/landmarks.json" ] ||
   "$bin" -q survey --run "$out/run" --out "$out/survey" --no-rerun --force
 # Drifts as in docs/RESULTS.md ("The same with a drifting odometry"): scale, turn scale, bias, seed.
