@@ -32,6 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         found_right += b.len();
     }
     let detect = t.elapsed().as_secs_f64();
+    println!("{} pairs: decode {decode:.2} s, detect (decimate {decimate}, min contrast {min_contrast}) {detect:.2} s, {found} left and {found_right} right detections (one thread)", pairs.len());
     let t = Instant::now();
     let mut with_tags = 0;
     for (l, _) in &pairs {
@@ -42,6 +43,5 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "left images alone: {left_only:.2} s; {with_tags} of {} pairs show a tag",
         pairs.len()
     );
-    println!("{} pairs: decode {decode:.2} s, detect (decimate {decimate}, min contrast {min_contrast}) {detect:.2} s, {found} left and {found_right} right detections (one thread)", pairs.len());
     Ok(())
 }

@@ -330,7 +330,7 @@ pub fn map_trajectory(
             (online, times)
         },
         || -> Result<_, GridError> {
-            let (grid_and_offline, (walls, walls_s)) = rayon::join(
+            let (grid_and_offline, (walls, walls_times)) = rayon::join(
                 || {
                     let mut times = BTreeMap::new();
                     let log_odds = timed("grid_log_odds", &mut times, || {
@@ -347,19 +347,21 @@ pub fn map_trajectory(
                     Ok::<_, GridError>((log_odds, offline, times))
                 },
                 || {
-                    let started = Instant::now();
-                    let walls = map_walls(
-                        &line_echoes,
-                        half,
-                        layout.max_range_m,
-                        &counting,
-                        &config.walls,
-                    );
-                    (walls, started.elapsed().as_secs_f64())
+                    let mut times = BTreeMap::new();
+                    let walls = timed("walls", &mut times, || {
+                        map_walls(
+                            &line_echoes,
+                            half,
+                            layout.max_range_m,
+                            &counting,
+                            &config.walls,
+                        )
+                    });
+                    (walls, times)
                 },
             );
             let (log_odds, offline, mut times) = grid_and_offline?;
-            times.insert("walls".into(), walls_s);
+            times.extend(walls_times);
             Ok((log_odds, offline, walls, times))
         },
     );
