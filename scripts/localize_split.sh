@@ -10,7 +10,8 @@
 # Prints each localised ATE beside the odometry's, then the median, and how many runs end worse
 # than their odometry.
 #   scripts/localize_split.sh [LOG] [OUT_DIR]     FLAGS adds localize flags to every run
-# A second call with the same OUT_DIR reuses the surveys and the runs (about a minute for the 32).
+# A second call with the same OUT_DIR reuses the surveys and the runs; the 32 localisations take
+# about 3 minutes either way (a run whose sigma grows searches the walls for its pose often).
 set -euo pipefail
 FLAGS=${FLAGS:-}
 log=${1:-../shared/data/radish/freiburg-079-corrected.log.gz}
