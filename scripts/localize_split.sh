@@ -2,13 +2,13 @@
 # Localisation on a real building against a survey of *other* ranges (issue 34: real logs).
 # scripts/localize_spread.sh localises the very log its survey was made from: the walls were
 # fitted to the ranges being localised, which flatters any method that matches ranges with a map
-# (session 55: a particle filter on the survey's grid ended 8-10 cm off there, and 4-17 m off
+# (session 55: a particle filter on the survey's grid ended 7-10 cm off there, and 4-17 m off
 # here). This cuts the log in two halves at its middle time (scripts/split_run.py), surveys each
 # half with no tags, and localises the other half against it: as logged and with its odometry
 # drifted three ways (scripts/drift_odometry.py, the drifts of localize_spread.sh), each at the
 # default range noise and at three constant range sigmas (the outcome of one run is chaotic).
-# Prints each localised ATE beside the odometry's, then the median, and how many runs end worse
-# than their odometry.
+# Prints each localised ATE beside the odometry's, then the median, the mean, how many runs end
+# over 1 m off and how many end worse than their odometry.
 #   scripts/localize_split.sh [LOG] [OUT_DIR]     FLAGS adds localize flags to every run
 # A second call with the same OUT_DIR reuses the surveys and the runs; the 32 localisations take
 # about 3 minutes either way (a run whose sigma grows searches the walls for its pose often).
