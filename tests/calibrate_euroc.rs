@@ -122,3 +122,55 @@ fn euroc_free_calibration_fails_loudly_and_writes_nothing() {
         "{report}"
     );
 }
+
+/// The real EuRoC pair through the rig calibrated from its AprilGrid corners: all 35 tags that
+/// both cameras see triangulate, none past the square's gate (their corners 0.05 corner sigmas
+/// off a square at the median, 0.85 at most: the gate is 2.0), and each within 10% of the
+/// AprilGrid's 88 mm.
+#[test]
+fn the_real_pairs_tags_pass_the_squares_gate() {
+    use stereotag::visual::stereo::StereoConfig;
+    use stereotag::visual::tags::{Backend, DetectorConfig, TagFamily};
+    use stereotag::workflow::detect::{detect, DetectOutput, DetectRequest};
+    let dir = tempfile::tempdir().unwrap();
+    calibrate_corners(
+        Some("calibration/rigs/euroc_official.yaml"),
+        None,
+        None,
+        &dir.path().join("rig"),
+    );
+    let stereo = Path::new("../shared/data/euroc_aprilgrid/calib/stereo");
+    let images = [
+        stereo.join("cam0_1403709395937837056.png"),
+        stereo.join("cam1_1403709395937837056.png"),
+    ];
+    let camchain = dir.path().join("rig/camchain.yaml");
+    let output = detect(&DetectRequest {
+        images: &images,
+        rig: Some(&camchain),
+        tag_size_m: Some(0.088),
+        sigma_px: StereoConfig::default().sigma_px,
+        backend: Backend::ApriltagC,
+        config: DetectorConfig {
+            families: vec![TagFamily::Aprilgrid36h11],
+            ..DetectorConfig::default()
+        },
+    })
+    .unwrap();
+    let DetectOutput::Stereo { tags, rejected } = output else {
+        panic!("a rig gives stereo tags");
+    };
+    assert_eq!(tags.len(), 35, "{rejected:?}");
+    assert!(
+        rejected.iter().all(|r| !r.reason.contains("off a square")),
+        "{rejected:?}"
+    );
+    for t in &tags {
+        assert!(
+            (t.size_m / 0.088 - 1.0).abs() < 0.1,
+            "tag {}: {}",
+            t.id,
+            t.size_m
+        );
+    }
+}

@@ -484,6 +484,12 @@ mod tests {
         }
     }
 
+    /// The corners (C order) of an upright tag facing the camera, `half` its half edge.
+    fn upright_square(centre: Vector3<f64>, half: f64) -> [Vector3<f64>; 4] {
+        let s = half;
+        [(-s, s), (s, s), (s, -s), (-s, -s)].map(|(x, y)| centre + Vector3::new(x, -y, 0.0))
+    }
+
     fn project_tag(rig: &StereoRig, corners: &[Vector3<f64>; 4]) -> ([[f64; 2]; 4], [[f64; 2]; 4]) {
         let l = corners.map(|c| {
             let p = rig.left.project(&c).unwrap();
@@ -519,8 +525,7 @@ mod tests {
         let rect = nominal.rectify();
         let s = 0.08;
         let centre = Vector3::new(0.4, -0.1, 3.0);
-        let corners =
-            [(-s, s), (s, s), (s, -s), (-s, -s)].map(|(x, y)| centre + Vector3::new(x, -y, 0.0));
+        let corners = upright_square(centre, s);
         let det = |c| detection(3, c);
         let unit = Normal::new(0.0, 1.0).unwrap();
         let pixel = Normal::new(0.0, StereoConfig::default().sigma_px).unwrap();
@@ -636,8 +641,7 @@ mod tests {
         let rect = rig.rectify();
         let s = 0.08;
         let centre = Vector3::new(0.0, 0.0, 2.0);
-        let corners =
-            [(-s, s), (s, s), (s, -s), (-s, -s)].map(|(x, y)| centre + Vector3::new(x, -y, 0.0));
+        let corners = upright_square(centre, s);
         let (l, r) = project_tag(&rig, &corners);
         let det = |c: [[f64; 2]; 4]| TagDetection {
             id: 1,
@@ -677,8 +681,7 @@ mod tests {
         let rect = rig.rectify();
         let s = 0.08;
         let centre = Vector3::new(0.2, 0.0, 1.0);
-        let corners =
-            [(-s, s), (s, s), (s, -s), (-s, -s)].map(|(x, y)| centre + Vector3::new(x, -y, 0.0));
+        let corners = upright_square(centre, s);
         let (l, r) = project_tag(&rig, &corners);
         let det = |c| detection(1, c);
         let config = StereoConfig::default();
