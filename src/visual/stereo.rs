@@ -639,17 +639,8 @@ mod tests {
     fn wrong_rows_and_wrong_size_are_rejected() {
         let rig = rig();
         let rect = rig.rectify();
-        let s = 0.08;
-        let centre = Vector3::new(0.0, 0.0, 2.0);
-        let corners = upright_square(centre, s);
-        let (l, r) = project_tag(&rig, &corners);
-        let det = |c: [[f64; 2]; 4]| TagDetection {
-            id: 1,
-            family: TagFamily::Tag36h11,
-            hamming: 0,
-            corners_px: c,
-            centre_px: [0.0, 0.0],
-        };
+        let (l, r) = project_tag(&rig, &upright_square(Vector3::new(0.0, 0.0, 2.0), 0.08));
+        let det = |c| detection(1, c);
         let shifted = r.map(|p| [p[0], p[1] + 6.0]);
         let (tags, rej) = triangulate_tags(
             &rig,
@@ -679,10 +670,7 @@ mod tests {
     fn a_quad_closed_short_of_the_tags_edge_is_rejected() {
         let rig = rig();
         let rect = rig.rectify();
-        let s = 0.08;
-        let centre = Vector3::new(0.2, 0.0, 1.0);
-        let corners = upright_square(centre, s);
-        let (l, r) = project_tag(&rig, &corners);
+        let (l, r) = project_tag(&rig, &upright_square(Vector3::new(0.2, 0.0, 1.0), 0.08));
         let det = |c| detection(1, c);
         let config = StereoConfig::default();
         let (tags, rej) = triangulate_tags(&rig, &rect, &[det(l)], &[det(r)], None, &config);
