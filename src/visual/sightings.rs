@@ -2,7 +2,9 @@
 //! is what the fusion stage takes from the visual half.
 
 use crate::camera::{Rectification, StereoRig};
-use crate::visual::stereo::{detect_pair, triangulate_tags, Rejection, StereoConfig, StereoTag};
+use crate::visual::stereo::{
+    detect_pair, largest_sigma, triangulate_tags, Rejection, StereoConfig, StereoTag,
+};
 use crate::visual::tags::{TagDetector, TagError, TagFamily, TagId};
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use serde::Serialize;
@@ -101,7 +103,7 @@ impl TagSighting {
         // The yaw error is the depth difference of opposite corners over the tag size, scaled by
         // the centre's depth sigma (a flat tag seen at a slant has its corners' depth errors in
         // its plane); see [`YAW_SIGMA_PER_DEPTH_SIGMA`].
-        let largest = cov_left.symmetric_eigenvalues().max().max(0.0).sqrt();
+        let largest = largest_sigma(&cov_left);
         let level = axis.x.hypot(axis.y).max(MIN_LEVEL_NORMAL);
         let yaw_sigma = YAW_SIGMA_PER_DEPTH_SIGMA * largest / tag.size_m.max(1e-3) / level;
         let [roll, pitch] = if flat {

@@ -354,7 +354,7 @@ pub fn triangulate_tags(
         }
         let centre = corners.iter().sum::<Vector3<f64>>() / 4.0;
         let pose = fit_square(&corners, known_size_m.unwrap_or(size_m));
-        let corner_sigma_m = 2.0 * cov.symmetric_eigenvalues().max().max(0.0).sqrt();
+        let corner_sigma_m = 2.0 * largest_sigma(&cov);
         if pose.rms_m > config.max_fit_sigmas * corner_sigma_m {
             rejected.push(reject(format!(
                 "corners {:.1} mm off a square, {:.1} times their sigma of {:.1} mm: a corner is misplaced (a tag running off the picture does this)",
@@ -395,6 +395,12 @@ pub fn triangulate_tags(
         });
     }
     (tags, rejected)
+}
+
+/// The sigma of a tag centre's covariance along its worst direction (for a triangulated tag, its
+/// depth), metres.
+pub(crate) fn largest_sigma(cov: &Matrix3<f64>) -> f64 {
+    cov.symmetric_eigenvalues().max().max(0.0).sqrt()
 }
 
 /// Rows of margin around the left tags' rows searched in the right image (ours: 24 px, room for
