@@ -13,7 +13,9 @@ pub struct FuseConfig {
     /// error over a full turn, 0.063 rad, at about one sigma).
     pub heading_sigma_per_sqrt_rad: f64,
     /// Heading noise per √rad turned of odometry corrected with a survey's calibration
-    /// ([`FuseConfig::for_calibrated_odometry`], what `localize` predicts with; ours: 0.015, a
+    /// ([`FuseConfig::for_calibrated_odometry`], what `localize` predicts with; also what the
+    /// offline graph weighs a turn along an arc with where no visual turn measures it and the
+    /// graph estimates the calibration from tags or visual turns; ours: 0.015, a
     /// measured choice: the calibration removes the 1% wheel-base error that the 0.03 covers,
     /// and with 0.03 each sonar range turns the heading too far. The localisation ATE summed
     /// over the pairs of README, with the walls: willow's 14 pairs 110 cm at 0.03, 81 at 0.02,

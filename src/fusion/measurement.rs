@@ -12,6 +12,29 @@ pub(crate) fn odometry_covariance(path_m: f64, turn_rad: f64, config: &FuseConfi
         + config.heading_sigma_per_sqrt_m.powi(2) * path_m;
     Matrix3::from_diagonal(&Vector3::new(vt + 1e-12, vt + 1e-12, vh + 1e-12))
 }
+/// A turn made with less travel than this per radian is a pivot, about a point between the
+/// wheels (the inner wheel runs backwards for any wheel base over 0.2 m): 0.1 m.
+pub(crate) const PIVOT_RADIUS_M: f64 = 0.1;
+
+/// Odometry noise of one increment with no other measure of its turn, when the graph estimates
+/// the odometry's calibration from tags or visual turns: its turns made along arcs with the
+/// calibrated turn noise, since the calibration removes the wheel-base error the uncalibrated
+/// noise covers; its pivots (`pivot_rad` of the turn, [`PIVOT_RADIUS_M`]) with the uncalibrated
+/// noise, since a robot turning on the spot scrubs its wheels sideways and its effective wheel
+/// base differs from the one its arcs calibrate (Borenstein and Feng's UMBmark).
+pub(crate) fn calibrated_odometry_covariance(
+    path_m: f64,
+    turn_rad: f64,
+    pivot_rad: f64,
+    config: &FuseConfig,
+) -> Matrix3<f64> {
+    let pivot = pivot_rad.clamp(0.0, turn_rad);
+    let mut cov = odometry_covariance(path_m, 0.0, config);
+    cov[(2, 2)] += config.heading_sigma_per_sqrt_rad.powi(2) * pivot
+        + config.calibrated_heading_sigma_per_sqrt_rad.powi(2) * (turn_rad - pivot);
+    cov
+}
+
 /// The planar measurement `(x, y, ψ)` and its covariance, with the configured floors.
 pub(crate) fn sighting_measurement(
     s: &TagSighting,

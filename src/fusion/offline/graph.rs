@@ -9,7 +9,9 @@ use super::factors::{
 };
 use super::keyframes::Keyframes;
 use super::OdometryCalibration;
-use crate::fusion::measurement::{odometry_covariance, sighting_measurement};
+use crate::fusion::measurement::{
+    calibrated_odometry_covariance, odometry_covariance, sighting_measurement, PIVOT_RADIUS_M,
+};
 use crate::fusion::{Anchor, FuseConfig, Observations, OnlineResult};
 use crate::geometry::{wrap_angle, Pose2};
 use crate::visual::tags::TagId;
@@ -190,7 +192,7 @@ pub(super) fn build(
         ],
     };
     graph.add(3, &[&pose_name(0)], Box::new(start), false, config);
-    add_odometry(&mut graph, obs, keyframes, config);
+    add_odometry(&mut graph, obs, keyframes, visual, config);
     if config.estimate_mounting && !keyframes.of_sighting.is_empty() {
         graph
             .init
@@ -340,38 +342,63 @@ fn add_calibration_prior(
 }
 
 /// Odometry between consecutive keyframes; path and turn summed over the samples between them.
+/// Where no visual turn spans an interval and the graph estimates the calibration from tags or
+/// visual turns, its turn noise is the calibrated odometry's ([`calibrated_odometry_covariance`]).
 fn add_odometry(
     graph: &mut Graph,
     obs: &Observations<'_>,
     keyframes: &Keyframes,
+    visual: &[&VisualTurn],
     config: &FuseConfig,
 ) {
     let (odometry, frames) = (obs.odometry, &keyframes.frames);
+    let calibrated =
+        config.calibrate_odometry && !(keyframes.of_sighting.is_empty() && visual.is_empty());
+    // Intervals (by their end keyframe) that a visual turn spans.
+    let mut seen_turning = vec![false; frames.len()];
+    for v in visual {
+        if let (Some(&a), Some(&b)) = (
+            keyframes.at_time.get(&v.from_t_s.to_bits()),
+            keyframes.at_time.get(&v.to_t_s.to_bits()),
+        ) {
+            if a < b {
+                seen_turning[a + 1..=b].fill(true);
+            }
+        }
+    }
     let mut sample = 0;
     for i in 1..frames.len() {
         let (a, b) = (&frames[i - 1], &frames[i]);
         let mut path = 0.0;
         let mut turn = 0.0;
+        let mut pivot = 0.0;
         let mut signed_turn = 0.0;
         let mut prev = a.odom;
         while sample < odometry.len() && odometry[sample].t_s <= a.t_s {
             sample += 1;
         }
         let mut j = sample;
+        let mut step = |d: Pose2| {
+            let (ds, dth) = (d.x.hypot(d.y), wrap_angle(d.theta));
+            path += ds;
+            turn += dth.abs();
+            signed_turn += dth;
+            if ds < PIVOT_RADIUS_M * dth.abs() {
+                pivot += dth.abs();
+            }
+        };
         while j < odometry.len() && odometry[j].t_s < b.t_s {
-            let d = prev.between(&odometry[j].pose);
-            path += d.x.hypot(d.y);
-            turn += wrap_angle(d.theta).abs();
-            signed_turn += wrap_angle(d.theta);
+            step(prev.between(&odometry[j].pose));
             prev = odometry[j].pose;
             j += 1;
         }
-        let d = prev.between(&b.odom);
-        path += d.x.hypot(d.y);
-        turn += wrap_angle(d.theta).abs();
-        signed_turn += wrap_angle(d.theta);
+        step(prev.between(&b.odom));
         let delta = a.odom.between(&b.odom);
-        let cov = odometry_covariance(path, turn, config);
+        let cov = if calibrated && !seen_turning[i] {
+            calibrated_odometry_covariance(path, turn, pivot, config)
+        } else {
+            odometry_covariance(path, turn, config)
+        };
         let (p0, p1) = (pose_name(i - 1), pose_name(i));
         let mut vars: Vec<&str> = vec![&p0, &p1];
         if config.calibrate_odometry {

@@ -781,4 +781,73 @@ mod tests {
         assert!(!offline.converged);
         assert_eq!(offline.trajectory.len(), online.trajectory.len());
     }
+
+    /// Where nothing else measures a turn and the tags observe the calibration, the graph weighs
+    /// a turn along an arc with the calibrated turn noise and a pivot with the uncalibrated one;
+    /// where a visual turn spans the interval, or nothing observes the calibration (no tag, no
+    /// visual turn), every turn keeps the uncalibrated noise.
+    #[test]
+    fn a_pivot_keeps_the_uncalibrated_turn_noise() {
+        use crate::visual::sightings::TagSighting;
+        use crate::visual::vo::VisualTurn;
+        // Straight sides whose wheels turn 0.001 rad every 0.1 m (an arc 100 m across), and
+        // corners turned on the spot.
+        let (odom, truth, sightings, _) = square_run(0.01, 1);
+        let config = FuseConfig::default();
+        let noise = |sightings: &[TagSighting], turns: &[VisualTurn]| {
+            let obs = obs(&odom, sightings, turns);
+            let online = run_online(&obs, &[], &config, None);
+            let visual = keyframes::turns_used(&obs, &config);
+            let frames = keyframes::choose(&obs, &visual, &online, &config, odom[0].pose);
+            let start = (odom[0].pose, None);
+            let graph = graph::build(&obs, &frames, &visual, &online, &config, start, &[]);
+            // Each interval's path, turn and heading sigma.
+            graph
+                .odometry
+                .iter()
+                .map(|(_, f)| (f.path_m, f.turn_rad.abs(), 1.0 / f.sqrt_info[2][2]))
+                .collect::<Vec<_>>()
+        };
+        let sigma = |path: f64, turn: f64, per_sqrt_rad: f64| {
+            (per_sqrt_rad.powi(2) * turn + config.heading_sigma_per_sqrt_m.powi(2) * path + 1e-12)
+                .sqrt()
+        };
+        let (uncalibrated, calibrated) = (
+            config.heading_sigma_per_sqrt_rad,
+            config.calibrated_heading_sigma_per_sqrt_rad,
+        );
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b;
+        let with_tags = noise(&sightings, &[]);
+        let pivots: Vec<_> = with_tags
+            .iter()
+            .filter(|f| f.0 < 1e-9 && f.1 > 0.1)
+            .collect();
+        let arcs: Vec<_> = with_tags
+            .iter()
+            .filter(|f| f.0 > 0.1 && f.1 < 0.05)
+            .collect();
+        assert!(pivots.len() >= 4 && arcs.len() >= 10, "{with_tags:?}");
+        for &&(path, turn, s) in &pivots {
+            assert!(
+                close(s, sigma(path, turn, uncalibrated)),
+                "pivot {turn} rad: {s}"
+            );
+        }
+        for &&(path, turn, s) in &arcs {
+            assert!(close(s, sigma(path, turn, calibrated)), "arc {path} m: {s}");
+        }
+        // Visual turns over the whole run, or nothing that observes the calibration.
+        let turns = turns_of(&truth, 1, 0.001);
+        for (what, intervals) in [
+            ("turns", noise(&sightings, &turns)),
+            ("none", noise(&[], &[])),
+        ] {
+            for &(path, turn, s) in &intervals {
+                assert!(
+                    close(s, sigma(path, turn, uncalibrated)),
+                    "{what}: {path} m, {turn} rad"
+                );
+            }
+        }
+    }
 }
