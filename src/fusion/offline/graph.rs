@@ -31,6 +31,22 @@ pub(super) const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
 /// about what one survey's estimate scatters by (turn scale 0.0066-0.0106 for 0.0100 over the
 /// office's and museum's sample runs, heading drift -0.0059 to -0.0082 for -0.0067 rad/m).
 const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
+
+/// Whether the wheels' errors `c` lie within two sigmas of [`CALIBRATION_PRIOR_SIGMA`]: the prior
+/// does not hold such a calibration back, so the odometry it corrects keeps no systematic error
+/// beyond what the calibrated turn noise covers (wheels off by more, 12% say, are corrected only
+/// in part, and their arcs keep the uncalibrated noise).
+pub(super) fn within_prior(c: &OdometryCalibration) -> bool {
+    let found = [
+        c.turn_scale_error,
+        c.heading_drift_rad_per_m,
+        c.distance_scale_error,
+    ];
+    found
+        .iter()
+        .zip(CALIBRATION_PRIOR_SIGMA)
+        .all(|(v, sigma)| v.abs() <= 2.0 * sigma)
+}
 /// Inverse sigma of the prior that anchors the first pose where the odometry starts (1 mm,
 /// 1 mrad: the survey's frame is its start).
 const START_SQRT_INFO: f64 = 1e3;
@@ -146,14 +162,16 @@ impl Graph {
 
 /// The graph of a run over its keyframes, started from `online`, anchored at the odometry's
 /// first pose, with the odometry calibration's prior centred on `prior` when given (an earlier
-/// survey's) or on no error.
+/// survey's) or on no error. With `calibrated_arcs` (a calibration is known and
+/// [`within_prior`]), turns along arcs that no visual turn measures are weighed with the
+/// calibrated turn noise ([`add_odometry`]).
 pub(super) fn build(
     obs: &Observations<'_>,
     keyframes: &Keyframes,
     visual: &[&VisualTurn],
     online: &OnlineResult,
     config: &FuseConfig,
-    (first, prior): (Pose2, Option<&OdometryCalibration>),
+    (first, prior, calibrated_arcs): (Pose2, Option<&OdometryCalibration>, bool),
     anchors: &[Anchor],
 ) -> Graph {
     let mut graph = Graph {
@@ -192,7 +210,13 @@ pub(super) fn build(
         ],
     };
     graph.add(3, &[&pose_name(0)], Box::new(start), false, config);
-    add_odometry(&mut graph, obs, keyframes, visual, config);
+    add_odometry(
+        &mut graph,
+        obs,
+        keyframes,
+        (visual, calibrated_arcs),
+        config,
+    );
     if config.estimate_mounting && !keyframes.of_sighting.is_empty() {
         graph
             .init
@@ -342,18 +366,20 @@ fn add_calibration_prior(
 }
 
 /// Odometry between consecutive keyframes; path and turn summed over the samples between them.
-/// Where no visual turn spans an interval and the graph estimates the calibration from tags or
-/// visual turns, its turn noise is the calibrated odometry's ([`calibrated_odometry_covariance`]).
+/// With `calibrated_arcs`, where no visual turn spans an interval and the graph estimates the
+/// calibration from tags or visual turns, its turn noise along arcs is the calibrated odometry's
+/// ([`calibrated_odometry_covariance`]).
 fn add_odometry(
     graph: &mut Graph,
     obs: &Observations<'_>,
     keyframes: &Keyframes,
-    visual: &[&VisualTurn],
+    (visual, calibrated_arcs): (&[&VisualTurn], bool),
     config: &FuseConfig,
 ) {
     let (odometry, frames) = (obs.odometry, &keyframes.frames);
-    let calibrated =
-        config.calibrate_odometry && !(keyframes.of_sighting.is_empty() && visual.is_empty());
+    let calibrated = calibrated_arcs
+        && config.calibrate_odometry
+        && !(keyframes.of_sighting.is_empty() && visual.is_empty());
     // Intervals (by their end keyframe) that a visual turn spans.
     let mut seen_turning = vec![false; frames.len()];
     for v in visual {

@@ -389,13 +389,21 @@ fn solve(
     };
     let visual = keyframes::turns_used(obs, config);
     let keyframes = keyframes::choose(obs, &visual, online, config, first.pose);
+    // The calibration known so far: the online pass's latest re-solve's, else an earlier
+    // survey's.
+    let known = online
+        .resolves
+        .last()
+        .map(|r| r.odometry_calibration)
+        .or(prior.copied());
+    let calibrated_arcs = known.as_ref().is_some_and(graph::within_prior);
     let mut graph = graph::build(
         obs,
         &keyframes,
         &visual,
         online,
         config,
-        (first.pose, prior),
+        (first.pose, prior, calibrated_arcs),
         anchors,
     );
     if let (Some(c), true) = (init, graph.init.contains_key(graph::CALIBRATION)) {
@@ -782,8 +790,9 @@ mod tests {
         assert_eq!(offline.trajectory.len(), online.trajectory.len());
     }
 
-    /// Where nothing else measures a turn and the tags observe the calibration, the graph weighs
-    /// a turn along an arc with the calibrated turn noise and a pivot with the uncalibrated one;
+    /// Where nothing else measures a turn and the tags observe a calibration that its prior does
+    /// not hold back, the graph weighs a turn along an arc with the calibrated turn noise and a
+    /// pivot with the uncalibrated one;
     /// where a visual turn spans the interval, or nothing observes the calibration (no tag, no
     /// visual turn), every turn keeps the uncalibrated noise.
     #[test]
@@ -799,7 +808,7 @@ mod tests {
             let online = run_online(&obs, &[], &config, None);
             let visual = keyframes::turns_used(&obs, &config);
             let frames = keyframes::choose(&obs, &visual, &online, &config, odom[0].pose);
-            let start = (odom[0].pose, None);
+            let start = (odom[0].pose, None, true);
             let graph = graph::build(&obs, &frames, &visual, &online, &config, start, &[]);
             // Each interval's path, turn and heading sigma.
             graph
@@ -836,6 +845,19 @@ mod tests {
         for &&(path, turn, s) in &arcs {
             assert!(close(s, sigma(path, turn, calibrated)), "arc {path} m: {s}");
         }
+        // Wheels 12% off are more than the calibration's prior lets it correct: their arcs keep
+        // the uncalibrated noise (`solve` builds their graph without `calibrated_arcs`).
+        let far_off = OdometryCalibration {
+            turn_scale_error: -0.26,
+            heading_drift_rad_per_m: -0.12,
+            distance_scale_error: -0.11,
+        };
+        assert!(!graph::within_prior(&far_off));
+        assert!(graph::within_prior(&OdometryCalibration {
+            turn_scale_error: 0.01,
+            heading_drift_rad_per_m: -0.0067,
+            distance_scale_error: 0.0,
+        }));
         // Visual turns over the whole run, or nothing that observes the calibration.
         let turns = turns_of(&truth, 1, 0.001);
         for (what, intervals) in [
