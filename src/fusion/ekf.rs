@@ -35,6 +35,22 @@ pub(crate) struct Ekf {
     pub(crate) slots: Vec<TagId>,
 }
 
+/// The odometry increment from `last` to `to`, corrected by an odometry calibration when given,
+/// and the distance travelled.
+pub(crate) fn calibrated_increment(
+    last: Pose2,
+    to: Pose2,
+    calibration: Option<&OdometryCalibration>,
+) -> (Pose2, f64) {
+    let mut delta = last.between(&to);
+    let path = delta.x.hypot(delta.y);
+    if let Some(c) = calibration {
+        delta.theta = wrap_angle(delta.theta);
+        delta = c.correct(delta, delta.theta, path);
+    }
+    (delta, path)
+}
+
 impl Ekf {
     /// A filter sure of its start pose (the run's first odometry pose, the survey's anchor).
     pub(crate) fn at_start(odometry: &[StampedPose]) -> (Self, Pose2) {
@@ -58,12 +74,7 @@ impl Ekf {
         calibration: Option<&OdometryCalibration>,
         config: &FuseConfig,
     ) -> f64 {
-        let mut delta = last.between(&to);
-        let path = delta.x.hypot(delta.y);
-        if let Some(c) = calibration {
-            delta.theta = wrap_angle(delta.theta);
-            delta = c.correct(delta, delta.theta, path);
-        }
+        let (delta, path) = calibrated_increment(*last, to, calibration);
         let q = odometry_covariance(path, wrap_angle(delta.theta).abs(), config);
         self.predict(&delta, &q);
         *last = to;
