@@ -1023,6 +1023,20 @@ mod tests {
     use crate::fusion::{run_offline, run_online};
     use crate::metrics::ate_m;
 
+    /// [`square_run`] with 1% wheel errors, twice round, and its survey (online, then offline).
+    fn surveyed_square() -> (
+        Vec<StampedPose>,
+        Vec<StampedPose>,
+        Vec<TagSighting>,
+        crate::fusion::OfflineResult,
+    ) {
+        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let config = FuseConfig::default();
+        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
+        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
+        (odom, truth, sightings, survey)
+    }
+
     /// Along the corridor, with the wall's ranges (left sonar 0.2 m off centre) the filter stays
     /// on its line; without them it ends half a metre off.
     #[test]
@@ -1047,10 +1061,8 @@ mod tests {
     /// a row that agree put it back where they say.
     #[test]
     fn a_lost_filter_starts_again_from_sightings_that_agree() {
-        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let (odom, truth, sightings, survey) = surveyed_square();
         let config = FuseConfig::default();
-        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
-        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         // Halfway round, the odometry jumps 1 m to the robot's left.
         let half = odom.len() / 2;
         let jump = odom[half].pose.compose(&Pose2::new(0.0, 1.0, 0.0));
@@ -1092,10 +1104,8 @@ mod tests {
     /// the survey's start it is wrong and sure of it.
     #[test]
     fn an_unknown_start_is_found_from_the_first_sighting_and_its_sigma_covers_the_wait() {
-        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let (odom, truth, sightings, survey) = surveyed_square();
         let config = FuseConfig::default();
-        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
-        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         // The same run with its odometry (and so its believed start) 3.5 m off.
         let off = Pose2::new(3.5, 0.0, 0.0);
         let shifted: Vec<StampedPose> = odom
@@ -1147,10 +1157,8 @@ mod tests {
     /// 10 cm, and its sigma covers its error from the first.
     #[test]
     fn sightings_of_a_far_tag_are_taken_together_until_the_pose_is_sure() {
-        let (odom, _, sightings, _) = square_run(0.01, 2);
+        let (_, _, _, survey) = surveyed_square();
         let config = FuseConfig::default();
-        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
-        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         let tag = survey.landmarks.iter().find(|l| l.id == 0).unwrap().clone();
         let (tx, ty, tyaw) = (tag.position_m[0], tag.position_m[1], tag.yaw_rad);
         let mut filter = Localizer::new(survey.landmarks.clone(), config, Start::Unknown);
@@ -1419,10 +1427,8 @@ mod tests {
 
     #[test]
     fn localisation_against_a_survey_bounds_the_drift() {
-        let (odom, truth, sightings, _) = square_run(0.01, 2);
+        let (odom, truth, sightings, survey) = surveyed_square();
         let config = FuseConfig::default();
-        let online = run_online(&obs(&odom, &sightings, &[]), &[], &config, None);
-        let survey = run_offline(&obs(&odom, &sightings, &[]), &online, &config, None);
         // A second run with the same drift, localised against the first run's landmarks.
         let result = localize(
             &obs(&odom, &sightings, &[]),
