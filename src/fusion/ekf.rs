@@ -37,7 +37,7 @@ pub(crate) struct Ekf {
 
 /// The odometry increment from `last` to `to`, corrected by an odometry calibration when given,
 /// and the distance travelled.
-pub(crate) fn calibrated_increment(
+fn calibrated_increment(
     last: Pose2,
     to: Pose2,
     calibration: Option<&OdometryCalibration>,
@@ -66,19 +66,20 @@ impl Ekf {
     }
 
     /// Predicts with the odometry increment from `last` to `to`, corrected by an odometry
-    /// calibration when given, and moves `last` on; returns the distance travelled.
+    /// calibration when given, and moves `last` on; returns the increment predicted with and
+    /// the distance travelled.
     pub(crate) fn advance_calibrated(
         &mut self,
         last: &mut Pose2,
         to: Pose2,
         calibration: Option<&OdometryCalibration>,
         config: &FuseConfig,
-    ) -> f64 {
+    ) -> (Pose2, f64) {
         let (delta, path) = calibrated_increment(*last, to, calibration);
         let q = odometry_covariance(path, wrap_angle(delta.theta).abs(), config);
         self.predict(&delta, &q);
         *last = to;
-        path
+        (delta, path)
     }
 
     /// The landmarks the filter holds, in slot order.

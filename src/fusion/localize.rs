@@ -2,7 +2,7 @@
 //! held fixed and the sonar matched against the surveyed walls; and the survey's own tail held
 //! to its walls after the last sighting.
 
-use crate::fusion::ekf::{calibrated_increment, Ekf};
+use crate::fusion::ekf::Ekf;
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::sighting_measurement;
 use crate::fusion::wall_fix::{RangeWindow, FIX_SIGMA_M, FIX_SIGMA_RAD};
@@ -625,14 +625,14 @@ impl Localizer {
             self.begin(t_s, pose);
             return;
         };
-        let (delta, path) = calibrated_increment(last, pose, self.calibration.as_ref());
+        let (delta, path) =
+            self.ekf
+                .advance_calibrated(&mut last, pose, self.calibration.as_ref(), &self.config);
+        self.travelled += path;
         let d = &mut self.dead_reckoned;
         d.pose = d.pose.compose(&delta);
         d.path_m += path;
         d.turn_rad += wrap_angle(delta.theta).abs();
-        self.travelled +=
-            self.ekf
-                .advance_calibrated(&mut last, pose, self.calibration.as_ref(), &self.config);
         self.last = Some((t_s, last));
     }
 

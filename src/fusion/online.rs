@@ -190,12 +190,13 @@ impl<'a> OnlineFilter<'a> {
 
     /// Predicts with the odometry up to `odom`.
     fn advance(&mut self, odom: Pose2) {
-        self.travel += self.ekf.advance_calibrated(
+        let (_, path) = self.ekf.advance_calibrated(
             &mut self.last_odom,
             odom,
             self.calibration.as_ref(),
             self.config,
         );
+        self.travel += path;
     }
 
     /// Handles one event; true when it was a sighting of a landmark seen before, fused.
