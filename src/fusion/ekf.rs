@@ -2,7 +2,7 @@
 //! online survey and by localisation against a survey.
 
 use crate::fusion::landmark::{landmark_from, Extras};
-use crate::fusion::measurement::odometry_covariance;
+use crate::fusion::measurement::{odometry_covariance, tag_in_robot};
 use crate::fusion::{FuseConfig, Landmark, OdometryCalibration};
 use crate::geometry::{wrap_angle, Pose2, StampedPose};
 use crate::visual::tags::TagId;
@@ -139,20 +139,20 @@ impl Ekf {
     pub(crate) fn observe(&self, slot: usize) -> (Vector3<f64>, DMatrix<f64>) {
         let i = 3 + 3 * slot;
         let (s, c) = self.x[2].sin_cos();
-        let d = Vector2::new(self.x[i] - self.x[0], self.x[i + 1] - self.x[1]);
-        let h = Vector3::new(
-            c * d.x + s * d.y,
-            -s * d.x + c * d.y,
-            wrap_angle(self.x[i + 2] - self.x[2]),
-        );
+        // The state's own angles, not wrapped again (the filter's figures stay to the bit).
+        let robot = Pose2 {
+            x: self.x[0],
+            y: self.x[1],
+            theta: self.x[2],
+        };
+        let tag = Pose2 {
+            x: self.x[i],
+            y: self.x[i + 1],
+            theta: self.x[i + 2],
+        };
+        let (h, over_robot) = tag_in_robot(robot, tag);
         let mut jac = DMatrix::zeros(3, self.x.len());
-        jac[(0, 0)] = -c;
-        jac[(0, 1)] = -s;
-        jac[(1, 0)] = s;
-        jac[(1, 1)] = -c;
-        jac[(0, 2)] = -s * d.x + c * d.y;
-        jac[(1, 2)] = -c * d.x - s * d.y;
-        jac[(2, 2)] = -1.0;
+        jac.fixed_view_mut::<3, 3>(0, 0).copy_from(&over_robot);
         jac[(0, i)] = c;
         jac[(0, i + 1)] = s;
         jac[(1, i)] = -s;

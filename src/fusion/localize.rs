@@ -4,7 +4,7 @@
 
 use crate::fusion::ekf::Ekf;
 use crate::fusion::events::{events, Event};
-use crate::fusion::measurement::sighting_measurement;
+use crate::fusion::measurement::{sighting_measurement, tag_in_robot};
 use crate::fusion::wall_fix::{RangeWindow, FIX_SIGMA_M, FIX_SIGMA_RAD};
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
@@ -495,17 +495,27 @@ fn pose_from_kept(
     // Each sighting's residual at pose `x` now, and its noise: the sighting's, the landmark's
     // position turned into the robot frame and its yaw floor, and the odometry's since (its
     // heading error carried over the distance to the tag).
+    // Also the residual's Jacobian over `x`: the measurement's over the pose then, through
+    // `p = x ∘ rel`.
     let residual = |k: &Kept, x: Pose2| {
-        let p = x.compose(&now.pose.between(&k.at.pose));
-        let (s, c) = p.theta.sin_cos();
-        let (dx, dy) = (k.tag.x - p.x, k.tag.y - p.y);
-        let h = Vector3::new(
-            c * dx + s * dy,
-            -s * dx + c * dy,
-            wrap_angle(k.tag.theta - p.theta),
-        );
+        let rel = now.pose.between(&k.at.pose);
+        let p = x.compose(&rel);
+        let (h, over_p) = tag_in_robot(p, k.tag);
         let mut e = k.z - h;
         e[2] = wrap_angle(e[2]);
+        let (s, c) = x.theta.sin_cos();
+        let p_over_x = Matrix3::new(
+            1.0,
+            0.0,
+            -s * rel.x - c * rel.y,
+            0.0,
+            1.0,
+            c * rel.x - s * rel.y,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let jac = -(over_p * p_over_x);
         let turn = nalgebra::Rotation2::new(-p.theta);
         let tag_cov = turn.matrix() * k.tag_cov * turn.matrix().transpose();
         let (path, turned) = (now.path_m - k.at.path_m, now.turn_rad - k.at.turn_rad);
@@ -519,7 +529,7 @@ fn pose_from_kept(
             r[(i, j)] += position[(i, j)];
         }
         r[(2, 2)] += heading_var + config.yaw_sigma_floor_rad.powi(2);
-        (e, r)
+        (e, r, jac)
     };
     let mut x = guess;
     let mut info = Matrix3::zeros();
@@ -527,17 +537,8 @@ fn pose_from_kept(
         info = Matrix3::zeros();
         let mut grad = Vector3::zeros();
         for k in kept {
-            let (e, r) = residual(k, x);
+            let (e, r, jac) = residual(k, x);
             let w = r.try_inverse()?;
-            // d(residual)/d(x, y, theta), by differences.
-            let jac = Matrix3::from_columns(&[0, 1, 2].map(|j| {
-                let mut moved = [x.x, x.y, x.theta];
-                moved[j] += 1e-7;
-                let (em, _) = residual(k, Pose2::new(moved[0], moved[1], moved[2]));
-                let mut d = (em - e) / 1e-7;
-                d[2] = wrap_angle(em[2] - e[2]) / 1e-7;
-                d
-            }));
             info += jac.transpose() * w * jac;
             grad += jac.transpose() * w * e;
         }
@@ -549,7 +550,7 @@ fn pose_from_kept(
     }
     let cov = info.try_inverse()?;
     let agree = kept.iter().all(|k| {
-        let (e, r) = residual(k, x);
+        let (e, r, _) = residual(k, x);
         r.try_inverse()
             .is_some_and(|w| (e.transpose() * w * e)[0] <= config.gate_chi2)
     });

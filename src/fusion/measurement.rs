@@ -2,6 +2,7 @@
 //! the robot frame, and the noise of an odometry increment.
 
 use crate::fusion::FuseConfig;
+use crate::geometry::{wrap_angle, Pose2};
 use crate::visual::sightings::TagSighting;
 use nalgebra::{Matrix3, Vector3};
 
@@ -33,6 +34,31 @@ pub(crate) fn calibrated_odometry_covariance(
     cov[(2, 2)] += config.heading_sigma_per_sqrt_rad.powi(2) * pivot
         + config.calibrated_heading_sigma_per_sqrt_rad.powi(2) * (turn_rad - pivot);
     cov
+}
+
+/// A tag at planar pose `tag` seen from robot pose `robot`: its position and yaw in the robot
+/// frame, and their Jacobian over the robot's `(x, y, theta)` (over the tag's it is the rotation
+/// into the robot frame, and 1 for the yaw).
+pub(crate) fn tag_in_robot(robot: Pose2, tag: Pose2) -> (Vector3<f64>, Matrix3<f64>) {
+    let (s, c) = robot.theta.sin_cos();
+    let (dx, dy) = (tag.x - robot.x, tag.y - robot.y);
+    let h = Vector3::new(
+        c * dx + s * dy,
+        -s * dx + c * dy,
+        wrap_angle(tag.theta - robot.theta),
+    );
+    let jac = Matrix3::new(
+        -c,
+        -s,
+        -s * dx + c * dy,
+        s,
+        -c,
+        -c * dx - s * dy,
+        0.0,
+        0.0,
+        -1.0,
+    );
+    (h, jac)
 }
 
 /// The planar measurement `(x, y, ψ)` and its covariance, with the configured floors.
