@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector2, Vector3};
 
 /// The Jacobians of `pose ∘ (dx, dy, dθ)` with respect to the pose and to the step, for a pose
 /// at heading `theta`.
-fn compose_jacobians(theta: f64, dx: f64, dy: f64) -> (Matrix3<f64>, Matrix3<f64>) {
+pub(crate) fn compose_jacobians(theta: f64, dx: f64, dy: f64) -> (Matrix3<f64>, Matrix3<f64>) {
     let (s, c) = theta.sin_cos();
     #[rustfmt::skip]
     let wrt_pose = Matrix3::new(

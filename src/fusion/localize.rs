@@ -2,7 +2,7 @@
 //! held fixed and the sonar matched against the surveyed walls; and the survey's own tail held
 //! to its walls after the last sighting.
 
-use crate::fusion::ekf::Ekf;
+use crate::fusion::ekf::{compose_jacobians, Ekf};
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::{sighting_measurement, tag_in_robot};
 use crate::fusion::wall_fix::{RangeWindow, FIX_SIGMA_M, FIX_SIGMA_RAD};
@@ -503,18 +503,7 @@ fn pose_from_kept(
         let (h, over_p) = tag_in_robot(p, k.tag);
         let mut e = k.z - h;
         e[2] = wrap_angle(e[2]);
-        let (s, c) = x.theta.sin_cos();
-        let p_over_x = Matrix3::new(
-            1.0,
-            0.0,
-            -s * rel.x - c * rel.y,
-            0.0,
-            1.0,
-            c * rel.x - s * rel.y,
-            0.0,
-            0.0,
-            1.0,
-        );
+        let (p_over_x, _) = compose_jacobians(x.theta, rel.x, rel.y);
         let jac = -(over_p * p_over_x);
         let turn = nalgebra::Rotation2::new(-p.theta);
         let tag_cov = turn.matrix() * k.tag_cov * turn.matrix().transpose();

@@ -11,6 +11,7 @@
 //! arc lies wholly in cells the grid has not seen says nothing and is left out of that match.
 
 use super::keyframes::Keyframe;
+use crate::fusion::ekf::compose_jacobians;
 use crate::fusion::measurement::odometry_covariance;
 use crate::fusion::wall_fix::DistanceField;
 use crate::fusion::FuseConfig;
@@ -200,19 +201,7 @@ fn propagated(
     delta: Pose2,
     config: &FuseConfig,
 ) -> Matrix3<f64> {
-    let (s, c) = pose.theta.sin_cos();
-    let f = Matrix3::new(
-        1.0,
-        0.0,
-        -s * delta.x - c * delta.y,
-        0.0,
-        1.0,
-        c * delta.x - s * delta.y,
-        0.0,
-        0.0,
-        1.0,
-    );
-    let g = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+    let (f, g) = compose_jacobians(pose.theta, delta.x, delta.y);
     let q = odometry_covariance(
         delta.x.hypot(delta.y),
         wrap_angle(delta.theta).abs(),
