@@ -492,34 +492,7 @@ fn pose_from_kept(
     guess: Pose2,
     config: &FuseConfig,
 ) -> Option<(Pose2, Matrix3<f64>)> {
-    // Each sighting's residual at pose `x` now, and its noise: the sighting's, the landmark's
-    // position turned into the robot frame and its yaw floor, and the odometry's since (its
-    // heading error carried over the distance to the tag).
-    // Also the residual's Jacobian over `x`: the measurement's over the pose then, through
-    // `p = x ∘ rel`.
-    let residual = |k: &Kept, x: Pose2| {
-        let rel = now.pose.between(&k.at.pose);
-        let p = x.compose(&rel);
-        let (h, over_p) = tag_in_robot(p, k.tag);
-        let mut e = k.z - h;
-        e[2] = wrap_angle(e[2]);
-        let (p_over_x, _) = compose_jacobians(x.theta, rel.x, rel.y);
-        let jac = -(over_p * p_over_x);
-        let turn = nalgebra::Rotation2::new(-p.theta);
-        let tag_cov = turn.matrix() * k.tag_cov * turn.matrix().transpose();
-        let (path, turned) = (now.path_m - k.at.path_m, now.turn_rad - k.at.turn_rad);
-        let heading_var = config.heading_sigma_per_sqrt_rad.powi(2) * turned
-            + config.heading_sigma_per_sqrt_m.powi(2) * path;
-        let position_var = config.odometry_sigma_m_per_sqrt_m.powi(2) * path
-            + (k.z.x * k.z.x + k.z.y * k.z.y) * heading_var;
-        let position = tag_cov + Matrix2::identity() * position_var;
-        let mut r = k.r;
-        for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-            r[(i, j)] += position[(i, j)];
-        }
-        r[(2, 2)] += heading_var + config.yaw_sigma_floor_rad.powi(2);
-        (e, r, jac)
-    };
+    let residual = |k: &Kept, x: Pose2| kept_residual(k, now, x, config);
     let mut x = guess;
     let mut info = Matrix3::zeros();
     for _ in 0..KEPT_ITERATIONS {
@@ -544,6 +517,51 @@ fn pose_from_kept(
             .is_some_and(|w| (e.transpose() * w * e)[0] <= config.gate_chi2)
     });
     (agree && x.x.is_finite() && x.y.is_finite()).then_some((x, cov))
+}
+
+/// A kept sighting's residual at pose `x` now (`now` the dead-reckoned odometry), its noise and
+/// its Jacobian over `x`. The noise is the sighting's, the landmark's position turned into the
+/// robot frame with the yaw floor, and the odometry's since the sighting: its distance noise on
+/// the robot's position then, and its heading noise turning the robot then, which moves the tag
+/// across the line of sight (not along it: a far tag's range to the robot holds however the
+/// robot turned since) and turns its yaw.
+fn kept_residual(
+    k: &Kept,
+    now: DeadReckoned,
+    x: Pose2,
+    config: &FuseConfig,
+) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+    let rel = now.pose.between(&k.at.pose);
+    let p = x.compose(&rel);
+    let (h, over_p) = tag_in_robot(p, k.tag);
+    let mut e = k.z - h;
+    e[2] = wrap_angle(e[2]);
+    let (p_over_x, _) = compose_jacobians(x.theta, rel.x, rel.y);
+    let jac = -(over_p * p_over_x);
+    let turn = nalgebra::Rotation2::new(-p.theta);
+    let tag_cov = turn.matrix() * k.tag_cov * turn.matrix().transpose();
+    let (path, turned) = (now.path_m - k.at.path_m, now.turn_rad - k.at.turn_rad);
+    let heading_var = config.heading_sigma_per_sqrt_rad.powi(2) * turned
+        + config.heading_sigma_per_sqrt_m.powi(2) * path;
+    let position =
+        tag_cov + Matrix2::identity() * config.odometry_sigma_m_per_sqrt_m.powi(2) * path;
+    let turned_by = over_p.column(2);
+    let mut r = k.r + turned_by * turned_by.transpose() * heading_var;
+    for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+        r[(i, j)] += position[(i, j)];
+    }
+    r[(2, 2)] += config.yaw_sigma_floor_rad.powi(2);
+    (e, r, jac)
+}
+
+/// The kept sightings' summed chi-square at pose `x` now; `None` when a noise is singular.
+fn kept_chi2(kept: &[Kept], now: DeadReckoned, x: Pose2, config: &FuseConfig) -> Option<f64> {
+    kept.iter()
+        .map(|k| {
+            let (e, r, _) = kept_residual(k, now, x, config);
+            r.try_inverse().map(|w| (e.transpose() * w * e)[0])
+        })
+        .sum()
 }
 
 impl Localizer {
@@ -776,9 +794,7 @@ impl Localizer {
     /// count one error hundreds of times).
     pub fn range(&mut self, reading: &SonarReading) -> Option<bool> {
         let layout = self.layout.as_ref()?;
-        if !self.located || self.last.is_none() {
-            return None;
-        }
+        self.last?; // nothing before the first odometry
         if layout.beam == BeamModel::Ray {
             let stride = (RAY_BEAM_SPACING_RAD / layout.cone_rad.max(1e-9))
                 .round()
@@ -789,6 +805,9 @@ impl Localizer {
         }
         if self.config.wall_relocalise {
             self.fix_from_walls(reading);
+        }
+        if !self.located {
+            return None;
         }
         let layout = self.layout.as_ref()?;
         let sonar = SonarInput {
@@ -806,8 +825,10 @@ impl Localizer {
         let (Some(layout), Some((t_s, odom))) = (self.layout.as_ref(), self.last) else {
             return;
         };
+        // Ranges are kept before the pose is known: those of an unknown start's look-around
+        // are matched as soon as a sighting places the robot.
         self.window.push(odom, reading, layout);
-        if !self.window.due(odom) {
+        if !self.located || !self.window.due(odom) {
             return;
         }
         let now = self.estimate();
@@ -818,7 +839,20 @@ impl Localizer {
             3.0 * now.position_sigma_m(),
             3.0 * now.covariance[(2, 2)].max(0.0).sqrt(),
         );
-        if let Some(fix) = self.window.fix(odom, now.pose, reach, &self.walls, layout) {
+        // While the pose rests on sightings, only poses they allow are candidates (a far tag's
+        // sightings hold the robot on a thin arc around it; the walls say where on it).
+        let (kept, dead_reckoned, config) = (&self.kept, self.dead_reckoned, &self.config);
+        let limit = kept_chi2(kept, dead_reckoned, now.pose, config)
+            .filter(|_| !kept.is_empty())
+            .map(|at_estimate| at_estimate + config.gate_chi2);
+        let prior = |p: Pose2| match limit {
+            None => Some(0.0),
+            Some(limit) => kept_chi2(kept, dead_reckoned, p, config).filter(|&c| c <= limit),
+        };
+        if let Some(fix) = self
+            .window
+            .fix(odom, now.pose, reach, &self.walls, layout, &prior)
+        {
             tracing::debug!(
                 "pose taken from the walls at t = {t_s:.1} s: {} of {} ranges agree",
                 fix.inliers,
@@ -1184,6 +1218,102 @@ mod tests {
             last = error;
         }
         assert!(last < 0.1, "{last} m after six sightings");
+    }
+
+    /// In a corridor the walls say nothing about where along it the robot is, and a far tag's
+    /// sighting says its range and bearing to the tag but hardly its heading: together they
+    /// place it. The ranges heard before the sighting are matched as soon as it places the robot.
+    #[test]
+    fn a_far_tag_and_a_corridor_s_walls_place_the_robot_together() {
+        use crate::fusion::testing::{face, ranges_off_faces};
+        use crate::sonar::SonarSensor;
+        let walls = vec![
+            face(90.0, 0.0, [-10.0, 0.0], [30.0, 0.0]),
+            face(270.0, -2.0, [30.0, 2.0], [-10.0, 2.0]),
+        ];
+        let layout = SonarLayout {
+            name: "sides".into(),
+            beam: BeamModel::Cone,
+            cone_rad: 30f64.to_radians(),
+            max_range_m: 5.0,
+            sensors: [-90.0f64, 90.0]
+                .iter()
+                .map(|b| SonarSensor {
+                    x_m: 0.0,
+                    y_m: 0.2 * b.to_radians().sin(),
+                    bearing_rad: b.to_radians(),
+                })
+                .collect(),
+        };
+        // Down the corridor's middle at 0.1 m/s; the odometry, perfect, in its own frame.
+        let truth: Vec<StampedPose> = (0..=300)
+            .map(|k| StampedPose {
+                t_s: 0.1 * k as f64,
+                pose: Pose2::new(2.0 + 0.01 * k as f64, 1.0, 0.0),
+            })
+            .collect();
+        let readings = ranges_off_faces(&truth, &layout, &walls);
+        let (_, _, _, survey) = surveyed_square();
+        let mut tag = survey.landmarks[0].clone();
+        (tag.position_m, tag.yaw_rad) = ([8.0, 1.0, 0.5], std::f64::consts::PI);
+        tag.covariance_m2 = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]];
+        // Seen once at 5 s from 5.5 m, its yaw 0.15 rad off (sigma 1 rad), its range to 5 cm.
+        let sighting = TagSighting {
+            t_s: 5.0,
+            frame: 0,
+            id: tag.id,
+            family: tag.family,
+            size_m: 0.16,
+            position_in_robot_m: [5.5, 0.0, 0.5],
+            covariance_m2: [[2.5e-3, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-4]],
+            yaw_in_robot_rad: std::f64::consts::PI + 0.15,
+            yaw_sigma_rad: 1.0,
+            pitch_rad: 0.0,
+            roll_rad: 0.0,
+            corners_px: None,
+        };
+        let run = |start: Start, sightings: &[TagSighting]| {
+            let mut filter = Localizer::new(vec![tag.clone()], FuseConfig::default(), start)
+                .with_walls(walls.clone(), layout.clone());
+            let mut readings = readings.iter().peekable();
+            let mut errors = Vec::new();
+            for p in &truth {
+                filter.odometry(p.t_s, Pose2::new(p.pose.x - 2.0, 0.0, 0.0));
+                for s in sightings.iter().filter(|s| (s.t_s - p.t_s).abs() < 1e-6) {
+                    filter.sighting(s);
+                }
+                while let Some(r) = readings.next_if(|r| r.t_s <= p.t_s) {
+                    filter.range(r);
+                }
+                let now = filter.estimate();
+                let error = (now.pose.x - p.pose.x).hypot(now.pose.y - p.pose.y);
+                errors.push((p.t_s, error, now.position_sigma_m()));
+            }
+            (filter.wall_fixes().to_vec(), errors)
+        };
+        // The sighting puts the robot 0.8 m off, on its arc around the tag; the walls then
+        // place it on the arc, at once.
+        let (fixes, errors) = run(Start::Unknown, std::slice::from_ref(&sighting));
+        let first = fixes.first().copied().unwrap_or(f64::INFINITY);
+        assert!(first <= 5.2, "the walls placed the robot at {fixes:?}");
+        for &(t_s, error, sigma) in &errors {
+            if t_s >= first {
+                assert!(
+                    error < 0.05 && error < 3.0 * sigma,
+                    "{t_s} s: {error} m, sigma {sigma}"
+                );
+            }
+        }
+        // The walls alone cannot: started 0.8 m off along the corridor with a 1 m sigma, the
+        // filter takes no pose from them.
+        let off = Start::Given {
+            pose: Pose2::new(2.8, 1.0, 0.0),
+            sigma_m: 1.0,
+            sigma_rad: 0.1,
+        };
+        let (fixes, errors) = run(off, &[]);
+        assert!(fixes.is_empty(), "{fixes:?}");
+        assert!(errors.last().unwrap().1 > 0.7, "{:?}", errors.last());
     }
 
     /// A filter started 0.7 m and 10 degrees off with a 1 m sigma (too unsure to match ranges

@@ -41,6 +41,8 @@ const FINE_TRUNCATE_M: f64 = 0.06;
 /// the ranges to agree.
 const INLIER_M: f64 = 0.05;
 const MIN_INLIER_SHARE: f64 = 0.8;
+/// A range's sigma against the walls, metres: half the inlier cut.
+const RANGE_SIGMA_M: f64 = 0.5 * INLIER_M;
 /// A rival pose (further than this from the best, metres) must explain the ranges this many
 /// times worse, in summed truncated squares, for the best to be taken.
 const RIVAL_M: f64 = 0.4;
@@ -192,7 +194,9 @@ impl RangeWindow {
     }
 
     /// Matches the ranges with `walls` around `estimate` (the pose now, at odometry pose `odom`)
-    /// within `reach` (metres, radians: 3 sigma, capped); `None` without a clear fix.
+    /// within `reach` (metres, radians: 3 sigma, capped); `None` without a clear fix. `prior` says
+    /// what else is known of the pose: `None` for a pose it rules out, else its chi-square there,
+    /// added to the ranges' (`Some(0.0)` everywhere: the walls alone).
     pub(super) fn fix(
         &mut self,
         odom: Pose2,
@@ -200,6 +204,7 @@ impl RangeWindow {
         reach: (f64, f64),
         walls: &[WallSegment],
         layout: &SonarLayout,
+        prior: &(dyn Fn(Pose2) -> Option<f64> + Sync),
     ) -> Option<WallFix> {
         self.last_try = Some(odom);
         let field = self
@@ -249,18 +254,24 @@ impl RangeWindow {
             (reach_m, reach_rad),
             (COARSE_STEP_M, COARSE_STEP_RAD),
         );
-        let scored: Vec<(Pose2, f64)> = coarse
+        // Each pose's summed truncated squares, and with the prior's chi-square (in the same
+        // units: times a range's variance).
+        let scored: Vec<(Pose2, f64, f64)> = coarse
             .into_par_iter()
-            .map(|p| (p, cost(p, COARSE_TRUNCATE_M).0))
+            .filter_map(|p| {
+                let prior = prior(p)?;
+                let walls = cost(p, COARSE_TRUNCATE_M).0;
+                Some((p, walls, walls + RANGE_SIGMA_M.powi(2) * prior))
+            })
             .collect();
-        let &(best, best_cost) = scored.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+        let &(best, best_cost, _) = scored.iter().min_by(|a, b| a.2.total_cmp(&b.2))?;
         let rival = scored
             .iter()
-            .filter(|(p, _)| (p.x - best.x).hypot(p.y - best.y) > RIVAL_M)
-            .map(|&(_, c)| c)
+            .filter(|(p, _, _)| (p.x - best.x).hypot(p.y - best.y) > RIVAL_M)
+            .map(|&(_, c, _)| c)
             .fold(f64::INFINITY, f64::min);
         // The ranges' own noise, so that a near-perfect best does not make every rival look far.
-        let floor = arcs.len() as f64 * (0.5 * INLIER_M).powi(2);
+        let floor = arcs.len() as f64 * RANGE_SIGMA_M.powi(2);
         if rival < RIVAL_RATIO * best_cost.max(floor) {
             tracing::debug!(
                 "no pose from the walls: {} ranges explained nearly as well {RIVAL_M} m apart (cost {best_cost:.4} and {rival:.4})",
@@ -274,7 +285,11 @@ impl RangeWindow {
             (FINE_STEP_M, FINE_STEP_RAD),
         )
         .into_iter()
-        .map(|p| (p, cost(p, FINE_TRUNCATE_M)))
+        .filter_map(|p| {
+            let prior = prior(p)?;
+            let (walls, inliers) = cost(p, FINE_TRUNCATE_M);
+            Some((p, (walls + RANGE_SIGMA_M.powi(2) * prior, inliers)))
+        })
         .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0))?;
         (inliers as f64 >= MIN_INLIER_SHARE * arcs.len() as f64).then_some(WallFix {
             pose: fine,
