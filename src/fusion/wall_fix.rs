@@ -1,9 +1,10 @@
-//! The pose from the walls alone, for a localiser too unsure of its pose to match ranges with
-//! walls one at a time (a far tag's fix, an uncertain start): the recent ranges, placed relative
-//! to now by the odometry, are matched with the surveyed walls over a grid of poses around the
-//! estimate, coarse then fine; a fix is taken only when most ranges agree with it and no other
-//! pose of the grid explains them nearly as well (a corridor, whose walls say nothing about
-//! where along it the robot is, gives none).
+//! The pose from the walls, for a localiser too unsure of its pose to match ranges with walls one
+//! at a time (a far tag's fix, an uncertain start): the recent ranges, placed relative to now by
+//! the odometry, are matched with the surveyed walls over a grid of poses around the estimate,
+//! coarse then fine; a fix is taken only when most ranges agree with it and no other pose of the
+//! grid explains them nearly as well (a corridor, whose walls say nothing about where along it
+//! the robot is, gives none). What else is known of the pose (a far tag's sightings, which hold
+//! the robot on an arc around the tag) rules poses out of the grid and weighs the rest.
 //!
 //! A range is explained at a pose by how near its echo's arc (the range across the beam's cone,
 //! or the point down a laser's ray) comes to a surveyed wall: a sonar hears a wall square to its
