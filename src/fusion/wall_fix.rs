@@ -255,15 +255,16 @@ impl RangeWindow {
             (reach_m, reach_rad),
             (COARSE_STEP_M, COARSE_STEP_RAD),
         );
-        // Each pose's summed truncated squares, and with the prior's chi-square (in the same
-        // units: times a range's variance).
+        // A pose the prior allows: its ranges' summed truncated squares, those with the prior's
+        // chi-square added (in the same units: times a range's variance), and its inliers.
+        let weigh = |p: Pose2, truncate: f64| {
+            let prior = prior(p)?;
+            let (walls, inliers) = cost(p, truncate);
+            Some((p, walls, walls + RANGE_SIGMA_M.powi(2) * prior, inliers))
+        };
         let scored: Vec<(Pose2, f64, f64)> = coarse
             .into_par_iter()
-            .filter_map(|p| {
-                let prior = prior(p)?;
-                let walls = cost(p, COARSE_TRUNCATE_M).0;
-                Some((p, walls, walls + RANGE_SIGMA_M.powi(2) * prior))
-            })
+            .filter_map(|p| weigh(p, COARSE_TRUNCATE_M).map(|(p, w, j, _)| (p, w, j)))
             .collect();
         let &(best, best_cost, _) = scored.iter().min_by(|a, b| a.2.total_cmp(&b.2))?;
         let rival = scored
@@ -280,18 +281,14 @@ impl RangeWindow {
             );
             return None;
         }
-        let (fine, (_, inliers)) = grid(
+        let (fine, _, _, inliers) = grid(
             best,
             (COARSE_STEP_M, COARSE_STEP_RAD),
             (FINE_STEP_M, FINE_STEP_RAD),
         )
         .into_iter()
-        .filter_map(|p| {
-            let prior = prior(p)?;
-            let (walls, inliers) = cost(p, FINE_TRUNCATE_M);
-            Some((p, (walls + RANGE_SIGMA_M.powi(2) * prior, inliers)))
-        })
-        .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0))?;
+        .filter_map(|p| weigh(p, FINE_TRUNCATE_M))
+        .min_by(|a, b| a.2.total_cmp(&b.2))?;
         (inliers as f64 >= MIN_INLIER_SHARE * arcs.len() as f64).then_some(WallFix {
             pose: fine,
             inliers,
