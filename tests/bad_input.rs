@@ -648,6 +648,13 @@ fn localize_names_a_bad_landmarks_file() {
              \"heading_drift_rad_per_m\": 0.0, \"distance_scale_error\": 0.0}}",
             "odometry_calibration.turn_scale_error",
         ),
+        // An odometry noise no robot has (a hundred times the model's).
+        (
+            "{\"landmarks\": [], \"odometry_calibration\": {\"turn_scale_error\": 0.01, \
+             \"heading_drift_rad_per_m\": 0.0, \"distance_scale_error\": 0.0}, \
+             \"odometry_noise_scale\": {\"translation\": 0.3, \"turning\": 100.0, \"drift\": 0.7}}",
+            "odometry_noise_scale.turning",
+        ),
     ] {
         std::fs::write(survey_dir.join("landmarks.json"), landmarks).unwrap();
         let (code, err) = localize();

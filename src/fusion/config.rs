@@ -2,6 +2,20 @@
 
 use serde::Serialize;
 
+/// How noisy a robot's calibrated odometry is against [`FuseConfig`]'s model, each as a factor on
+/// the model's sigmas: what a survey measures ([`super::NoiseScales`]) and `localize` predicts
+/// with ([`FuseConfig::with_odometry_noise_scale`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OdometryNoiseScale {
+    /// On the translation's sigma ([`FuseConfig::odometry_sigma_m_per_sqrt_m`]).
+    pub translation: f64,
+    /// On the heading's sigmas per radian turned (calibrated or not).
+    pub turning: f64,
+    /// On the heading's sigma per metre travelled.
+    pub drift: f64,
+}
+
 /// Settings of the fusion stage. Defaults say where they come from.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -192,6 +206,21 @@ impl FuseConfig {
     pub fn for_calibrated_odometry(&self) -> Self {
         Self {
             heading_sigma_per_sqrt_rad: self.calibrated_heading_sigma_per_sqrt_rad,
+            ..self.clone()
+        }
+    }
+
+    /// The settings with the odometry's noise scaled as a survey measured it
+    /// ([`super::NoiseScales`], `landmarks.json`'s `odometry_noise_scale`): the translation's
+    /// sigma by `scale.translation`, the heading's per radian turned by `scale.turning`, and its
+    /// per metre travelled by `scale.drift`.
+    pub fn with_odometry_noise_scale(&self, scale: &OdometryNoiseScale) -> Self {
+        Self {
+            odometry_sigma_m_per_sqrt_m: self.odometry_sigma_m_per_sqrt_m * scale.translation,
+            heading_sigma_per_sqrt_rad: self.heading_sigma_per_sqrt_rad * scale.turning,
+            calibrated_heading_sigma_per_sqrt_rad: self.calibrated_heading_sigma_per_sqrt_rad
+                * scale.turning,
+            heading_sigma_per_sqrt_m: self.heading_sigma_per_sqrt_m * scale.drift,
             ..self.clone()
         }
     }

@@ -47,7 +47,7 @@ pub use crate::visual::sightings::{PairCorners, TagSighting, YAW_SIGMA_PER_DEPTH
 pub use anchors::{
     anchor_frame, anchor_residuals, origin_anchor, Anchor, AnchorError, AnchorResidual,
 };
-pub use config::{FuseConfig, FuseConfigError};
+pub use config::{FuseConfig, FuseConfigError, OdometryNoiseScale};
 pub use landmark::{associate, surveyed_tag_sizes, Conflict, CornerMatch, Landmark};
 pub use localize::{
     hold_tail_to_walls, localize, localize_from, range_scatter, scatter_too_wide, wall_in_beam,
@@ -59,7 +59,8 @@ pub use localize::{
 pub use observations::Observations;
 pub use offline::{
     estimate_mounting, run_offline, run_offline_anchored, run_offline_sonar, run_offline_walls,
-    MountingEstimate, OdometryCalibration, OfflineKept, OfflineResult, MOUNTING_STRETCH_M,
+    MountingEstimate, NoiseScales, OdometryCalibration, OfflineKept, OfflineResult,
+    MOUNTING_STRETCH_M,
 };
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use streaming::{PairError, PairUpdate, StereoLocalizer};

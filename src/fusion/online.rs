@@ -6,8 +6,7 @@ use crate::fusion::events::{events, Event};
 use crate::fusion::landmark::Extras;
 use crate::fusion::measurement::sighting_measurement;
 use crate::fusion::{
-    associate, run_offline, Conflict, FuseConfig, Landmark, Observations, OdometryCalibration,
-    OfflineKept,
+    associate, Conflict, FuseConfig, Landmark, Observations, OdometryCalibration, OfflineKept,
 };
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::hough::Feature;
@@ -389,7 +388,7 @@ impl<'a> OnlineFilter<'a> {
             odometry: &self.obs.odometry[..=i],
             ..*self.obs
         };
-        run_offline(&up_to_now, so_far, config, self.prior.as_ref())
+        super::offline::resolve_online(&up_to_now, so_far, config, self.prior.as_ref())
     }
 
     /// Goes on from a solve's pose, landmarks and odometry calibration.

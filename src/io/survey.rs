@@ -51,6 +51,12 @@ pub struct LandmarksFile {
     /// DESIGN.md's keys; `localize` corrects a later run's odometry with it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub odometry_calibration: Option<OdometryCalibration>,
+    /// How noisy the calibrated odometry was against the fusion's odometry noise model, as a
+    /// factor on its sigmas (ours, beside `odometry_calibration`): the survey's offline residuals
+    /// tell it ([`crate::fusion::NoiseScales`]); `localize` predicts with the model scaled by it
+    /// ([`crate::fusion::FuseConfig::with_odometry_noise_scale`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometry_noise_scale: Option<crate::fusion::OdometryNoiseScale>,
     /// `[x, y, theta]` (metres, radians) of the run's odometry frame in the survey's, when the
     /// survey is not in its start's frame (`--anchors`, `--origin-tag`): `localize` moves a later
     /// run's odometry by it, as the survey did its run's.
@@ -61,6 +67,10 @@ pub struct LandmarksFile {
 /// Largest magnitude of each odometry calibration term a file may give (50% scale errors, 0.5
 /// rad of drift per metre: far beyond any working robot's wheels).
 const CALIBRATION_LIMIT: f64 = 0.5;
+
+/// The odometry noise scales a file may give (a robot twenty times quieter or noisier than the
+/// model is a file gone wrong).
+const NOISE_SCALE_LIMITS: (f64, f64) = (0.05, 20.0);
 
 /// Writes `landmarks.json`.
 pub fn save_landmarks(path: &Path, file: &LandmarksFile) -> Result<(), IoError> {
@@ -110,6 +120,22 @@ pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
             return Err(IoError::content(
                 path,
                 format!("odometry_calibration.{name} = {v}: expected a finite value within +-{CALIBRATION_LIMIT}"),
+            ));
+        }
+    }
+    if let Some(s) = &file.odometry_noise_scale {
+        let terms = [
+            ("translation", s.translation),
+            ("turning", s.turning),
+            ("drift", s.drift),
+        ];
+        let (low, high) = NOISE_SCALE_LIMITS;
+        if let Some((name, v)) = terms.iter().find(|(_, v)| !(low..=high).contains(v)) {
+            return Err(IoError::content(
+                path,
+                format!(
+                    "odometry_noise_scale.{name} = {v}: expected a factor within {low} to {high}"
+                ),
             ));
         }
     }
@@ -377,6 +403,22 @@ pub fn save_survey(
         &LandmarksFile {
             landmarks: records,
             odometry_calibration: s.offline.odometry_calibration,
+            // Measured on the calibrated odometry: meant only with its calibration.
+            odometry_noise_scale: s
+                .offline
+                .noise
+                .filter(|n| {
+                    [n.odometry_translation, n.odometry_turning, n.odometry_drift]
+                        .iter()
+                        .any(Option::is_some)
+                })
+                // A part the residuals cannot tell is left as modelled.
+                .map(|n| crate::fusion::OdometryNoiseScale {
+                    translation: n.odometry_translation.unwrap_or(1.0),
+                    turning: n.odometry_turning.unwrap_or(1.0),
+                    drift: n.odometry_drift.unwrap_or(1.0),
+                })
+                .filter(|_| s.offline.odometry_calibration.is_some()),
             frame_from_odometry: s.frame_from_odometry.map(|f| [f.x, f.y, f.theta]),
         },
     )?;

@@ -304,6 +304,21 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
             c.distance_scale_error,
         );
     }
+    if let Some(n) = &survey.offline.noise {
+        let groups = [
+            ("odometry_translation", n.odometry_translation),
+            ("odometry_turning", n.odometry_turning),
+            ("odometry_drift", n.odometry_drift),
+            ("sightings", n.sightings),
+            ("visual_turns", n.turns),
+        ];
+        for ((name, scale), redundancy) in groups.into_iter().zip(n.redundancy) {
+            if let Some(scale) = scale {
+                m.insert(format!("offline.noise_scale.{name}"), scale);
+            }
+            m.insert(format!("offline.noise_redundancy.{name}"), redundancy);
+        }
+    }
     let o = &survey.offline;
     if o.kept == crate::fusion::OfflineKept::Nothing {
         // Nothing was solved: nothing is claimed.

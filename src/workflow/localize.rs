@@ -6,7 +6,9 @@ use super::sightings::{detect_run, DetectOptions, RunSightings};
 use super::survey::load_run_rig;
 use super::{load_run, load_world_of_run, Error, Result};
 use crate::dataset::RunDataset;
-use crate::fusion::{self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, SonarInput};
+use crate::fusion::{
+    self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, OdometryNoiseScale, SonarInput,
+};
 use crate::geometry::{Pose2, StampedPose};
 use crate::io::{self, OutputDir};
 use crate::metrics::{error_growth, localization_metrics, GrowthBin, LocalizationCounts};
@@ -79,19 +81,32 @@ fn surveyed_walls(survey: &Path, no_walls: bool) -> Result<Vec<WallSegment>> {
 }
 
 /// The settings the filter predicts with: those given, with the turn noise that calibrated
-/// odometry leaves when the odometry is calibrated.
-fn filter_config(config: FuseConfig, calibration: Option<&OdometryCalibration>) -> FuseConfig {
-    match calibration {
-        Some(_) => {
-            let c = config.for_calibrated_odometry();
-            tracing::info!(
-                "predicting with {} heading noise per √rad turned (calibrated odometry)",
-                c.heading_sigma_per_sqrt_rad
-            );
-            c
-        }
-        None => config,
+/// odometry leaves when the odometry is calibrated, and the odometry's noise scaled as the
+/// survey measured it (`noise_scale`, measured on the calibrated odometry).
+fn filter_config(
+    config: FuseConfig,
+    calibration: Option<&OdometryCalibration>,
+    noise_scale: Option<&OdometryNoiseScale>,
+) -> FuseConfig {
+    let Some(_) = calibration else {
+        return config;
+    };
+    let mut c = config.for_calibrated_odometry();
+    if let Some(scale) = noise_scale {
+        tracing::info!(
+            "the survey measured the calibrated odometry's noise against the model: translation {:.2}, turning {:.2}, drift {:.2} times the model's sigmas; predicting with them",
+            scale.translation,
+            scale.turning,
+            scale.drift
+        );
+        c = c.with_odometry_noise_scale(scale);
     }
+    tracing::info!(
+        "predicting with {:.4} m per √m travelled, {:.4} heading noise per √rad turned (calibrated odometry)",
+        c.odometry_sigma_m_per_sqrt_m,
+        c.heading_sigma_per_sqrt_rad
+    );
+    c
 }
 
 /// What a survey gives a localisation.
@@ -100,6 +115,9 @@ struct Surveyed {
     walls: Vec<WallSegment>,
     /// The odometry's errors the survey found, unless told to track with the raw odometry.
     calibration: Option<OdometryCalibration>,
+    /// How noisy the survey found the calibrated odometry against the model (with
+    /// `calibration` only).
+    noise_scale: Option<OdometryNoiseScale>,
     /// Where the survey's run's odometry frame lies in the survey's frame (an anchored survey).
     frame_from_odometry: Option<Pose2>,
 }
@@ -109,6 +127,9 @@ impl Surveyed {
         let file = io::load_landmarks(&request.survey.join("landmarks.json"))?;
         Ok(Self {
             calibration: file.odometry_calibration.filter(|_| !request.raw_odometry),
+            noise_scale: file
+                .odometry_noise_scale
+                .filter(|_| file.odometry_calibration.is_some() && !request.raw_odometry),
             frame_from_odometry: file
                 .frame_from_odometry
                 .map(|[x, y, theta]| Pose2::new(x, y, theta)),
@@ -198,7 +219,11 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             .collect::<Vec<_>>()
             .into();
     }
-    let config = filter_config(io::load_fuse_config(request.config)?, calibration);
+    let config = filter_config(
+        io::load_fuse_config(request.config)?,
+        calibration,
+        surveyed.noise_scale.as_ref(),
+    );
     let world = load_world_of_run(request.world, request.run_dir, &run)?;
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
@@ -268,8 +293,16 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         visual_turns: seen.visual.len(),
     };
     let calibrated = calibration.is_some();
-    let metrics =
+    let mut metrics =
         localization_metrics(&result, &run.odometry, &odometry, calibrated, truth, counts);
+    if let Some(scale) = surveyed.noise_scale {
+        metrics.insert(
+            "odometry.noise_scale_translation".into(),
+            scale.translation.into(),
+        );
+        metrics.insert("odometry.noise_scale_turning".into(), scale.turning.into());
+        metrics.insert("odometry.noise_scale_drift".into(), scale.drift.into());
+    }
     io::save_json(
         &dir.path("report.json"),
         &serde_json::json!({ "metrics": metrics, "error_growth": growth }),

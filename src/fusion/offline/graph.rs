@@ -83,6 +83,26 @@ pub(super) struct Graph {
     pub(super) sighting_index: Vec<usize>,
     /// The odometry factors again, with their variables ([`Graph::odometry_chi2`]).
     pub(super) odometry: Vec<(Vec<String>, BetweenFactor)>,
+    /// The residual row of each measurement, and the noise model it is weighed with
+    /// ([`super::noise`]).
+    pub(super) measured_rows: Vec<(usize, Noise)>,
+}
+
+/// The noise models a graph's measurements are weighed with, whose scale the run itself can
+/// tell ([`super::noise::variance_components`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Noise {
+    /// The odometry's translation between keyframes.
+    OdometryTranslation,
+    /// The odometry's heading change between keyframes, where its modelled noise is mostly
+    /// the turn's (per radian turned).
+    OdometryTurning,
+    /// ... where it is mostly the travel's (per metre travelled).
+    OdometryDrift,
+    /// The tag sightings.
+    Sighting,
+    /// The visual turns.
+    Turn,
 }
 
 /// A sighting is consistent with a solution when its whitened residual's squared norm is below
@@ -158,6 +178,22 @@ impl Graph {
             .add_residual_block(dim, variables, factor, loss);
         self.factors += 1;
     }
+
+    /// [`Graph::add`] for a measurement whose rows are weighed with the `noise` models (one a
+    /// row), its rows noted.
+    fn add_measured(
+        &mut self,
+        noise: &[Noise],
+        variables: &[&str],
+        factor: Box<dyn tiny_solver::factors::FactorImpl + Send>,
+        robust: bool,
+        config: &FuseConfig,
+    ) {
+        let first = self.problem.total_residual_dimension;
+        self.add(noise.len(), variables, factor, robust, config);
+        self.measured_rows
+            .extend(noise.iter().enumerate().map(|(i, &n)| (first + i, n)));
+    }
 }
 
 /// The graph of a run over its keyframes, started from `online`, anchored at the odometry's
@@ -181,6 +217,7 @@ pub(super) fn build(
         sightings: Vec::new(),
         sighting_index: Vec::new(),
         odometry: Vec::new(),
+        measured_rows: Vec::new(),
     };
     for (i, kf) in keyframes.frames.iter().enumerate() {
         graph.init.insert(
@@ -439,7 +476,19 @@ fn add_odometry(
         graph
             .odometry
             .push((vars.iter().map(|v| v.to_string()).collect(), factor.clone()));
-        graph.add(3, &vars, Box::new(factor), false, config);
+        // The covariance is diagonal: the whitened rows are the translation's and the heading's,
+        // the heading's weighed mostly by the turn's noise or by the travel's.
+        let drift = config.heading_sigma_per_sqrt_m.powi(2) * path;
+        let noise = [
+            Noise::OdometryTranslation,
+            Noise::OdometryTranslation,
+            if 2.0 * drift >= cov[(2, 2)] {
+                Noise::OdometryDrift
+            } else {
+                Noise::OdometryTurning
+            },
+        ];
+        graph.add_measured(&noise, &vars, Box::new(factor), false, config);
     }
 }
 
@@ -480,7 +529,13 @@ fn add_sightings(
         graph.sightings.push((vars.clone(), factor.clone()));
         graph.sighting_index.push(k);
         let names: Vec<&str> = vars.iter().map(String::as_str).collect();
-        graph.add(3, &names, Box::new(factor), true, config);
+        graph.add_measured(
+            &[Noise::Sighting; 3],
+            &names,
+            Box::new(factor),
+            true,
+            config,
+        );
     }
 }
 
@@ -506,7 +561,13 @@ fn add_turns(
             sqrt_info: 1.0 / v.sigma_rad.max(1e-6),
         };
         let vars = [pose_name(a), pose_name(b)];
-        graph.add(1, &[&vars[0], &vars[1]], Box::new(factor), true, config);
+        graph.add_measured(
+            &[Noise::Turn],
+            &[&vars[0], &vars[1]],
+            Box::new(factor),
+            true,
+            config,
+        );
     }
 }
 
@@ -556,6 +617,41 @@ fn add_anchor_priors(
     any
 }
 
+/// A problem linearised at `values`: its whitened residuals, their Jacobian (one column per
+/// free tangent direction), and each variable's first column.
+pub(super) struct Linearised {
+    pub(super) residuals: faer::Mat<f64>,
+    pub(super) jacobian: faer::sparse::SparseColMat<usize, f64>,
+    pub(super) columns: HashMap<String, usize>,
+}
+
+impl Linearised {
+    /// `problem` at `values`.
+    pub(super) fn at(problem: &tiny_solver::Problem, values: &HashMap<String, Vector>) -> Self {
+        let blocks = problem.initialize_parameter_blocks(values);
+        let columns = problem.get_variable_name_to_col_idx_dict(&blocks);
+        let total: usize = columns
+            .keys()
+            .map(|k| blocks[k].tangent_size() - blocks[k].fixed_variables.len())
+            .sum();
+        let structure = problem.build_symbolic_structure(&blocks, total, &columns);
+        let (residuals, jacobian) =
+            problem.compute_residual_and_jacobian(&blocks, &columns, &structure);
+        Self {
+            residuals,
+            jacobian,
+            columns,
+        }
+    }
+
+    /// The information `JᵀJ` of a Jacobian.
+    pub(super) fn information(
+        jacobian: &faer::sparse::SparseColMat<usize, f64>,
+    ) -> Option<faer::sparse::SparseColMat<usize, f64>> {
+        Some(jacobian.as_ref().transpose().to_col_major().ok()? * jacobian.as_ref())
+    }
+}
+
 /// The marginal covariance of variable `name` (of `dim` numbers) at `values`: the inverse of the
 /// problem's information (JᵀJ of its whitened residuals) restricted to it, through the sparse
 /// Cholesky the solver itself uses; `None` when the information is singular.
@@ -566,16 +662,10 @@ pub(super) fn marginal_covariance(
     dim: usize,
 ) -> Option<nalgebra::DMatrix<f64>> {
     use tiny_solver::linear::sparse::SparseLinearSolver;
-    let blocks = problem.initialize_parameter_blocks(values);
-    let columns = problem.get_variable_name_to_col_idx_dict(&blocks);
-    let first = *columns.get(name)?;
-    let total: usize = columns
-        .keys()
-        .map(|k| blocks[k].tangent_size() - blocks[k].fixed_variables.len())
-        .sum();
-    let structure = problem.build_symbolic_structure(&blocks, total, &columns);
-    let (_, jacobian) = problem.compute_residual_and_jacobian(&blocks, &columns, &structure);
-    let jtj = jacobian.as_ref().transpose().to_col_major().ok()? * jacobian.as_ref();
+    let linear = Linearised::at(problem, values);
+    let first = *linear.columns.get(name)?;
+    let jtj = Linearised::information(&linear.jacobian)?;
+    let total = jtj.ncols();
     let rhs = faer::Mat::<f64>::from_fn(total, dim, |r, c| f64::from(u8::from(r == first + c)));
     let x = tiny_solver::linear::SparseCholeskySolver::new().solve_jtj(&rhs, &jtj)?;
     let cov = nalgebra::DMatrix::from_fn(dim, dim, |r, c| x[(first + r, c)]);
