@@ -1,12 +1,12 @@
 //! How noisy a run's measurements were, told by the run itself: the variance components of the
-//! solved offline graph (Förstner's estimate). Each group of measurements weighed with one noise
-//! model (the odometry's translations, its heading changes where turning makes most of their
-//! modelled noise and where travelling does, the sightings, the visual turns) gets a factor on its variance, the
-//! group's summed squared whitened residuals over its redundancy (its residuals' degrees of
-//! freedom: its rows less the share of the solution they determine); the factors are iterated
-//! since each group's redundancy depends on the others' weights. The redundancy is the rows less
-//! the trace of `Σ Hg` (`Σ` the solution's covariance, `Hg` the group's information), taken by
-//! Hutchinson's estimator through the sparse Cholesky the solver uses.
+//! solved offline graph (Förstner's estimate). Each group of residual rows weighed with one
+//! noise model (the odometry's translation; its heading where turning makes most of the
+//! modelled noise, and where travelling does; the sightings; the visual turns) gets a factor on
+//! its variance: the group's summed squared whitened residuals over its redundancy, the rows
+//! less the trace of the group's block of the hat matrix `J Σ Jᵀ` (`Σ` the solution's
+//! covariance), taken by Hutchinson's estimator with random signs on the group's rows through
+//! the sparse Cholesky the solver uses. The factors are iterated, each round moving the solution
+//! by a Gauss-Newton step under the new weights, since each group's share depends on the others'.
 //!
 //! What it is for: the odometry's noise model ([`crate::fusion::FuseConfig`]) is set to cover
 //! any robot's wheels; a survey measures this robot's, and `localize` predicts with it. The
