@@ -504,10 +504,12 @@ fn a_later_run_localises_against_the_survey() {
         "localised {localised} vs odometry {odometry}"
     );
     // Issue 5's figure: a second office run keeps ATE <= 5 cm (measured 1.3 cm), with its heading
-    // held by visual odometry and its sonar ranges held to the survey's walls between sightings
-    // (101 ranges fused); with the tags and visual odometry alone, 3.7 cm.
+    // held by visual odometry and its sonar ranges held to the survey's walls between sightings;
+    // with the tags and visual odometry alone, 3.3 cm. 23 ranges are fused (101 when the filter
+    // predicted with the odometry noise model instead of the survey's measure of it: a range is
+    // not fused where the filter knows its distance to the wall better than the wall is known).
     assert!(metric(&report, "walls.surveyed") >= 5.0);
-    assert!(metric(&report, "ranges.fused") >= 50.0);
+    assert!(metric(&report, "ranges.fused") >= 15.0);
     assert!(localised <= 0.05, "localised {localised}");
     let tags_only = metric(
         &localize_run(&run, "loc_tags", false, false),
@@ -590,7 +592,8 @@ fn a_later_run_localises_against_the_survey() {
     assert!(sigma(&growth[0]) < sigma(growth.last().unwrap()));
 
     // The home changed after the survey: a cabinet against a surveyed wall, a sofa. Their echoes
-    // are gated out and the run still localises within 5 cm (measured 1.4 cm; 3.8 tags only).
+    // are gated out and the run still localises within 5 cm (measured 2.0 cm; 1.4 with the odometry
+    // noise model).
     let office = std::fs::read_to_string("samples/office/world.yaml").unwrap();
     let moved = office.replace(
         "  - polyline_m: [[3.5, 4.35], [3.5, 7.5]]\n",
@@ -609,7 +612,9 @@ fn a_later_run_localises_against_the_survey() {
         localised <= 0.05,
         "localised {localised} in the changed home"
     );
-    assert!(metric(&report, "ranges.gated_out") > 50.0);
+    // 31 gated out and 22 fused (78 and 83 when the filter predicted with the odometry noise
+    // model: more of its ranges were matched at all).
+    assert!(metric(&report, "ranges.gated_out") > 15.0);
 
     // The same run once its world is gone (a real robot's run has none): the tags are checked
     // against the sizes the survey used, so the same sightings are fused as with the world.
