@@ -10,12 +10,13 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::{Duration, Instant};
 use stereotag::dataset::RunDataset;
-use stereotag::fusion::{FuseConfig, Localizer, Start, StereoLocalizer};
+use stereotag::fusion::{FuseConfig, Start, StereoLocalizer};
 use stereotag::progress::Silent;
 use stereotag::visual::sightings::sightings_from_pair;
 use stereotag::visual::stereo::StereoConfig;
 use stereotag::visual::tags::{Backend, DetectorConfig, TagDetector, TagFamily};
 use stereotag::viz::RecordingRequest;
+use stereotag::workflow::localize::{SurveyUse, SurveyedMap};
 use stereotag::workflow::sightings::{survey_decimate, DetectOptions, SURVEY_MIN_CONTRAST};
 
 /// Pairs of the run held in memory and cycled through.
@@ -35,9 +36,7 @@ fn detector() -> Box<dyn TagDetector + Send> {
 
 /// What the localiser is fed: the survey and the run, its first [`PAIRS`] pairs loaded.
 struct Fixture {
-    landmarks: Vec<stereotag::fusion::Landmark>,
-    walls: Vec<stereotag::sonar::walls::WallSegment>,
-    calibration: stereotag::fusion::OdometryCalibration,
+    map: SurveyedMap,
     run: RunDataset,
     rig: stereotag::camera::StereoRig,
     pairs: Vec<(f64, image::GrayImage, image::GrayImage)>,
@@ -79,8 +78,7 @@ impl Fixture {
             &Silent,
         )
         .expect("the second day's run");
-        let file =
-            stereotag::io::load_landmarks(&survey.join("landmarks.json")).expect("landmarks");
+        let map = SurveyedMap::load(&survey, SurveyUse::default()).expect("the survey");
         let run = stereotag::workflow::load_run(&run_dir).expect("the run");
         let rig = stereotag::workflow::survey::load_run_rig(&run_dir, &run, false)
             .expect("the rig")
@@ -95,10 +93,7 @@ impl Fixture {
             })
             .collect();
         Self {
-            landmarks: file.landmarks.into_iter().map(|r| r.landmark).collect(),
-            walls: stereotag::io::load_walls_csv(&survey.join("walls_corrected.csv"))
-                .expect("walls"),
-            calibration: file.odometry_calibration.expect("calibration"),
+            map,
             rig,
             run,
             pairs,
@@ -107,13 +102,11 @@ impl Fixture {
 
     /// A localiser at the run's start.
     fn localizer(&self) -> StereoLocalizer {
-        let filter = Localizer::new(
-            self.landmarks.clone(),
-            FuseConfig::default().for_calibrated_odometry(),
+        let filter = self.map.localizer(
+            FuseConfig::default(),
             Start::Survey,
-        )
-        .with_walls(self.walls.clone(), self.run.meta.robot.sonar.clone())
-        .with_calibration(self.calibration);
+            Some(&self.run.meta.robot.sonar),
+        );
         StereoLocalizer::new(filter, self.rig.clone(), detector())
     }
 }

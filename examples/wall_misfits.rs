@@ -1,13 +1,13 @@
 //! Diagnostic: each wall face of a survey (`walls_corrected.csv`) against a simulated run's sonar
 //! placed with the run's ground-truth poses, matched as `localize` matches them. A face the
 //! survey placed well has a median misfit (range measured minus range expected) near zero and
-//! a narrow spread; a face the survey misplaced has its median off; a face that clutter or a
+//! a narrow spread; a face the survey misplaced has its median off (and its `sigma_m`, the
+//! survey's own placement sigma, should cover it); a face that clutter or a
 //! wall the survey did not see echoes in front of has a long negative tail, one the beam passes
 //! (the face longer than the wall) a long positive one.
 //!
 //! Usage: cargo run --release --example wall_misfits -- SURVEY_DIR RUN_DIR
-use stereotag::fusion::{wall_in_beam, SonarInput};
-use stereotag::geometry::pose_at;
+use stereotag::fusion::{wall_misfits, SonarInput};
 use stereotag::io;
 
 /// A range whose misfit is over this is counted apart: 5 cm (2.5 sigma of a range and a wall).
@@ -35,17 +35,12 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         readings: &run.sonar,
         layout: &run.meta.robot.sonar,
         walls: &walls,
+        walls_covariance: None,
     };
-    let mut misfits = vec![Vec::new(); walls.len()];
-    for reading in &run.sonar {
-        let Some(pose) = pose_at(truth, reading.t_s) else {
-            continue;
-        };
-        if let Some(m) = wall_in_beam(&sonar, reading, pose) {
-            misfits[m.wall].push(m.range_m - m.expected_m);
-        }
-    }
-    println!("face,normal_deg,length_m,readings,rms_m,ranges,median_m,p10_m,p90_m,over_5cm");
+    let mut misfits = wall_misfits(&sonar, truth);
+    println!(
+        "face,normal_deg,length_m,readings,rms_m,sigma_m,ranges,median_m,p10_m,p90_m,over_5cm"
+    );
     for (i, (w, m)) in walls.iter().zip(misfits.iter_mut()).enumerate() {
         m.sort_by(f64::total_cmp);
         let q = |f: f64| {
@@ -55,10 +50,11 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         let show = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.3}"));
         let length = (w.to_m[0] - w.from_m[0]).hypot(w.to_m[1] - w.from_m[1]);
         println!(
-            "{i},{:.1},{length:.2},{},{:.3},{},{},{},{},{}",
+            "{i},{:.1},{length:.2},{},{:.3},{},{},{},{},{},{}",
             w.normal_rad.to_degrees(),
             w.readings,
             w.rms_m,
+            show(w.sigma_m),
             m.len(),
             show(q(0.5)),
             show(q(0.1)),

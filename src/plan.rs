@@ -492,6 +492,7 @@ mod tests {
             to_m,
             readings: 50,
             rms_m: 0.01,
+            sigma_m: None,
         };
         use std::f64::consts::{FRAC_PI_2, PI};
         vec![

@@ -681,6 +681,38 @@ fn localize_names_a_bad_landmarks_file() {
         "{err}"
     );
     assert!(!out.exists());
+    // Good walls with their sigma, and their covariance naming a face that is not there (line 3)
+    // or a variance that is not positive (line 2).
+    std::fs::write(
+        survey_dir.join("walls_corrected.csv"),
+        "normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m,sigma_m\n\
+         0,1,1,0,1,2,20,0.01,0.005\n",
+    )
+    .unwrap();
+    for (covariance, line, says) in [
+        (
+            "0,offset,0,offset,2.5e-5\n0,offset,1,offset,1e-6\n",
+            '3',
+            "face 1",
+        ),
+        ("0,turn,0,turn,-1e-6\n", '2', "not positive"),
+    ] {
+        std::fs::write(
+            survey_dir.join("walls_corrected_covariance.csv"),
+            format!("wall_a,part_a,wall_b,part_b,covariance\n{covariance}"),
+        )
+        .unwrap();
+        let (code, err) = localize();
+        assert_eq!(code, 2, "{err}");
+        assert!(
+            err.contains("walls_corrected_covariance.csv")
+                && err.contains(line)
+                && err.contains(says),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
+    std::fs::remove_file(survey_dir.join("walls_corrected_covariance.csv")).unwrap();
     // Fusion settings out of range: named with the file and the key.
     std::fs::remove_file(survey_dir.join("walls_corrected.csv")).unwrap();
     let config = tmp.path().join("fuse.yaml");

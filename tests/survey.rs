@@ -62,6 +62,35 @@ fn run_demo(out: &Path, seed: u64) -> Value {
     )
 }
 
+/// The mean of (error / sigma)² of a survey's corrected walls, over the faces with a sigma and 20
+/// ranges of `run_dir` (its ground-truth poses) matched with them, and their count. A face's
+/// error is the median misfit of its ranges (measured minus expected at the true pose).
+fn wall_placement_z2(survey: &Path, run_dir: &Path) -> (f64, usize) {
+    use stereotag::fusion::{wall_misfits, SonarInput, RANGE_OFF_M};
+    let walls = stereotag::io::load_walls_csv(&survey.join("walls_corrected.csv")).unwrap();
+    let run = stereotag::io::load_run(run_dir).unwrap();
+    let sonar = SonarInput {
+        readings: &run.sonar,
+        layout: &run.meta.robot.sonar,
+        walls: &walls,
+        walls_covariance: None,
+    };
+    let mut misfits = wall_misfits(&sonar, run.ground_truth.as_ref().unwrap());
+    for m in &mut misfits {
+        m.retain(|e| e.abs() <= RANGE_OFF_M);
+    }
+    let z2: Vec<f64> = walls
+        .iter()
+        .zip(&mut misfits)
+        .filter(|(w, m)| w.sigma_m.is_some() && m.len() >= 20)
+        .map(|(w, m)| {
+            m.sort_by(f64::total_cmp);
+            (m[m.len() / 2] / w.sigma_m.unwrap()).powi(2)
+        })
+        .collect();
+    (z2.iter().sum::<f64>() / z2.len().max(1) as f64, z2.len())
+}
+
 /// The demo's steps on `world` (pictures with `rig`, else the default one) into `out`, recorded
 /// if `record`.
 fn demo_of(world: &Path, rig: Option<&Path>, out: &Path, seed: u64, record: bool) -> Value {
@@ -183,6 +212,13 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
         metric(&report, "walls.range_residual_sigma_m"),
         metric(&report, "walls.range_sigma_assumed_m")
     ));
+    // The walls' placement sigmas (walls_corrected.csv's sigma_m, from the offline trajectory's
+    // covariance) are the size of their errors: mean (error / sigma)² 1.21 over the 10 faces
+    // (true errors 0.5 cm RMS, sigmas 0.5 cm); a sigma off by a factor of 1.6 either way fails.
+    let (z2, faces) = wall_placement_z2(&out, &out.join("run"));
+    assert!(faces >= 8, "{faces} faces placed and seen 20 times");
+    assert!((0.4..=2.5).contains(&z2), "mean (error / sigma)² {z2}");
+    assert!(metric(&report, "walls.placed") >= 8.0);
     let turns = metric(&report, "visual.turns");
     let turn_rms = metric(&report, "visual.turn_error_rms_deg");
     assert!(turns > 500.0, "{turns} visual turns");
@@ -386,26 +422,33 @@ fn ground_truth(run_dir: &Path) -> Vec<stereotag::geometry::StampedPose> {
 /// each odometry pose, and the mean position NEES (as `localize` reports it: `e² / (2 σ²)` with
 /// the worst-direction sigma) against the ground truth.
 fn stream_localise(survey: &Path, run_dir: &Path) -> (Vec<stereotag::geometry::StampedPose>, f64) {
-    use stereotag::fusion::{FuseConfig, Localizer, Start, StereoLocalizer};
+    use stereotag::fusion::{FuseConfig, Start, StereoLocalizer};
     use stereotag::geometry::{pose_at, StampedPose};
     use stereotag::visual::tags::{DetectorConfig, TagFamily};
-    let file = stereotag::io::load_landmarks(&survey.join("landmarks.json")).unwrap();
-    let calibration = file
-        .odometry_calibration
-        .expect("the survey calibrated the odometry");
-    let landmarks = file.landmarks.into_iter().map(|r| r.landmark).collect();
-    let walls = stereotag::io::load_walls_csv(&survey.join("walls_corrected.csv")).unwrap();
+    use stereotag::workflow::localize::{SurveyUse, SurveyedMap};
+    let map = SurveyedMap::load(survey, SurveyUse::default()).unwrap();
+    assert!(
+        map.calibration.is_some(),
+        "the survey calibrated the odometry"
+    );
+    assert!(
+        map.noise_scale.is_some(),
+        "the survey measured the odometry's noise"
+    );
+    assert!(
+        map.walls_covariance.is_some(),
+        "the survey placed its walls"
+    );
     let run = stereotag::workflow::load_run(run_dir).unwrap();
     let rig = stereotag::workflow::survey::load_run_rig(run_dir, &run, false)
         .unwrap()
         .expect("the run has pictures");
-    let filter = Localizer::new(
-        landmarks,
-        FuseConfig::default().for_calibrated_odometry(),
+    // As `localize` predicts: the calibrated odometry's noise, scaled as the survey measured it.
+    let filter = map.localizer(
+        FuseConfig::default(),
         Start::Survey,
-    )
-    .with_walls(walls, run.meta.robot.sonar.clone())
-    .with_calibration(calibration);
+        Some(&run.meta.robot.sonar),
+    );
     let detector = Backend::ApriltagC
         .detector(DetectorConfig {
             families: vec![TagFamily::Tag36h11],

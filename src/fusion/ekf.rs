@@ -27,12 +27,15 @@ pub(crate) fn compose_jacobians(theta: f64, dx: f64, dy: f64) -> (Matrix3<f64>, 
     (wrt_pose, wrt_step)
 }
 
-/// The EKF state: pose first, then three numbers per landmark.
+/// The EKF state: pose first, then three numbers per landmark, then `biases` numbers a user
+/// of the filter keeps (the localiser's surveyed walls' offsets and turns), then a heading copy
+/// while a turn is measured ([`Ekf::clone_heading`]).
 #[derive(Debug, Clone)]
 pub(crate) struct Ekf {
     pub(crate) x: DVector<f64>,
     pub(crate) p: DMatrix<f64>,
     pub(crate) slots: Vec<TagId>,
+    pub(crate) biases: usize,
 }
 
 /// The odometry increment from `last` to `to`, corrected by an odometry calibration when given,
@@ -61,8 +64,107 @@ impl Ekf {
             x: DVector::from_vec(vec![start.x, start.y, start.theta]),
             p: DMatrix::identity(3, 3) * 1e-9,
             slots: Vec::new(),
+            biases: 0,
         };
         (ekf, start)
+    }
+
+    /// A filter at `pose` with covariance `cov`, holding `landmarks` (each its key, x, y, yaw
+    /// and their covariance) and after them bias states at zero with covariance `biases`
+    /// (square); the three uncorrelated.
+    pub(crate) fn at_pose(
+        pose: Pose2,
+        cov: &Matrix3<f64>,
+        landmarks: &[(TagId, Vector3<f64>, Matrix3<f64>)],
+        biases: &DMatrix<f64>,
+    ) -> Self {
+        let b = biases.nrows();
+        let l = 3 + 3 * landmarks.len();
+        let n = l + b;
+        let mut x = DVector::zeros(n);
+        x.fixed_rows_mut::<3>(0)
+            .copy_from(&Vector3::new(pose.x, pose.y, pose.theta));
+        let mut p = DMatrix::zeros(n, n);
+        p.fixed_view_mut::<3, 3>(0, 0).copy_from(cov);
+        for (k, (_, at, c)) in landmarks.iter().enumerate() {
+            x.fixed_rows_mut::<3>(3 + 3 * k).copy_from(at);
+            p.fixed_view_mut::<3, 3>(3 + 3 * k, 3 + 3 * k).copy_from(c);
+        }
+        p.view_mut((l, l), (b, b)).copy_from(biases);
+        Self {
+            x,
+            p,
+            slots: landmarks.iter().map(|(key, _, _)| *key).collect(),
+            biases: b,
+        }
+    }
+
+    /// Updates with a sighting of landmark `slot` whose innovation `y`, its covariance `s` and
+    /// Jacobian `jac` are [`Ekf::innovation`]'s, as [`Ekf::update`] does, in `O(n²)`: `P - K S
+    /// K'` with `K = P H' S⁻¹` (a filter holding many states: the localiser's landmarks and
+    /// walls).
+    pub(crate) fn update_sighting(
+        &mut self,
+        y: &Vector3<f64>,
+        s: &Matrix3<f64>,
+        jac: &DMatrix<f64>,
+    ) {
+        let Some(s_inv) = s.try_inverse() else { return };
+        let s_inv = DMatrix::from_column_slice(3, 3, s_inv.as_slice());
+        let pht = &self.p * jac.transpose();
+        let k = &pht * &s_inv;
+        self.x += &k * DVector::from_column_slice(y.as_slice());
+        self.x[2] = wrap_angle(self.x[2]);
+        for l in 0..self.slots.len() {
+            let i = 3 + 3 * l + 2;
+            self.x[i] = wrap_angle(self.x[i]);
+        }
+        self.p -= &k * pht.transpose();
+        self.p = (&self.p + self.p.transpose()) * 0.5;
+    }
+
+    /// Puts the pose at `pose` with covariance `cov`, known apart from the rest of the state
+    /// (a pose taken afresh: from a sighting, or from the walls).
+    pub(crate) fn reset_pose(&mut self, pose: Pose2, cov: &Matrix3<f64>) {
+        self.x
+            .fixed_rows_mut::<3>(0)
+            .copy_from(&Vector3::new(pose.x, pose.y, pose.theta));
+        let n = self.x.len();
+        self.p.view_mut((0, 3), (3, n - 3)).fill(0.0);
+        self.p.view_mut((3, 0), (n - 3, 3)).fill(0.0);
+        self.p.fixed_view_mut::<3, 3>(0, 0).copy_from(cov);
+    }
+
+    /// Puts the pose at `pose`, taken as a linear function of landmarks plus noise: `Σ A ·
+    /// landmark[slot]` over `from`'s `(slot, A)`, and noise of covariance `noise` apart from the
+    /// state. The pose's covariance with every state follows (`T P Tᵀ` for the map `T` that
+    /// replaces the pose's rows), so a pose taken from a tag errs with the tag as the filter
+    /// holds it, and a later sighting of the tag is not counted as news.
+    pub(crate) fn reset_pose_from(
+        &mut self,
+        pose: Pose2,
+        noise: &Matrix3<f64>,
+        from: &[(usize, Matrix3<f64>)],
+    ) {
+        let n = self.x.len();
+        let mut cross = DMatrix::zeros(3, n);
+        for (slot, a) in from {
+            cross += a * self.p.rows(3 + 3 * slot, 3);
+        }
+        let mut own = *noise;
+        for (slot, a) in from {
+            own += cross.fixed_view::<3, 3>(0, 3 + 3 * slot) * a.transpose();
+        }
+        self.p.rows_mut(0, 3).copy_from(&cross);
+        self.p.columns_mut(0, 3).copy_from(&cross.transpose());
+        self.p
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&((own + own.transpose()) * 0.5));
+        self.x.fixed_rows_mut::<3>(0).copy_from(&Vector3::new(
+            pose.x,
+            pose.y,
+            wrap_angle(pose.theta),
+        ));
     }
 
     /// Predicts with the odometry increment from `last` to `to`, corrected by an odometry
@@ -209,20 +311,33 @@ impl Ekf {
     ) -> bool {
         let ph = self.p.columns(0, 3) * h;
         let s = h.dot(&ph.rows(0, 3)) + r;
+        self.update_with(y, &ph, s, gate_chi2)
+    }
+
+    /// Updates with one measurement over the whole state: innovation `y`, Jacobian `h` (one
+    /// number per state), noise variance `r`, after a χ² gate; returns whether it was fused.
+    pub(crate) fn update_row(&mut self, y: f64, h: &DVector<f64>, r: f64, gate_chi2: f64) -> bool {
+        let ph = &self.p * h;
+        let s = h.dot(&ph) + r;
+        self.update_with(y, &ph, s, gate_chi2)
+    }
+
+    /// The update of one measurement with `ph` = P h' and innovation variance `s`.
+    fn update_with(&mut self, y: f64, ph: &DVector<f64>, s: f64, gate_chi2: f64) -> bool {
         if s.is_nan() || s <= 0.0 || y * y / s > gate_chi2 {
             return false;
         }
-        let k = &ph / s;
+        let k = ph / s;
         self.x += &k * y;
         self.x[2] = wrap_angle(self.x[2]);
         // Joseph form, written for one row: P - K h'P - P h K' + K (h'Ph + r) K'.
-        self.p = &self.p - &k * ph.transpose() - &ph * k.transpose() + &k * k.transpose() * s;
+        self.p = &self.p - &k * ph.transpose() - ph * k.transpose() + &k * k.transpose() * s;
         true
     }
 
     /// Whether the state ends with a copy of the heading ([`Ekf::clone_heading`]).
     pub(crate) fn has_clone(&self) -> bool {
-        self.x.len() == 3 + 3 * self.slots.len() + 1
+        self.x.len() == 3 + 3 * self.slots.len() + self.biases + 1
     }
 
     /// Appends a copy of the current heading to the state (replacing an older one), so that a
@@ -263,16 +378,11 @@ impl Ekf {
         let y = wrap_angle(turn - (self.x[2] - self.x[c]));
         let ph = self.p.column(2) - self.p.column(c);
         let s = ph[2] - ph[c] + var;
-        if s.is_nan() || s <= 0.0 || y * y / s > gate_chi2 {
-            return false;
+        let fused = self.update_with(y, &ph, s, gate_chi2);
+        if fused {
+            self.x[c] = wrap_angle(self.x[c]);
         }
-        let k = &ph / s;
-        self.x += &k * y;
-        self.x[2] = wrap_angle(self.x[2]);
-        self.x[c] = wrap_angle(self.x[c]);
-        // Joseph form for one row, as in `update_scalar`.
-        self.p = &self.p - &k * ph.transpose() - &ph * k.transpose() + &k * k.transpose() * s;
-        true
+        fused
     }
 
     /// Adds a landmark at the sighting seen from the current pose; returns its slot.

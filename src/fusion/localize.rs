@@ -9,11 +9,11 @@ use crate::fusion::wall_fix::{RangeWindow, FIX_SIGMA_M, FIX_SIGMA_RAD};
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
-use crate::sonar::{BeamModel, SonarLayout, SonarReading};
+use crate::sonar::{BeamModel, SonarLayout, SonarReading, SonarSensor};
 use crate::visual::sightings::TagSighting;
 use crate::visual::tags::TagId;
 use crate::visual::vo::VisualTurn;
-use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// The result of localising a new run against a saved survey.
 #[derive(Debug, Clone)]
@@ -59,21 +59,16 @@ pub const RELOCALISE_AGREE_M: f64 = 0.3;
 /// How close their headings must agree, radians (about 6 degrees).
 pub const RELOCALISE_AGREE_RAD: f64 = 0.1;
 
-/// The robot pose a sighting of a surveyed landmark gives, with its covariance (the sighting's
-/// and the landmark's position noise, and the heading's carried over the distance to the tag).
-fn pose_from_sighting(s: &TagSighting, l: &Landmark, config: &FuseConfig) -> (Pose2, Matrix3<f64>) {
-    let (z, r) = sighting_measurement(s, config);
-    let theta = wrap_angle(l.yaw_rad - z.z);
+/// The robot pose a sighting of a landmark at `tag` gives (its covariance, and how the pose
+/// errs with the landmark, are [`pose_from_kept`]'s).
+fn pose_from_sighting(s: &TagSighting, tag: Pose2, config: &FuseConfig) -> Pose2 {
+    let (z, _) = sighting_measurement(s, config);
+    let theta = wrap_angle(tag.theta - z.z);
     let (st, ct) = theta.sin_cos();
-    let x = l.position_m[0] - (ct * z.x - st * z.y);
-    let y = l.position_m[1] - (st * z.x + ct * z.y);
-    let yaw_var = r[(2, 2)] + config.yaw_sigma_floor_rad.powi(2);
-    let c = &l.covariance_m2;
-    let pos_var =
-        0.5 * (r[(0, 0)] + r[(1, 1)] + c[0][0] + c[1][1]) + (z.x * z.x + z.y * z.y) * yaw_var;
-    (
-        Pose2::new(x, y, theta),
-        Matrix3::from_diagonal(&Vector3::new(pos_var, pos_var, yaw_var)),
+    Pose2::new(
+        tag.x - (ct * z.x - st * z.y),
+        tag.y - (st * z.x + ct * z.y),
+        theta,
     )
 }
 
@@ -98,6 +93,11 @@ pub struct SonarInput<'a> {
     pub layout: &'a SonarLayout,
     /// The survey's walls (`walls_corrected.csv`).
     pub walls: &'a [WallSegment],
+    /// The covariance of the walls' placement errors, [`WALL_PARTS`] numbers a wall in their
+    /// order (`walls_corrected_covariance.csv`), when the survey measured it: walls placed from
+    /// the same stretch of its trajectory err together. Without it the walls whose offset sigma
+    /// is known ([`WallSegment::sigma_m`]) are taken to err apart, and not to turn.
+    pub walls_covariance: Option<&'a DMatrix<f64>>,
 }
 
 /// A wall face is used only when its normal is this far inside the beam's half-cone: 2 degrees
@@ -207,6 +207,23 @@ pub fn range_scatter(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Opti
     })
 }
 
+/// The misfits (range measured minus range expected) of `sonar`'s readings placed along
+/// `trajectory`, matched with its walls as [`localize`] matches them ([`wall_in_beam`]), by wall:
+/// with a simulated run's ground-truth trajectory, a wall's median misfit is how far off the
+/// survey placed it.
+pub fn wall_misfits(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Vec<Vec<f64>> {
+    let mut misfits = vec![Vec::new(); sonar.walls.len()];
+    for reading in sonar.readings {
+        let Some(pose) = pose_at(trajectory, reading.t_s) else {
+            continue;
+        };
+        if let Some(m) = wall_in_beam(sonar, reading, pose) {
+            misfits[m.wall].push(m.range_m - m.expected_m);
+        }
+    }
+    misfits
+}
+
 /// Share of a survey's ranges off their walls ([`RANGE_OFF_M`]) above which `survey` warns that
 /// holding a later run to those walls may pull it off: 5% (the simulated homes: under 1%; a real
 /// building's ranges off furniture and door frames: 16% on freiburg-079 as sonar).
@@ -222,13 +239,52 @@ pub fn scatter_too_wide(off_share: f64, sigma_m: f64, assumed_sigma_m: f64) -> b
 /// Ranges [`range_scatter`] needs matched: 100.
 pub const RANGE_SCATTER_MIN: usize = 100;
 
-/// Fuses one sonar range against the nearest surveyed wall face in the beam; `Some(fused)` when
-/// a face is in the beam, `None` when there is none (or the filter already knows its distance to
-/// it better than the wall is known).
+/// The numbers of a wall face's placement error: its offset along its normal at its middle
+/// (metres), and its turn (radians; the offset grows by the turn times the distance from the
+/// middle).
+pub const WALL_PARTS: usize = 2;
+
+/// Where along a wall face, from its middle, a range taken at `world_from_robot` by `sensor`
+/// meets it (metres): a sonar's echo at the foot of the perpendicular, a laser's ray where its
+/// line crosses the face.
+pub(crate) fn echo_from_middle(
+    wall: &WallSegment,
+    world_from_robot: Pose2,
+    sensor: &SonarSensor,
+    range_m: f64,
+    beam: BeamModel,
+) -> f64 {
+    let at = world_from_robot.compose(&sensor.robot_from_sensor());
+    let reach = match beam {
+        BeamModel::Cone => 0.0,
+        BeamModel::Ray => range_m,
+    };
+    wall.from_middle([at.x + reach * at.theta.cos(), at.y + reach * at.theta.sin()])
+}
+
+/// How far a sensor moves along a wall face's normal per change of the robot's pose (x, y,
+/// heading) at heading `theta`: `n · (p + R(θ) o)`'s gradient, `o` the sensor's place on the
+/// robot (a sonar's echo off the face changes by as much).
+pub(crate) fn across_wall(wall: &WallSegment, sensor: &SonarSensor, theta: f64) -> Vector3<f64> {
+    let n = wall.normal();
+    let (st, ct) = theta.sin_cos();
+    let (ox, oy) = (sensor.x_m, sensor.y_m);
+    Vector3::new(
+        n[0],
+        n[1],
+        n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy),
+    )
+}
+
+/// Fuses one sonar range against the nearest surveyed wall face in the beam, with the face's
+/// placement error when it is a state of the filter (`bias_of`: its offset's state index, the
+/// turn's next); `Some(fused)` when a face is in the beam, `None` when there is none, the filter
+/// knows the pose too badly to trust the match, or (a face whose placement is not a state) it
+/// already knows its distance to the face better than the face is known.
 fn fuse_range(
     ekf: &mut Ekf,
     reading: &SonarReading,
-    sonar: &SonarInput<'_>,
+    (sonar, bias_of): (&SonarInput<'_>, &[Option<usize>]),
     config: &FuseConfig,
 ) -> Option<bool> {
     let pose = ekf.pose();
@@ -239,9 +295,6 @@ fn fuse_range(
     // range = n . (p + R(theta) o) - offset.
     // A laser's ray meets the face at `phi` off its normal: range = d / cos(phi), with d as
     // above and phi = theta + bearing - normal - pi (a sonar's echo: phi = 0).
-    let n = wall.normal();
-    let (st, ct) = pose.theta.sin_cos();
-    let (ox, oy) = (sensor.x_m, sensor.y_m);
     let phi = match sonar.layout.beam {
         BeamModel::Cone => 0.0,
         BeamModel::Ray => crate::geometry::wrap_angle(
@@ -250,18 +303,37 @@ fn fuse_range(
     };
     let (sp, cp) = phi.sin_cos();
     let d = expected * cp;
-    let h = Vector3::new(
-        n[0] / cp,
-        n[1] / cp,
-        (n[0] * (-st * ox - ct * oy) + n[1] * (ct * ox - st * oy)) / cp + d * sp / (cp * cp),
-    );
+    let h = across_wall(wall, sensor, pose.theta) / cp + Vector3::new(0.0, 0.0, d * sp / (cp * cp));
     let known = (h.transpose() * ekf.p.fixed_view::<3, 3>(0, 0) * h)[0];
-    if known < config.wall_sigma_m.powi(2) || known > config.sonar_max_range_sigma_m.powi(2) {
+    if known > config.sonar_max_range_sigma_m.powi(2) {
         return None;
     }
-    let r = (config.sonar_sigma_m + config.sonar_sigma_frac * range).powi(2)
-        + config.wall_sigma_m.powi(2);
-    Some(ekf.update_scalar(range - expected, &h, r, config.sonar_gate_chi2))
+    let sonar_variance = (config.sonar_sigma_m + config.sonar_sigma_frac * range).powi(2);
+    match bias_of.get(m.wall).copied().flatten() {
+        // The face's offset error is a state (the survey measured it): shared by every range
+        // off the face, it is carried with the pose instead of counted afresh at each range.
+        // range = (n . s - offset - b - t a) / cos(phi), `a` where along the face from its
+        // middle the range meets it.
+        Some(b) => {
+            let a = echo_from_middle(wall, pose, sensor, range, sonar.layout.beam);
+            let mut full = DVector::zeros(ekf.x.len());
+            full.fixed_rows_mut::<3>(0).copy_from(&h);
+            full[b] = -1.0 / cp;
+            full[b + 1] = -a / cp;
+            let y = range - (expected - (ekf.x[b] + ekf.x[b + 1] * a) / cp);
+            Some(ekf.update_row(y, &full, sonar_variance, config.sonar_gate_chi2))
+        }
+        // Otherwise its assumed sigma is added to each range's, and a range is not fused where
+        // the filter already knows its distance to the face better than the face is known.
+        None => {
+            let wall_variance = config.wall_sigma_m.powi(2);
+            if known < wall_variance {
+                return None;
+            }
+            let r = sonar_variance + wall_variance;
+            Some(ekf.update_scalar(range - expected, &h, r, config.sonar_gate_chi2))
+        }
+    }
 }
 
 /// Where a localisation starts.
@@ -323,6 +395,9 @@ pub fn localize_from(
     let mut filter = Localizer::new(landmarks.to_vec(), config.clone(), start);
     if let Some(s) = &sonar {
         filter = filter.with_walls(s.walls.to_vec(), s.layout.clone());
+        if let Some(c) = s.walls_covariance {
+            filter = filter.with_walls_covariance(c.clone());
+        }
     }
     let mut out = LocalizeResult::with_capacity(obs.odometry.len());
     let first_t = obs.odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
@@ -430,9 +505,16 @@ pub struct Localizer {
     landmarks: Vec<Landmark>,
     /// The surveyed walls and the layout of the sensors whose ranges are matched with them.
     walls: Vec<WallSegment>,
+    /// The state index of each wall's offset error, for the walls whose placement the survey
+    /// measured ([`WallSegment::sigma_m`]).
+    bias_of: Vec<Option<usize>>,
+    /// Their covariance, in the order of `walls` ([`SonarInput::walls_covariance`]).
+    walls_covariance: Option<DMatrix<f64>>,
     layout: Option<SonarLayout>,
     /// Corrects each odometry increment before it predicts.
     calibration: Option<OdometryCalibration>,
+    /// The survey's frame from the odometry's, for a run leaving from the survey's start.
+    odometry_frame: Option<Pose2>,
     start: Start,
     ekf: Ekf,
     /// The odometry pose predicted to, and its time; `None` before the first.
@@ -467,14 +549,39 @@ struct DeadReckoned {
 }
 
 /// A sighting kept while the pose rests on sightings alone: the measurement and its noise, the
-/// landmark it sees, and the dead-reckoned odometry when it was taken.
+/// landmark it sees (its slot in the filter, where the filter held it then and how well), and
+/// the dead-reckoned odometry when it was taken.
 #[derive(Debug, Clone, Copy)]
 struct Kept {
     z: Vector3<f64>,
     r: Matrix3<f64>,
+    slot: usize,
     tag: Pose2,
-    tag_cov: Matrix2<f64>,
+    tag_cov: Matrix3<f64>,
     at: DeadReckoned,
+}
+
+/// The pose the kept sightings give ([`pose_from_kept`]), as a linear function of the landmarks
+/// they see: `pose ≈ Σ from[k].1 · landmark[from[k].0] + noise`, the noise the sightings' and
+/// the odometry's, with covariance `noise`. The filter takes it with the landmarks' share of its
+/// error (`Ekf::reset_pose_from`).
+#[derive(Debug, Clone)]
+struct PoseFix {
+    pose: Pose2,
+    noise: Matrix3<f64>,
+    from: Vec<(usize, Matrix3<f64>)>,
+}
+
+/// A kept sighting's residual at a pose ([`kept_residual`]).
+struct KeptResidual {
+    /// Measured less predicted.
+    e: Vector3<f64>,
+    /// Its noise: the sighting's, the odometry's since, and the landmark's.
+    r: Matrix3<f64>,
+    /// Its Jacobian over the pose now.
+    jac: Matrix3<f64>,
+    /// The prediction's over the landmark's x, y and yaw.
+    over_tag: Matrix3<f64>,
 }
 
 /// Sightings kept at most (the oldest let go first).
@@ -499,7 +606,7 @@ fn pose_from_kept(
     now: DeadReckoned,
     guess: Pose2,
     config: &FuseConfig,
-) -> Option<(Pose2, Matrix3<f64>)> {
+) -> Option<PoseFix> {
     let residual = |k: &Kept, x: Pose2| kept_residual(k, now, x, config);
     let mut x = guess;
     let mut info = Matrix3::zeros();
@@ -507,7 +614,7 @@ fn pose_from_kept(
         info = Matrix3::zeros();
         let mut grad = Vector3::zeros();
         for k in kept {
-            let (e, r, jac) = residual(k, x);
+            let KeptResidual { e, r, jac, .. } = residual(k, x);
             let w = r.try_inverse()?;
             info += jac.transpose() * w * jac;
             grad += jac.transpose() * w * e;
@@ -519,26 +626,36 @@ fn pose_from_kept(
         }
     }
     let cov = info.try_inverse()?;
-    let agree = kept.iter().all(|k| {
-        let (e, r, _) = residual(k, x);
-        r.try_inverse()
-            .is_some_and(|w| (e.transpose() * w * e)[0] <= config.gate_chi2)
-    });
-    (agree && x.x.is_finite() && x.y.is_finite()).then_some((x, cov))
+    // At the solution, Σ Jᵀ W e = 0: a landmark moved by δ moves the pose by
+    // cov Jᵀ W (∂h/∂tag) δ; the rest of the error is the noise without the landmarks'.
+    let mut noise = Matrix3::zeros();
+    let mut from = Vec::with_capacity(kept.len());
+    for k in kept {
+        let res = residual(k, x);
+        let w = res.r.try_inverse()?;
+        let e2 = (res.e.transpose() * w * res.e)[0];
+        if e2 > config.gate_chi2 {
+            return None;
+        }
+        let gain = cov * res.jac.transpose() * w;
+        let own = res.r - res.over_tag * k.tag_cov * res.over_tag.transpose();
+        noise += gain * own * gain.transpose();
+        from.push((k.slot, gain * res.over_tag));
+    }
+    (x.x.is_finite() && x.y.is_finite()).then_some(PoseFix {
+        pose: x,
+        noise: (noise + noise.transpose()) * 0.5,
+        from,
+    })
 }
 
 /// A kept sighting's residual at pose `x` now (`now` the dead-reckoned odometry), its noise and
-/// its Jacobian over `x`. The noise is the sighting's, the landmark's position turned into the
-/// robot frame with the yaw floor, and the odometry's since the sighting: its distance noise on
+/// its Jacobian over `x`. The noise is the sighting's, the landmark's (as the filter held it)
+/// turned into the robot frame, and the odometry's since the sighting: its distance noise on
 /// the robot's position then, and its heading noise turning the robot then, which moves the tag
 /// across the line of sight (not along it: a far tag's range to the robot holds however the
 /// robot turned since) and turns its yaw.
-fn kept_residual(
-    k: &Kept,
-    now: DeadReckoned,
-    x: Pose2,
-    config: &FuseConfig,
-) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+fn kept_residual(k: &Kept, now: DeadReckoned, x: Pose2, config: &FuseConfig) -> KeptResidual {
     let rel = now.pose.between(&k.at.pose);
     let p = x.compose(&rel);
     let (h, over_p) = tag_in_robot(p, k.tag);
@@ -546,27 +663,32 @@ fn kept_residual(
     e[2] = wrap_angle(e[2]);
     let (p_over_x, _) = compose_jacobians(x.theta, rel.x, rel.y);
     let jac = -(over_p * p_over_x);
-    let turn = nalgebra::Rotation2::new(-p.theta);
-    let tag_cov = turn.matrix() * k.tag_cov * turn.matrix().transpose();
+    // h = (R(-θ) (tag - p), tag yaw - θ): its gradient over the landmark.
+    let (st, ct) = p.theta.sin_cos();
+    let over_tag = Matrix3::new(ct, st, 0.0, -st, ct, 0.0, 0.0, 0.0, 1.0);
     let (path, turned) = (now.path_m - k.at.path_m, now.turn_rad - k.at.turn_rad);
     let heading_var = config.heading_sigma_per_sqrt_rad.powi(2) * turned
         + config.heading_sigma_per_sqrt_m.powi(2) * path;
-    let position =
-        tag_cov + Matrix2::identity() * config.odometry_sigma_m_per_sqrt_m.powi(2) * path;
     let turned_by = over_p.column(2);
-    let mut r = k.r + turned_by * turned_by.transpose() * heading_var;
-    for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-        r[(i, j)] += position[(i, j)];
+    let mut r = k.r
+        + turned_by * turned_by.transpose() * heading_var
+        + over_tag * k.tag_cov * over_tag.transpose();
+    let travel = config.odometry_sigma_m_per_sqrt_m.powi(2) * path;
+    r[(0, 0)] += travel;
+    r[(1, 1)] += travel;
+    KeptResidual {
+        e,
+        r,
+        jac,
+        over_tag,
     }
-    r[(2, 2)] += config.yaw_sigma_floor_rad.powi(2);
-    (e, r, jac)
 }
 
 /// The kept sightings' summed chi-square at pose `x` now; `None` when a noise is singular.
 fn kept_chi2(kept: &[Kept], now: DeadReckoned, x: Pose2, config: &FuseConfig) -> Option<f64> {
     kept.iter()
         .map(|k| {
-            let (e, r, _) = kept_residual(k, now, x, config);
+            let KeptResidual { e, r, .. } = kept_residual(k, now, x, config);
             r.try_inverse().map(|w| (e.transpose() * w * e)[0])
         })
         .sum()
@@ -580,8 +702,11 @@ impl Localizer {
             config,
             landmarks,
             walls: Vec::new(),
+            bias_of: Vec::new(),
+            walls_covariance: None,
             layout: None,
             calibration: None,
+            odometry_frame: None,
             start,
             ekf: Ekf::at_start(&[]).0,
             last: None,
@@ -602,15 +727,66 @@ impl Localizer {
 
     /// The same, with the ranges of the sensors of `layout` matched against the surveyed `walls`.
     pub fn with_walls(mut self, walls: Vec<WallSegment>, layout: SonarLayout) -> Self {
+        // The walls' states come after the pose's and the landmarks'.
+        let mut next = 3 + 3 * self.landmarks.len();
+        self.bias_of = walls
+            .iter()
+            .map(|w| {
+                w.sigma_m.map(|_| {
+                    next += WALL_PARTS;
+                    next - WALL_PARTS
+                })
+            })
+            .collect();
         self.walls = walls;
         self.layout = Some(layout);
         self
+    }
+
+    /// The same, with the covariance of the walls' placement errors ([`WALL_PARTS`] numbers a
+    /// wall, in the order of the walls given to [`Localizer::with_walls`]) the survey measured;
+    /// ignored unless it is square of that size.
+    pub fn with_walls_covariance(mut self, covariance: DMatrix<f64>) -> Self {
+        self.walls_covariance = Some(covariance);
+        self
+    }
+
+    /// The covariance the walls' error states start with: the survey's, between the walls whose
+    /// sigma it measured ([`WALL_PARTS`] numbers a wall), else their offsets' sigmas apart (and
+    /// their turns known).
+    fn walls_prior(&self) -> DMatrix<f64> {
+        let parts: Vec<usize> = (0..self.walls.len())
+            .filter(|&i| self.bias_of[i].is_some())
+            .flat_map(|i| (0..WALL_PARTS).map(move |k| WALL_PARTS * i + k))
+            .collect();
+        let n = WALL_PARTS * self.walls.len();
+        match &self.walls_covariance {
+            Some(c) if c.nrows() == n && c.ncols() == n => {
+                DMatrix::from_fn(parts.len(), parts.len(), |a, b| c[(parts[a], parts[b])])
+            }
+            _ => DMatrix::from_diagonal(&DVector::from_iterator(
+                parts.len(),
+                parts.iter().map(|&p| match p % WALL_PARTS {
+                    0 => self.walls[p / WALL_PARTS].sigma_m.unwrap_or(0.0).powi(2),
+                    _ => 0.0,
+                }),
+            )),
+        }
     }
 
     /// The same, with each odometry increment corrected by a survey's odometry calibration
     /// before it predicts (give the `config` [`FuseConfig::for_calibrated_odometry`] then).
     pub fn with_calibration(mut self, calibration: OdometryCalibration) -> Self {
         self.calibration = Some(calibration);
+        self
+    }
+
+    /// The same, with the survey solved in another frame than its run's odometry's (an anchored
+    /// survey's `frame_from_odometry`, `landmarks.json`): a run leaving from the survey's start
+    /// ([`Start::Survey`]) starts at its first odometry pose moved by `frame`. (The odometry is
+    /// fed as logged: the filter predicts with its increments.)
+    pub fn with_odometry_frame(mut self, frame: Pose2) -> Self {
+        self.odometry_frame = Some(frame);
         self
     }
 
@@ -654,12 +830,11 @@ impl Localizer {
 
     /// Starts at the first odometry pose, as [`Start`] says.
     fn begin(&mut self, t_s: f64, pose: Pose2) {
-        let diagonal = |sm: f64, sr: f64| {
-            DMatrix::from_diagonal(&DVector::from_vec(vec![sm * sm, sm * sm, sr * sr]))
-        };
+        let diagonal =
+            |sm: f64, sr: f64| Matrix3::from_diagonal(&Vector3::new(sm * sm, sm * sm, sr * sr));
         let (at, p, located) = match self.start {
             Start::Survey => (
-                pose,
+                self.odometry_frame.map_or(pose, |f| f.compose(&pose)),
                 diagonal(SURVEY_START_SIGMA_M, SURVEY_START_SIGMA_RAD),
                 true,
             ),
@@ -674,8 +849,12 @@ impl Localizer {
                 false,
             ),
         };
-        self.ekf.x.copy_from_slice(&[at.x, at.y, at.theta]);
-        self.ekf.p = p;
+        let landmarks: Vec<_> = self
+            .landmarks
+            .iter()
+            .map(|l| landmark_state(l, &self.config))
+            .collect();
+        self.ekf = Ekf::at_pose(at, &p, &landmarks, &self.walls_prior());
         self.located = located;
         self.last = Some((t_s, pose));
     }
@@ -720,31 +899,35 @@ impl Localizer {
         // A sighting updates the pose alone: a heading copy is let go (the turn under way is
         // not fused).
         self.drop_turn();
-        let Some(l) = self
+        let Some(slot) = self
             .landmarks
             .iter()
-            .find(|l| l.id == s.id && l.family == s.family)
+            .position(|l| l.id == s.id && l.family == s.family)
         else {
             return SightingOutcome::NotSurveyed;
         };
-        let (pose, cov) = pose_from_sighting(s, l, &self.config);
+        // The landmark as the filter holds it now.
+        let at = 3 + 3 * slot;
+        let tag = Pose2::new(self.ekf.x[at], self.ekf.x[at + 1], self.ekf.x[at + 2]);
+        let pose = pose_from_sighting(s, tag, &self.config);
         let (z, r) = sighting_measurement(s, &self.config);
-        let c = &l.covariance_m2;
         let kept = Kept {
             z,
             r,
-            tag: Pose2::new(l.position_m[0], l.position_m[1], l.yaw_rad),
-            tag_cov: Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]),
+            slot,
+            tag,
+            tag_cov: self.ekf.p.fixed_view::<3, 3>(at, at).into_owned(),
             at: self.dead_reckoned,
         };
         if !self.located {
             // The first sighting of a surveyed tag says where the robot is.
-            self.restart_at(pose, &cov);
-            self.kept.push(kept);
+            if !self.restart_from(kept, pose) {
+                return SightingOutcome::GatedOut;
+            }
             self.located = true;
             return SightingOutcome::Located;
         }
-        if fuse_sighting(&mut self.ekf, s, l, &self.config) {
+        if fuse_sighting(&mut self.ekf, s, slot, &self.config) {
             self.lost.clear();
             self.travelled = 0.0;
             if !self.kept.is_empty() {
@@ -762,21 +945,25 @@ impl Localizer {
                     (moved.x - pose.x).hypot(moved.y - pose.y) <= RELOCALISE_AGREE_M
                         && wrap_angle(moved.theta - pose.theta).abs() <= RELOCALISE_AGREE_RAD
                 });
-        if agree {
-            self.restart_at(pose, &cov);
-            self.kept.push(kept);
+        if agree && self.restart_from(kept, pose) {
             return SightingOutcome::Relocalised;
         }
         SightingOutcome::GatedOut
     }
 
-    /// Starts again at `pose` with covariance `cov` (the sightings kept are let go).
-    fn restart_at(&mut self, pose: Pose2, cov: &Matrix3<f64>) {
-        self.ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
-        self.ekf.p.copy_from(cov);
+    /// Starts again from the sighting `kept` alone (the sightings kept before are let go), at
+    /// the pose it gives (`pose`), erring with its landmark; false (nothing changed) when its
+    /// noise is singular or not finite.
+    fn restart_from(&mut self, kept: Kept, pose: Pose2) -> bool {
+        let Some(fix) = pose_from_kept(&[kept], self.dead_reckoned, pose, &self.config) else {
+            return false;
+        };
+        self.ekf.reset_pose_from(fix.pose, &fix.noise, &fix.from);
         self.lost.clear();
         self.kept.clear();
+        self.kept.push(kept);
         self.travelled = 0.0;
+        true
     }
 
     /// While the pose rests on sightings alone, takes it from all of them at once
@@ -788,11 +975,8 @@ impl Localizer {
             self.kept.remove(0);
         }
         let now = self.estimate();
-        if let Some((pose, cov)) =
-            pose_from_kept(&self.kept, self.dead_reckoned, now.pose, &self.config)
-        {
-            self.ekf.x.copy_from_slice(&[pose.x, pose.y, pose.theta]);
-            self.ekf.p.copy_from(&cov);
+        if let Some(fix) = pose_from_kept(&self.kept, self.dead_reckoned, now.pose, &self.config) {
+            self.ekf.reset_pose_from(fix.pose, &fix.noise, &fix.from);
         }
         if self.estimate().position_sigma_m() <= self.config.sonar_max_range_sigma_m {
             self.kept.clear();
@@ -826,8 +1010,14 @@ impl Localizer {
             readings: &[],
             layout,
             walls: &self.walls,
+            walls_covariance: None,
         };
-        fuse_range(&mut self.ekf, reading, &sonar, &self.config)
+        fuse_range(
+            &mut self.ekf,
+            reading,
+            (&sonar, &self.bias_of),
+            &self.config,
+        )
     }
 
     /// Keeps `reading` for matching with the walls, and takes the pose from them when the
@@ -875,11 +1065,10 @@ impl Localizer {
             self.drop_turn();
             self.kept.clear();
             let (sm, sr) = (FIX_SIGMA_M, FIX_SIGMA_RAD);
-            self.ekf
-                .x
-                .copy_from_slice(&[fix.pose.x, fix.pose.y, fix.pose.theta]);
-            self.ekf.p =
-                DMatrix::from_diagonal(&DVector::from_vec(vec![sm * sm, sm * sm, sr * sr]));
+            self.ekf.reset_pose(
+                fix.pose,
+                &Matrix3::from_diagonal(&Vector3::new(sm * sm, sm * sm, sr * sr)),
+            );
             self.wall_fixes.push(t_s);
         }
     }
@@ -901,44 +1090,43 @@ impl Localizer {
     }
 }
 
-/// Updates the pose with a sighting of surveyed landmark `l`, held fixed (a pose-only filter
-/// with the landmark's uncertainty moved into the measurement noise); false when gated out.
-fn fuse_sighting(ekf: &mut Ekf, s: &TagSighting, l: &Landmark, config: &FuseConfig) -> bool {
-    let mut full = Ekf {
-        x: DVector::from_vec(vec![
-            ekf.x[0],
-            ekf.x[1],
-            ekf.x[2],
-            l.position_m[0],
-            l.position_m[1],
-            l.yaw_rad,
-        ]),
-        p: DMatrix::zeros(6, 6),
-        slots: vec![TagId {
+/// A surveyed landmark as the filter holds it: its key, x, y and yaw, and their covariance (the
+/// survey's in x and y, the yaw floor in the yaw).
+fn landmark_state(l: &Landmark, config: &FuseConfig) -> (TagId, Vector3<f64>, Matrix3<f64>) {
+    let c = &l.covariance_m2;
+    (
+        TagId {
             family: l.family,
             id: l.id,
-        }],
-    };
-    full.p
-        .fixed_view_mut::<3, 3>(0, 0)
-        .copy_from(&ekf.p.fixed_view::<3, 3>(0, 0));
-    let c = &l.covariance_m2;
-    full.p[(3, 3)] = c[0][0];
-    full.p[(3, 4)] = c[0][1];
-    full.p[(4, 3)] = c[1][0];
-    full.p[(4, 4)] = c[1][1];
-    full.p[(5, 5)] = config.yaw_sigma_floor_rad.powi(2);
+        },
+        Vector3::new(l.position_m[0], l.position_m[1], l.yaw_rad),
+        Matrix3::new(
+            c[0][0],
+            c[0][1],
+            0.0,
+            c[1][0],
+            c[1][1],
+            0.0,
+            0.0,
+            0.0,
+            config.yaw_sigma_floor_rad.powi(2),
+        ),
+    )
+}
+
+/// Updates the filter with a sighting of the landmark in `slot`, a state of the filter (so that
+/// the survey's error in it, shared by every sighting of the tag, is not averaged away); false
+/// when gated out.
+fn fuse_sighting(ekf: &mut Ekf, s: &TagSighting, slot: usize, config: &FuseConfig) -> bool {
     let (z, r) = sighting_measurement(s, config);
-    let (y, sm, jac) = full.innovation(0, &z, &r);
+    let (y, sm, jac) = ekf.innovation(slot, &z, &r);
     let d2 = sm
         .try_inverse()
         .map_or(f64::INFINITY, |si| (y.transpose() * si * y)[0]);
     if d2 > config.gate_chi2 {
         return false;
     }
-    full.update(&y, &sm, &jac, &r);
-    ekf.x.copy_from(&full.x.rows(0, 3));
-    ekf.p.copy_from(&full.p.view((0, 0), (3, 3)));
+    ekf.update_sighting(&y, &sm, &jac);
     true
 }
 
@@ -1094,6 +1282,7 @@ mod tests {
             readings: &readings,
             layout: &layout,
             walls: std::slice::from_ref(&wall),
+            walls_covariance: None,
         };
         let config = FuseConfig::default();
         let with = localize(&obs(&odometry, &[], &[]), &[], Some(sonar), &config);
@@ -1244,6 +1433,147 @@ mod tests {
         assert!(last < 0.1, "{last} m after six sightings");
     }
 
+    /// An anchored survey's frame is not its odometry's: a run leaving from its start starts
+    /// there in the survey's frame, and moves as its odometry says.
+    #[test]
+    fn a_run_from_an_anchored_survey_s_start_starts_in_its_frame() {
+        let frame = Pose2::new(1.0, 2.0, std::f64::consts::FRAC_PI_2);
+        let mut filter = Localizer::new(Vec::new(), FuseConfig::default(), Start::Survey)
+            .with_odometry_frame(frame);
+        filter.odometry(0.0, Pose2::new(0.0, 0.0, 0.0));
+        filter.odometry(1.0, Pose2::new(1.0, 0.0, 0.0));
+        let now = filter.estimate().pose;
+        assert!(
+            (now.x - 1.0).abs() < 1e-9 && (now.y - 3.0).abs() < 1e-9,
+            "{now:?}"
+        );
+        assert!((now.theta - frame.theta).abs() < 1e-9, "{now:?}");
+    }
+
+    /// A surveyed tag's error is shared by every sighting of it: a robot that sees one tag a
+    /// hundred times from where it stands knows its pose no better than the survey knew the tag.
+    /// (With the tag's covariance added to each sighting, as before the landmarks were states,
+    /// the position sigma went to 6 mm here, the tag's 5 cm over √100.) So too when the pose
+    /// was taken from the tag (an unknown start): it errs with the tag from then on (taken
+    /// apart from it, the tag's variance added to the pose's, the sigma along went to 2.9 cm).
+    #[test]
+    fn a_tag_seen_again_and_again_is_known_no_better_than_the_survey_knew_it() {
+        let (_, _, _, survey) = surveyed_square();
+        let mut tag = survey.landmarks[0].clone();
+        tag.covariance_m2 = [[0.0025, 0.0, 0.0], [0.0, 0.0025, 0.0], [0.0, 0.0, 1e-6]];
+        let truth = Pose2::new(tag.position_m[0] - 2.0, tag.position_m[1], 0.0);
+        let given = Start::Given {
+            pose: truth,
+            sigma_m: 1.0,
+            sigma_rad: 0.1,
+        };
+        for start in [given, Start::Unknown] {
+            sighted_again_and_again(&tag, start);
+        }
+    }
+
+    /// [`a_tag_seen_again_and_again_is_known_no_better_than_the_survey_knew_it`] from `start`.
+    fn sighted_again_and_again(tag: &Landmark, start: Start) {
+        let mut filter = Localizer::new(vec![tag.clone()], FuseConfig::default(), start);
+        for k in 0..100 {
+            filter.odometry(0.1 * k as f64, Pose2::new(0.0, 0.0, 0.0));
+            let outcome = filter.sighting(&TagSighting {
+                t_s: 0.1 * k as f64,
+                frame: k,
+                id: tag.id,
+                family: tag.family,
+                size_m: 0.16,
+                position_in_robot_m: [2.0, 0.0, 0.5],
+                covariance_m2: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
+                yaw_in_robot_rad: tag.yaw_rad,
+                yaw_sigma_rad: 0.05,
+                pitch_rad: 0.0,
+                roll_rad: 0.0,
+                corners_px: None,
+            });
+            let expected = match (k, start) {
+                (0, Start::Unknown) => SightingOutcome::Located,
+                _ => SightingOutcome::Fused,
+            };
+            assert_eq!(outcome, expected, "sighting {k} from {start:?}");
+        }
+        // Along the line of sight the tag's 5 cm; across it also its yaw's 0.02 rad at 2 m.
+        let p = filter.estimate().covariance;
+        let (along, across) = (p[(0, 0)].sqrt(), p[(1, 1)].sqrt());
+        assert!(
+            (0.045..=0.055).contains(&along),
+            "along {along} m from {start:?}"
+        );
+        assert!(
+            (0.055..=0.07).contains(&across),
+            "across {across} m from {start:?}"
+        );
+    }
+
+    /// A wall the survey placed 3 cm off, with a 3 cm sigma: the robot held to it sits 3 cm off,
+    /// and knows it may (its sigma across the wall stays near the wall's, however many ranges
+    /// off it are fused), and a wall's turn (the survey's covariance) lets the ranges taken
+    /// along it disagree by as much as the turn may.
+    #[test]
+    fn a_misplaced_wall_s_error_is_carried_not_averaged_away() {
+        use crate::fusion::testing::{face, ranges_off_faces};
+        use crate::sonar::SonarSensor;
+        // The true wall along y = 0 (facing +y); the surveyed one 3 cm further at its middle,
+        // turned 0.01 rad (5 cm further where the robot starts, 1 cm where it ends).
+        let true_wall = face(90.0, 0.0, [-5.0, 0.0], [5.0, 0.0]);
+        let turn = 0.01f64;
+        let mut surveyed = face(
+            90.0 + turn.to_degrees(),
+            -0.03 * turn.cos(),
+            [-5.0, -0.03 - 5.0 * turn],
+            [5.0, -0.03 + 5.0 * turn],
+        );
+        surveyed.sigma_m = Some(0.03);
+        let covariance =
+            DMatrix::from_diagonal(&DVector::from_vec(vec![0.03f64.powi(2), 0.01f64.powi(2)]));
+        let layout = SonarLayout {
+            name: "right".into(),
+            beam: BeamModel::Cone,
+            cone_rad: 30f64.to_radians(),
+            max_range_m: 5.0,
+            sensors: vec![SonarSensor {
+                x_m: 0.0,
+                y_m: -0.2,
+                bearing_rad: -std::f64::consts::FRAC_PI_2,
+            }],
+        };
+        // Along the wall at 1 m from it, 0.1 m/s, the odometry perfect.
+        let truth: Vec<StampedPose> = (0..=400)
+            .map(|k| StampedPose {
+                t_s: 0.1 * k as f64,
+                pose: Pose2::new(-2.0 + 0.01 * k as f64, 1.0, 0.0),
+            })
+            .collect();
+        let readings = ranges_off_faces(&truth, &layout, &[true_wall]);
+        let start = Start::Given {
+            pose: truth[0].pose,
+            sigma_m: 0.1,
+            sigma_rad: 0.001,
+        };
+        for with_covariance in [false, true] {
+            let mut filter = Localizer::new(Vec::new(), FuseConfig::default(), start)
+                .with_walls(vec![surveyed], layout.clone());
+            if with_covariance {
+                filter = filter.with_walls_covariance(covariance.clone());
+            }
+            let mut fused = 0;
+            for (p, r) in truth.iter().zip(&readings) {
+                filter.odometry(p.t_s, p.pose);
+                fused += usize::from(filter.range(r) == Some(true));
+            }
+            let now = filter.estimate();
+            let (error, sigma) = (now.pose.y - 1.0, now.covariance[(1, 1)].sqrt());
+            assert!(fused > 300, "{fused} ranges fused");
+            assert!((0.025..=0.035).contains(&sigma), "sigma {sigma} m");
+            assert!(error.abs() <= 2.0 * sigma, "{error} m off, sigma {sigma}");
+        }
+    }
+
     /// In a corridor the walls say nothing about where along it the robot is, and a far tag's
     /// sighting says its range and bearing to the tag but hardly its heading: together they
     /// place it. The ranges heard before the sighting are matched as soon as it places the robot.
@@ -1390,6 +1720,7 @@ mod tests {
             readings: &readings,
             layout: &layout,
             walls: &walls,
+            walls_covariance: None,
         };
         let run = |wall_relocalise| {
             let config = FuseConfig {
@@ -1448,6 +1779,7 @@ mod tests {
             readings: &readings,
             layout: &layout,
             walls: &walls,
+            walls_covariance: None,
         };
         let reading = readings[0];
         let m = wall_in_beam(&sonar, &reading, Pose2::new(0.0, 0.0, 0.0)).unwrap();
@@ -1514,6 +1846,7 @@ mod tests {
             readings: &readings,
             layout: &layout,
             walls: std::slice::from_ref(&wall),
+            walls_covariance: None,
         };
         let config = FuseConfig::default();
         for (sigma, fused) in [(0.05, true), (0.5, false)] {
@@ -1521,7 +1854,7 @@ mod tests {
             ekf.p = DMatrix::identity(3, 3) * (sigma * sigma);
             ekf.p[(2, 2)] = 1e-6;
             let before = ekf.x.clone();
-            let outcome = fuse_range(&mut ekf, &readings[0], &sonar, &config);
+            let outcome = fuse_range(&mut ekf, &readings[0], (&sonar, &[]), &config);
             assert_eq!(outcome.is_some(), fused, "sigma {sigma}: {outcome:?}");
             assert_eq!(ekf.x == before, !fused, "sigma {sigma}");
         }
@@ -1552,6 +1885,7 @@ mod tests {
             readings: &readings,
             layout: &layout,
             walls: std::slice::from_ref(&wall),
+            walls_covariance: None,
         };
         let held = hold_tail_to_walls(
             &odometry,

@@ -51,16 +51,16 @@ pub use config::{FuseConfig, FuseConfigError, OdometryNoiseScale};
 pub use landmark::{associate, surveyed_tag_sizes, Conflict, CornerMatch, Landmark};
 pub use localize::{
     hold_tail_to_walls, localize, localize_from, range_scatter, scatter_too_wide, wall_in_beam,
-    LocalizeResult, Localizer, PoseEstimate, RangeScatter, SightingOutcome, SonarInput, Start,
-    WallMatch, RANGE_OFF_M, RANGE_OFF_WARN, RANGE_SCATTER_MIN, RAY_BEAM_SPACING_RAD, RAY_MATCH_RAD,
-    RELOCALISE_AFTER, RELOCALISE_AGREE_M, RELOCALISE_AGREE_RAD, UNKNOWN_START_SIGMA_M,
-    WALL_CONE_MARGIN_RAD, WALL_INSET_M,
+    wall_misfits, LocalizeResult, Localizer, PoseEstimate, RangeScatter, SightingOutcome,
+    SonarInput, Start, WallMatch, RANGE_OFF_M, RANGE_OFF_WARN, RANGE_SCATTER_MIN,
+    RAY_BEAM_SPACING_RAD, RAY_MATCH_RAD, RELOCALISE_AFTER, RELOCALISE_AGREE_M,
+    RELOCALISE_AGREE_RAD, UNKNOWN_START_SIGMA_M, WALL_CONE_MARGIN_RAD, WALL_INSET_M, WALL_PARTS,
 };
 pub use observations::Observations;
 pub use offline::{
     estimate_mounting, run_offline, run_offline_anchored, run_offline_sonar, run_offline_walls,
-    MountingEstimate, NoiseScales, OdometryCalibration, OfflineKept, OfflineResult,
-    MOUNTING_STRETCH_M,
+    MountingEstimate, NoiseScales, OdometryCalibration, OfflineKept, OfflineResult, PoseFunction,
+    SolutionCovariance, MOUNTING_STRETCH_M,
 };
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use streaming::{PairError, PairUpdate, StereoLocalizer};

@@ -3,16 +3,19 @@
 //! landmarks.
 
 use crate::dataset::RunDataset;
+use crate::fusion::localize::{across_wall, echo_from_middle, WALL_PARTS};
 use crate::fusion::{
     associate, hold_tail_to_walls, run_offline_anchored, run_offline_sonar, run_offline_walls,
-    run_online, FuseConfig, Landmark, Observations, OdometryCalibration, OfflineResult,
-    OnlineResult, SonarInput,
+    run_online, wall_in_beam, FuseConfig, Landmark, Observations, OdometryCalibration,
+    OfflineResult, OnlineResult, PoseFunction, SonarInput, RANGE_OFF_M,
 };
+use crate::geometry::pose_at;
 use crate::progress::timed;
 use crate::sonar::grid::{GridError, OccupancyMap};
 use crate::sonar::map::{
     counting_map, counting_map_along, layout_walls, map_trajectory, MappingConfig, SonarMap,
 };
+use crate::sonar::walls::WallSegment;
 use crate::visual::sightings::TagSighting;
 use crate::visual::vo::VisualTurn;
 use std::collections::BTreeMap;
@@ -39,6 +42,11 @@ pub struct Survey {
     /// Where the run's odometry frame lies in the survey's, when the survey is solved in another
     /// frame than its start's (anchors): the run's odometry was moved by it before the survey.
     pub frame_from_odometry: Option<crate::geometry::Pose2>,
+    /// The covariance of the corrected walls' placement errors, [`crate::fusion::WALL_PARTS`]
+    /// numbers a wall (its offset at its middle, metres, and its turn, radians) in the order of
+    /// `corrected.walls`, when the survey measured their placement: walls placed from the same
+    /// stretch of trajectory err together.
+    pub walls_covariance: Option<nalgebra::DMatrix<f64>>,
 }
 
 /// How a survey is made.
@@ -89,6 +97,7 @@ pub fn survey(
             readings: &run.sonar,
             layout: &run.meta.robot.sonar,
             walls: &[],
+            walls_covariance: None,
         };
         timed("fuse_sonar", times, || {
             run_offline_sonar(&obs, &online, fuse, &sonar, &mapping.grid)
@@ -108,9 +117,12 @@ pub fn survey(
             hold_tail(run, sightings, visual, &online, &mut offline, mapping, fuse)
         })?;
     }
-    let corrected = timed("map_corrected", times, || {
+    let mut corrected = timed("map_corrected", times, || {
         map_trajectory(&run.sonar_log(), &offline.trajectory, mapping)
     })?;
+    let walls_covariance = timed("place_walls", times, || {
+        place_walls(&mut corrected.walls, run, &offline)
+    });
     let landmarks = offline
         .landmarks
         .iter()
@@ -133,6 +145,7 @@ pub fn survey(
         visual: visual.to_vec(),
         timings_s,
         frame_from_odometry: None,
+        walls_covariance,
     })
 }
 
@@ -154,6 +167,7 @@ fn walls_pass(
         readings: &run.sonar,
         layout,
         walls: &walls,
+        walls_covariance: None,
     };
     let held = run_offline_walls(
         obs,
@@ -176,7 +190,10 @@ fn walls_pass(
         offline.sightings_consistent[1]
     );
     Ok(match held.kept {
-        crate::fusion::OfflineKept::Solution => held,
+        crate::fusion::OfflineKept::Solution => OfflineResult {
+            covariance: offline.covariance,
+            ..held
+        },
         _ => offline,
     })
 }
@@ -224,10 +241,104 @@ fn hold_tail(
             readings: &run.sonar,
             layout,
             walls: &walls,
+            walls_covariance: None,
         },
         fuse,
     );
     Ok(())
+}
+
+/// The corrected faces' placement: the covariance of their errors, two numbers a face (its
+/// offset along its normal at its middle, metres, and its turn, radians: [`WALL_PARTS`]), in the
+/// order of `walls`, with each face's sigma where its ranges met it ([`WallSegment::sigma_m`])
+/// set from it.
+///
+/// A face's error is that of the poses its ranges were taken from, carried along its normal
+/// (each at the nearest keyframe) to its ranges (matched as `localize` matches ranges, within
+/// [`RANGE_OFF_M`]): the line fitted to them along the face (least squares) is its offset and
+/// turn, each with the fit's own noise (the range residuals' `rms²` over the fit). The covariance
+/// comes from the offline solution's ([`OfflineResult::covariance`]): faces placed from the same
+/// stretch of trajectory err together, and a survey's heading error turns its long faces. A face
+/// no range is matched with keeps `None` (and zeros); without the solution's covariance nothing
+/// is measured.
+fn place_walls(
+    walls: &mut [WallSegment],
+    run: &RunDataset,
+    offline: &OfflineResult,
+) -> Option<nalgebra::DMatrix<f64>> {
+    let covariance = offline.covariance.as_ref()?;
+    let layout = &run.meta.robot.sonar;
+    let sonar = SonarInput {
+        readings: &run.sonar,
+        layout,
+        walls,
+        walls_covariance: None,
+    };
+    // Each face's ranges: the keyframe, the gradient, where along the face.
+    type Seen = (usize, nalgebra::Vector3<f64>, f64);
+    let mut seen: Vec<Vec<Seen>> = vec![Vec::new(); walls.len()];
+    for reading in &run.sonar {
+        let Some(pose) = pose_at(&offline.trajectory, reading.t_s) else {
+            continue;
+        };
+        let (Some(m), Some(sensor), Some(k)) = (
+            wall_in_beam(&sonar, reading, pose),
+            layout.sensors.get(reading.sensor),
+            covariance.keyframe_at(reading.t_s),
+        ) else {
+            continue;
+        };
+        if (m.range_m - m.expected_m).abs() <= RANGE_OFF_M {
+            let w = &walls[m.wall];
+            let along = echo_from_middle(w, pose, sensor, m.range_m, layout.beam);
+            seen[m.wall].push((k, across_wall(w, sensor, pose.theta), along));
+        }
+    }
+    // The line e(a) = offset + turn a through the pose errors carried to each range, fitted by
+    // least squares: the turn is their slope about their mean place `mean`, the offset (at the
+    // middle) their mean less the turn times `mean`.
+    let mut functions: Vec<PoseFunction> = Vec::with_capacity(WALL_PARTS * walls.len());
+    let mut fitted = vec![(0.0, 0.0); walls.len()];
+    for (i, s) in seen.iter().enumerate() {
+        let n = s.len().max(1) as f64;
+        let mean = s.iter().map(|x| x.2).sum::<f64>() / n;
+        let spread = s.iter().map(|x| (x.2 - mean).powi(2)).sum::<f64>();
+        let slope = |a: f64| {
+            if spread > 0.0 {
+                (a - mean) / spread
+            } else {
+                0.0
+            }
+        };
+        functions.push(
+            s.iter()
+                .map(|&(k, g, a)| (k, g * (1.0 / n - mean * slope(a))))
+                .collect(),
+        );
+        functions.push(s.iter().map(|&(k, g, a)| (k, g * slope(a))).collect());
+        fitted[i] = (mean, spread);
+    }
+    let mut matrix = covariance.of(&functions)?;
+    for (i, w) in walls.iter_mut().enumerate() {
+        if seen[i].is_empty() {
+            continue;
+        }
+        let (o, t) = (WALL_PARTS * i, WALL_PARTS * i + 1);
+        let n = seen[i].len() as f64;
+        let (mean, spread) = fitted[i];
+        // The fit's own noise in the line: a face seen from one place only has its turn as
+        // unknown as its fit leaves it over 10 cm.
+        let fit = w.rms_m.powi(2);
+        let s = spread.max(n * 0.01);
+        matrix[(o, o)] += fit * (1.0 / n + mean * mean / s);
+        matrix[(o, t)] -= fit * mean / s;
+        matrix[(t, o)] -= fit * mean / s;
+        matrix[(t, t)] += fit / s;
+        // Its sigma where its ranges met it (their mean place).
+        let there = matrix[(o, o)] + 2.0 * mean * matrix[(o, t)] + mean * mean * matrix[(t, t)];
+        w.sigma_m = Some(there.max(0.0).sqrt());
+    }
+    Some(matrix)
 }
 
 /// The wall faces of placed readings: their counting grid, then the layout's wall fit.

@@ -35,6 +35,7 @@ pub(crate) fn corridor() -> (
         to_m: [11.0, 0.5],
         readings: 100,
         rms_m: 0.01,
+        sigma_m: None,
     };
     let (mut odometry, mut truth, mut readings) = (Vec::new(), Vec::new(), Vec::new());
     let mut odom = Pose2::new(0.0, 0.0, 0.0);
@@ -168,6 +169,7 @@ pub(crate) fn face(
         to_m,
         readings: 100,
         rms_m: 0.01,
+        sigma_m: None,
     }
 }
 

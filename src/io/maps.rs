@@ -324,8 +324,13 @@ pub fn load_features_csv(path: &Path) -> Result<Vec<Feature>, IoError> {
         .collect()
 }
 
-/// Header of `walls.csv`.
-const WALLS_HEADER: &str = "normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m";
+/// Header of `walls.csv`: the faces' line, ends and fit, and how well each is placed (`sigma_m`,
+/// empty when not measured: a survey's `walls_corrected.csv` has it).
+const WALLS_HEADER: &str =
+    "normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m,sigma_m";
+/// ... as written before `sigma_m` (read still).
+const WALLS_HEADER_UNPLACED: &str =
+    "normal_rad,offset_m,from_x_m,from_y_m,to_x_m,to_y_m,readings,rms_m";
 
 /// Writes `walls.csv`: one wall face per row (see [`WallSegment`]).
 pub fn save_walls_csv(path: &Path, walls: &[WallSegment]) -> Result<(), IoError> {
@@ -333,7 +338,7 @@ pub fn save_walls_csv(path: &Path, walls: &[WallSegment]) -> Result<(), IoError>
     for w in walls {
         let _ = writeln!(
             s,
-            "{:.6},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5}",
+            "{:.6},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{}",
             w.normal_rad,
             w.offset_m,
             w.from_m[0],
@@ -341,20 +346,125 @@ pub fn save_walls_csv(path: &Path, walls: &[WallSegment]) -> Result<(), IoError>
             w.to_m[0],
             w.to_m[1],
             w.readings,
-            w.rms_m
+            w.rms_m,
+            w.sigma_m.map_or(String::new(), |v| format!("{v:.5}"))
         );
     }
     write_file(path, s.as_bytes())
 }
 
-/// Reads `walls.csv`, naming the line of the first bad row.
+/// Header of `walls_corrected_covariance.csv`.
+const WALLS_COVARIANCE_HEADER: &str = "wall_a,part_a,wall_b,part_b,covariance";
+/// The parts of a face's placement error ([`crate::fusion::WALL_PARTS`]): its offset along its
+/// normal at its middle (metres) and its turn (radians).
+const WALL_PART_NAMES: [&str; crate::fusion::WALL_PARTS] = ["offset", "turn"];
+
+/// Writes the covariance of walls' placement errors ([`crate::fusion::Survey::walls_covariance`],
+/// two parts a face: `offset`, metres, and `turn`, radians): a row per pair of parts of the
+/// faces whose placement is known ([`WallSegment::sigma_m`]), the faces by their rows in
+/// `walls.csv` from 0, each pair once.
+pub fn save_walls_covariance_csv(
+    path: &Path,
+    walls: &[WallSegment],
+    covariance: &nalgebra::DMatrix<f64>,
+) -> Result<(), IoError> {
+    let parts = WALL_PART_NAMES.len();
+    let mut s = format!("{WALLS_COVARIANCE_HEADER}\n");
+    let placed: Vec<usize> = (0..walls.len().min(covariance.nrows() / parts))
+        .filter(|&i| walls[i].sigma_m.is_some())
+        .flat_map(|i| (0..parts).map(move |k| parts * i + k))
+        .collect();
+    for (k, &a) in placed.iter().enumerate() {
+        for &b in &placed[k..] {
+            let _ = writeln!(
+                s,
+                "{},{},{},{},{:.6e}",
+                a / parts,
+                WALL_PART_NAMES[a % parts],
+                b / parts,
+                WALL_PART_NAMES[b % parts],
+                covariance[(a, b)]
+            );
+        }
+    }
+    write_file(path, s.as_bytes())
+}
+
+/// Reads `walls_corrected_covariance.csv` for `walls` faces into a square matrix, two parts a
+/// face (pairs not listed: 0), naming the line of the first bad row: a face past the walls, an
+/// unknown part, a number that is not finite, a variance that is not positive, or a pair given
+/// twice.
+pub fn load_walls_covariance_csv(
+    path: &Path,
+    walls: usize,
+) -> Result<nalgebra::DMatrix<f64>, IoError> {
+    let text = read_text(path)?;
+    let parts = WALL_PART_NAMES.len();
+    let mut out = nalgebra::DMatrix::zeros(parts * walls, parts * walls);
+    let mut seen = std::collections::HashSet::new();
+    for (line_no, f) in csv_rows(path, &text, WALLS_COVARIANCE_HEADER)? {
+        let bad = |m: String| IoError::line(path, line_no, m);
+        let part = |k: usize, name: &str| -> Result<usize, IoError> {
+            let face = count_field(path, line_no, &format!("wall_{name}"), f[k])?;
+            if face >= walls {
+                return Err(bad(format!(
+                    "wall_{name}: face {face}, but walls_corrected.csv has {walls} faces"
+                )));
+            }
+            let p = WALL_PART_NAMES
+                .iter()
+                .position(|n| *n == f[k + 1])
+                .ok_or_else(|| {
+                    bad(format!(
+                        "part_{name}: `{}`, expected {}",
+                        f[k + 1],
+                        WALL_PART_NAMES.join(" or ")
+                    ))
+                })?;
+            Ok(parts * face + p)
+        };
+        let (a, b) = (part(0, "a")?, part(2, "b")?);
+        let v = finite_field(path, line_no, "covariance", f[4])?;
+        if a == b && v <= 0.0 {
+            return Err(bad(format!("covariance: a variance of {v}, not positive")));
+        }
+        if !seen.insert((a.min(b), a.max(b))) {
+            return Err(bad("this pair of parts is given twice".to_owned()));
+        }
+        out[(a, b)] = v;
+        out[(b, a)] = v;
+    }
+    Ok(out)
+}
+
+/// Reads `walls.csv` (with or without its `sigma_m` column), naming the line of the first bad
+/// row.
 pub fn load_walls_csv(path: &Path) -> Result<Vec<WallSegment>, IoError> {
     let text = read_text(path)?;
+    let header = match text.lines().next().map(str::trim) {
+        Some(WALLS_HEADER_UNPLACED) => WALLS_HEADER_UNPLACED,
+        _ => WALLS_HEADER,
+    };
     let names: Vec<&str> = WALLS_HEADER.split(',').collect();
-    csv_rows(path, &text, WALLS_HEADER)?
+    csv_rows(path, &text, header)?
         .into_iter()
         .map(|(line_no, f)| {
             let v = |k: usize| finite_field(path, line_no, names[k], f[k]);
+            let sigma_m = match f.get(8) {
+                None | Some(&"") => None,
+                Some(s) => Some(
+                    s.parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite() && *v > 0.0)
+                        .ok_or_else(|| {
+                            IoError::line(
+                                path,
+                                line_no,
+                                format!("sigma_m: `{s}` is not a positive number"),
+                            )
+                        })?,
+                ),
+            };
             Ok(WallSegment {
                 normal_rad: v(0)?,
                 offset_m: v(1)?,
@@ -362,6 +472,7 @@ pub fn load_walls_csv(path: &Path) -> Result<Vec<WallSegment>, IoError> {
                 to_m: [v(4)?, v(5)?],
                 readings: count_field(path, line_no, names[6], f[6])?,
                 rms_m: v(7)?,
+                sigma_m,
             })
         })
         .collect()

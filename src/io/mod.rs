@@ -21,9 +21,9 @@ pub use anchors::load_anchors;
 pub use bundled::{bundled, extract as extract_bundled, FILES as BUNDLED_FILES};
 pub use calib::{load_corner_csvs, load_target, save_corner_csvs, save_corners_vnl};
 pub use maps::{
-    load_features_csv, load_ros_map, load_ros_occupancy, load_walls_csv, save_accumulator_png,
-    save_features_csv, save_gray_png, save_map_png, save_rgb_png, save_ros_map, save_walls_csv,
-    RosMapYaml,
+    load_features_csv, load_ros_map, load_ros_occupancy, load_walls_covariance_csv, load_walls_csv,
+    save_accumulator_png, save_features_csv, save_gray_png, save_map_png, save_rgb_png,
+    save_ros_map, save_walls_covariance_csv, save_walls_csv, RosMapYaml,
 };
 pub use output::{remove_partial_outputs, OutputDir, PartialFile};
 pub use rig::{

@@ -381,6 +381,13 @@ pub fn save_survey(
         &s.corrected.features_offline,
     )?;
     super::save_walls_csv(&dir.join("walls_corrected.csv"), &s.corrected.walls)?;
+    if let Some(c) = &s.walls_covariance {
+        super::save_walls_covariance_csv(
+            &dir.join("walls_corrected_covariance.csv"),
+            &s.corrected.walls,
+            c,
+        )?;
+    }
     super::save_visual_turns_csv(
         &dir.join("visual_turns.csv"),
         &s.visual,

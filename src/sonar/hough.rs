@@ -688,6 +688,7 @@ mod tests {
             to_m: [3.0, 2.0],
             readings: 40,
             rms_m: 0.01,
+            sigma_m: None,
         };
         let at = |x_m: f64, y_m: f64| Feature {
             x_m,

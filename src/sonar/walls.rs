@@ -144,6 +144,11 @@ pub struct WallSegment {
     pub readings: usize,
     /// Root-mean-square range residual of the fit, metres.
     pub rms_m: f64,
+    /// How well the face is placed: one sigma along its normal where its ranges met it (their
+    /// mean place), metres, when known (a survey's corrected faces, from its trajectory's
+    /// covariance); `None` for a face whose placement was not measured, taken to
+    /// [`crate::fusion::FuseConfig::wall_sigma_m`].
+    pub sigma_m: Option<f64>,
 }
 
 impl WallSegment {
@@ -162,6 +167,11 @@ impl WallSegment {
     fn along(&self, p: [f64; 2]) -> f64 {
         let (s, c) = self.normal_rad.sin_cos();
         -s * p[0] + c * p[1]
+    }
+
+    /// Position of `p`'s foot on the face along its direction, from the face's middle, metres.
+    pub fn from_middle(&self, p: [f64; 2]) -> f64 {
+        self.along(p) - 0.5 * (self.along(self.from_m) + self.along(self.to_m))
     }
 
     /// Whether `p` lies within `across_m` of the face's line and within its ends extended by
@@ -646,6 +656,7 @@ fn fit(
         to_m: at(hi),
         readings: members.len(),
         rms_m: rms,
+        sigma_m: None,
     };
     Some((wall, members))
 }
@@ -729,6 +740,7 @@ mod tests {
             to_m: [5.0, 2.0],
             readings: 20,
             rms_m: 0.01,
+            sigma_m: None,
         };
         let up = std::f64::consts::FRAC_PI_2;
         let r = w.expected_ray_range([0.0, 0.0], up, 1.0, 0.05).unwrap();

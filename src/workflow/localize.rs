@@ -64,20 +64,46 @@ pub struct LocalizeOutput {
     pub metrics: serde_json::Map<String, serde_json::Value>,
 }
 
-/// The survey's walls, unless told not to use them or the survey has none.
-fn surveyed_walls(survey: &Path, no_walls: bool) -> Result<Vec<WallSegment>> {
+/// The survey's walls, unless told not to use them or the survey has none, and the covariance
+/// of their placement when the survey measured it (`walls_corrected_covariance.csv`).
+fn surveyed_walls(
+    survey: &Path,
+    no_walls: bool,
+) -> Result<(Vec<WallSegment>, Option<nalgebra::DMatrix<f64>>)> {
     let path = survey.join("walls_corrected.csv");
     if no_walls {
-        Ok(Vec::new())
-    } else if path.exists() {
-        Ok(io::load_walls_csv(&path)?)
-    } else {
+        return Ok((Vec::new(), None));
+    }
+    if !path.exists() {
         tracing::warn!(
             "{} not found (a survey of an older version): tracking with the tags alone",
             path.display()
         );
-        Ok(Vec::new())
+        return Ok((Vec::new(), None));
     }
+    let walls = io::load_walls_csv(&path)?;
+    let covariance = survey.join("walls_corrected_covariance.csv");
+    let covariance = if covariance.exists() {
+        Some(io::load_walls_covariance_csv(&covariance, walls.len())?)
+    } else {
+        None
+    };
+    let mut placed: Vec<f64> = walls.iter().filter_map(|w| w.sigma_m).collect();
+    placed.sort_by(f64::total_cmp);
+    if !placed.is_empty() {
+        tracing::info!(
+            "the survey placed {} of the {} walls within {:.1} cm (median sigma){}",
+            placed.len(),
+            walls.len(),
+            100.0 * placed[placed.len() / 2],
+            if covariance.is_some() {
+                ", with how they err together"
+            } else {
+                ""
+            }
+        );
+    }
+    Ok((walls, covariance))
 }
 
 /// The settings the filter predicts with: those given, with the turn noise that calibrated
@@ -109,33 +135,101 @@ fn filter_config(
     c
 }
 
-/// What a survey gives a localisation.
-struct Surveyed {
-    landmarks: Vec<Landmark>,
-    walls: Vec<WallSegment>,
-    /// The odometry's errors the survey found, unless told to track with the raw odometry.
-    calibration: Option<OdometryCalibration>,
-    /// How noisy the survey found the calibrated odometry against the model (with
-    /// `calibration` only).
-    noise_scale: Option<OdometryNoiseScale>,
-    /// Where the survey's run's odometry frame lies in the survey's frame (an anchored survey).
-    frame_from_odometry: Option<Pose2>,
+/// What of a survey a localisation uses.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SurveyUse {
+    /// Track with the run's odometry as logged, not corrected with the survey's calibration.
+    pub raw_odometry: bool,
+    /// Track with the tags alone, not the sonar against the survey's walls (their files are
+    /// not read).
+    pub no_walls: bool,
 }
 
-impl Surveyed {
-    fn load(request: &LocalizeRequest<'_>) -> Result<Self> {
-        let file = io::load_landmarks(&request.survey.join("landmarks.json"))?;
+/// What a survey gives a localisation, read from its output directory: the map a robot
+/// localises in ([`SurveyedMap::localizer`]).
+///
+/// ```no_run
+/// use std::path::Path;
+/// use stereotag::fusion::{FuseConfig, Start};
+/// use stereotag::geometry::Pose2;
+/// use stereotag::workflow::localize::{SurveyUse, SurveyedMap};
+///
+/// let map = SurveyedMap::load(Path::new("surveys/office"), SurveyUse::default())?;
+/// let layout = stereotag::io::load_run(Path::new("runs/office-monday"))?.meta.robot.sonar;
+/// let mut filter = map.localizer(FuseConfig::default(), Start::Unknown, Some(&layout));
+/// filter.odometry(0.0, Pose2::new(0.0, 0.0, 0.0));
+/// println!("{:?}", filter.estimate());
+/// # Ok::<(), stereotag::workflow::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct SurveyedMap {
+    /// The surveyed tags (`landmarks.json`).
+    pub landmarks: Vec<Landmark>,
+    /// The corrected walls (`walls_corrected.csv`).
+    pub walls: Vec<WallSegment>,
+    /// The covariance of the walls' placement, when the survey measured it
+    /// (`walls_corrected_covariance.csv`).
+    pub walls_covariance: Option<nalgebra::DMatrix<f64>>,
+    /// The odometry's errors the survey found, unless told to track with the raw odometry.
+    pub calibration: Option<OdometryCalibration>,
+    /// How noisy the survey found the calibrated odometry against the model (with
+    /// `calibration` only).
+    pub noise_scale: Option<OdometryNoiseScale>,
+    /// Where the survey's run's odometry frame lies in the survey's frame (an anchored survey).
+    pub frame_from_odometry: Option<Pose2>,
+}
+
+impl SurveyedMap {
+    /// Reads the survey in directory `survey` (`landmarks.json`, and unless `using.no_walls`
+    /// its walls), naming the file and line of anything bad.
+    pub fn load(survey: &Path, using: SurveyUse) -> Result<Self> {
+        let file = io::load_landmarks(&survey.join("landmarks.json"))?;
+        let (walls, walls_covariance) = surveyed_walls(survey, using.no_walls)?;
         Ok(Self {
-            calibration: file.odometry_calibration.filter(|_| !request.raw_odometry),
+            walls,
+            walls_covariance,
+            calibration: file.odometry_calibration.filter(|_| !using.raw_odometry),
             noise_scale: file
                 .odometry_noise_scale
-                .filter(|_| file.odometry_calibration.is_some() && !request.raw_odometry),
+                .filter(|_| file.odometry_calibration.is_some() && !using.raw_odometry),
             frame_from_odometry: file
                 .frame_from_odometry
                 .map(|[x, y, theta]| Pose2::new(x, y, theta)),
             landmarks: file.landmarks.into_iter().map(|r| r.landmark).collect(),
-            walls: surveyed_walls(request.survey, request.no_walls)?,
         })
+    }
+
+    /// The settings a filter predicts with, from `config`: with the turn noise calibrated
+    /// odometry leaves and the odometry's noise as the survey measured it, when it calibrated
+    /// the odometry.
+    pub fn filter_config(&self, config: FuseConfig) -> FuseConfig {
+        filter_config(config, self.calibration.as_ref(), self.noise_scale.as_ref())
+    }
+
+    /// A streaming localiser in this map from `start`, fed the run's odometry as logged (each
+    /// increment corrected with the survey's calibration, the start moved into an anchored
+    /// survey's frame) and, with the sonar `layout`, its ranges against the walls.
+    pub fn localizer(
+        &self,
+        config: FuseConfig,
+        start: fusion::Start,
+        layout: Option<&crate::sonar::SonarLayout>,
+    ) -> fusion::Localizer {
+        let mut filter =
+            fusion::Localizer::new(self.landmarks.clone(), self.filter_config(config), start);
+        if let (Some(layout), false) = (layout, self.walls.is_empty()) {
+            filter = filter.with_walls(self.walls.clone(), layout.clone());
+            if let Some(c) = &self.walls_covariance {
+                filter = filter.with_walls_covariance(c.clone());
+            }
+        }
+        if let Some(c) = self.calibration {
+            filter = filter.with_calibration(c);
+        }
+        if let Some(frame) = self.frame_from_odometry {
+            filter = filter.with_odometry_frame(frame);
+        }
+        filter
     }
 
     /// The tag families the survey holds, each once.
@@ -198,7 +292,13 @@ fn corrected_odometry<'r>(
 /// # Ok::<(), stereotag::workflow::Error>(())
 /// ```
 pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Result<LocalizeOutput> {
-    let surveyed = Surveyed::load(request)?;
+    let surveyed = SurveyedMap::load(
+        request.survey,
+        SurveyUse {
+            raw_odometry: request.raw_odometry,
+            no_walls: request.no_walls,
+        },
+    )?;
     let run = load_run(request.run_dir)?;
     let calibration = surveyed.calibration.as_ref();
     let mut odometry = corrected_odometry(&run, calibration);
@@ -219,11 +319,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             .collect::<Vec<_>>()
             .into();
     }
-    let config = filter_config(
-        io::load_fuse_config(request.config)?,
-        calibration,
-        surveyed.noise_scale.as_ref(),
-    );
+    let config = surveyed.filter_config(io::load_fuse_config(request.config)?);
     let world = load_world_of_run(request.world, request.run_dir, &run)?;
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
@@ -259,13 +355,17 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         )?,
         None => RunSightings::default(),
     };
-    let Surveyed {
-        landmarks, walls, ..
+    let SurveyedMap {
+        landmarks,
+        walls,
+        walls_covariance,
+        ..
     } = surveyed;
     let sonar = SonarInput {
         readings: &run.sonar,
         layout: &run.meta.robot.sonar,
         walls: &walls,
+        walls_covariance: walls_covariance.as_ref(),
     };
     let obs = fusion::Observations {
         odometry: &odometry,

@@ -582,8 +582,9 @@ fn report_mounting(
     }
 }
 
-/// How the survey's own ranges scatter about its corrected walls along its corrected
-/// trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
+/// How well the survey placed its corrected walls (`walls.placed`, the faces whose placement it
+/// measured, and `walls.placement_sigma_m_median`), how its own ranges scatter about them along
+/// its corrected trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
 /// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes), and a
 /// warning when they scatter far more than `localize` assumes ([`fusion::scatter_too_wide`]).
 fn report_range_scatter(
@@ -592,10 +593,28 @@ fn report_range_scatter(
     fuse: &fusion::FuseConfig,
     metrics: &mut BTreeMap<String, f64>,
 ) {
+    let mut placed: Vec<f64> = result
+        .corrected
+        .walls
+        .iter()
+        .filter_map(|w| w.sigma_m)
+        .collect();
+    placed.sort_by(f64::total_cmp);
+    metrics.insert("walls.placed".into(), placed.len() as f64);
+    if let Some(&median) = placed.get(placed.len() / 2) {
+        metrics.insert("walls.placement_sigma_m_median".into(), median);
+        tracing::info!(
+            "{} of the {} corrected walls placed within {:.1} cm (median sigma, from the offline trajectory's covariance; walls_corrected.csv's sigma_m)",
+            placed.len(),
+            result.corrected.walls.len(),
+            100.0 * median
+        );
+    }
     let sonar = fusion::SonarInput {
         readings: &run.sonar,
         layout: &run.meta.robot.sonar,
         walls: &result.corrected.walls,
+        walls_covariance: None,
     };
     let Some(scatter) = fusion::range_scatter(&sonar, &result.offline.trajectory) else {
         return;

@@ -8,7 +8,7 @@ mod interpolate;
 mod keyframes;
 mod mounting;
 mod noise;
-pub use noise::NoiseScales;
+pub use noise::{NoiseScales, PoseFunction, SolutionCovariance};
 mod scan_match;
 
 use crate::fusion::{FuseConfig, Landmark, Observations, OnlineResult};
@@ -69,6 +69,10 @@ pub struct OfflineResult {
     /// the solution's residuals tell (its variance components); `None` for a solution not kept, a graph
     /// without sightings, and the online pass's re-solves.
     pub noise: Option<NoiseScales>,
+    /// The solution's covariance with the noise the run measured ([`Self::noise`]); `None`
+    /// unless measured, and in a pass with ranges off walls (walls mapped from the run's own
+    /// trajectory are no independent check on it).
+    pub covariance: Option<SolutionCovariance>,
 }
 
 /// The camera's planar mounting error the offline pass found: where the sightings must be moved
@@ -423,6 +427,7 @@ fn solve(
             odometry_calibration: None,
             mounting: None,
             noise: None,
+            covariance: None,
         };
     };
     let visual = keyframes::turns_used(obs, config);
@@ -606,9 +611,17 @@ fn solve(
             n.redundancy[4]
         );
     }
+    let covariance = match (&noise, sonar) {
+        (Some(n), SonarUse::None) => {
+            let times: Vec<f64> = keyframes.frames.iter().map(|k| k.t_s).collect();
+            noise::SolutionCovariance::at(&graph, &values, n, &times)
+        }
+        _ => None,
+    };
     OfflineResult {
         mounting,
         noise,
+        covariance,
         trajectory: interpolate::corrected(obs.odometry, &keyframes.frames, &solved),
         landmarks,
         keyframes: keyframes.frames.len(),
@@ -795,6 +808,7 @@ mod tests {
             readings: &readings,
             layout: &layout,
             walls: &walls,
+            walls_covariance: None,
         };
         let config = FuseConfig::default();
         let o = obs(&odom, &sightings, &[]);

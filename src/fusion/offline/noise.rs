@@ -13,6 +13,9 @@
 //! simulated homes' seed-1 surveys find the translation at 0.13-0.18 of the model, the turns at
 //! 0.34-0.56 and the drift at about 0.8; predicting with the model, `localize`'s position NEES on
 //! the office was 0.16-0.31, with the measured noise 0.43-1.01 (docs/RESULTS.md).
+//!
+//! The solution's covariance under the measured noise ([`SolutionCovariance`]) then places the
+//! survey's corrected walls: how far each may be off, and how they err together.
 
 use super::graph::{Graph, Linearised, Noise, Vector};
 use std::collections::HashMap;
@@ -66,12 +69,10 @@ pub(super) fn variance_components(
 ) -> Option<NoiseScales> {
     let linear = Linearised::at(&graph.problem, values);
     let (rows, cols) = (linear.jacobian.nrows(), linear.jacobian.ncols());
-    let mut group_of = vec![None; rows];
+    let group_of = groups_of_rows(graph, rows)?;
     let mut count = [0usize; GROUPS.len()];
-    for &(r, noise) in graph.measured_rows.iter().filter(|(r, _)| *r < rows) {
-        let g = GROUPS.iter().position(|n| *n == noise)?;
-        group_of[r] = Some(g);
-        count[g] += 1;
+    for g in group_of.iter().flatten() {
+        count[*g] += 1;
     }
     if count.iter().all(|&c| c == 0) {
         return None;
@@ -86,13 +87,7 @@ pub(super) fn variance_components(
             .iter()
             .map(|g| g.map_or(1.0, |g| 1.0 / variance[g].sqrt()))
             .collect();
-        let mut jacobian = linear.jacobian.clone();
-        for c in 0..cols {
-            let at = linear.jacobian.row_idx_of_col_raw(c);
-            for (v, &r) in jacobian.val_of_col_mut(c).iter_mut().zip(at) {
-                *v *= weight[r];
-            }
-        }
+        let jacobian = weighted(&linear.jacobian, &weight);
         let information = Linearised::information(&jacobian)?;
         // Each group's probes carried into the variables: Jgᵀ zg.
         // ... and, last, the gradient `Jᵀ e` under these weights: the solution moves by a
@@ -159,6 +154,134 @@ pub(super) fn variance_components(
         turns: scale(4),
         redundancy,
     })
+}
+
+/// The group (its index in [`GROUPS`]) of each of a graph's `rows` residual rows; `None` for a
+/// row of no group (a prior, a range off a wall), and as a whole when a row's noise is of none.
+fn groups_of_rows(graph: &Graph, rows: usize) -> Option<Vec<Option<usize>>> {
+    let mut group_of = vec![None; rows];
+    for &(r, noise) in graph.measured_rows.iter().filter(|(r, _)| *r < rows) {
+        group_of[r] = Some(GROUPS.iter().position(|n| *n == noise)?);
+    }
+    Some(group_of)
+}
+
+/// `jacobian` with each row multiplied by its `weight`.
+fn weighted(
+    jacobian: &faer::sparse::SparseColMat<usize, f64>,
+    weight: &[f64],
+) -> faer::sparse::SparseColMat<usize, f64> {
+    let mut out = jacobian.clone();
+    for c in 0..jacobian.ncols() {
+        let at = jacobian.row_idx_of_col_raw(c);
+        for (v, &r) in out.val_of_col_mut(c).iter_mut().zip(at) {
+            *v *= weight[r];
+        }
+    }
+    out
+}
+
+/// The offline solution's covariance with the noise the run measured, kept to answer for
+/// linear functions of the keyframe poses ([`SolutionCovariance::of`]): the graph's information
+/// (`JᵀJ` of its whitened residuals, each group's rows weighed by the noise measured) and where
+/// each keyframe pose's columns lie.
+#[derive(Debug, Clone)]
+pub struct SolutionCovariance {
+    information: faer::sparse::SparseColMat<usize, f64>,
+    /// Each keyframe's time and first column (`None`: held fixed).
+    keyframes: Vec<(f64, Option<usize>)>,
+}
+
+/// A linear function of the keyframe poses: `Σ gᵀ δpose[k]` over its `(k, g)`, `g` the
+/// gradient over the keyframe's x, y (metres) and heading (radians).
+pub type PoseFunction = Vec<(usize, nalgebra::Vector3<f64>)>;
+
+impl SolutionCovariance {
+    /// `graph` solved at `values`, with each group's rows weighed by the noise the run
+    /// measured (`scales`; a group not measured as modelled), its keyframes at `times`; `None`
+    /// when a row's group is unknown.
+    pub(super) fn at(
+        graph: &Graph,
+        values: &HashMap<String, Vector>,
+        scales: &NoiseScales,
+        times: &[f64],
+    ) -> Option<Self> {
+        let linear = Linearised::at(&graph.problem, values);
+        let measured = [
+            scales.odometry_translation,
+            scales.odometry_turning,
+            scales.odometry_drift,
+            scales.sightings,
+            scales.turns,
+        ];
+        let weight: Vec<f64> = groups_of_rows(graph, linear.jacobian.nrows())?
+            .iter()
+            .map(|g| g.and_then(|g| measured[g]).map_or(1.0, |s| 1.0 / s))
+            .collect();
+        let information = Linearised::information(&weighted(&linear.jacobian, &weight))?;
+        let total = information.ncols();
+        let keyframes = times
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| {
+                let c = linear.columns.get(&super::graph::pose_name(i)).copied();
+                (t, c.filter(|&c| c + 3 <= total))
+            })
+            .collect();
+        Some(Self {
+            information,
+            keyframes,
+        })
+    }
+
+    /// The keyframe nearest in time to `t_s`; `None` with no keyframe.
+    pub fn keyframe_at(&self, t_s: f64) -> Option<usize> {
+        let after = self.keyframes.partition_point(|k| k.0 < t_s);
+        [
+            after.checked_sub(1),
+            (after < self.keyframes.len()).then_some(after),
+        ]
+        .into_iter()
+        .flatten()
+        .min_by(|&a, &b| {
+            (self.keyframes[a].0 - t_s)
+                .abs()
+                .total_cmp(&(self.keyframes[b].0 - t_s).abs())
+        })
+    }
+
+    /// The covariance matrix of `functions` of the keyframe poses (one solve of the
+    /// information against all of them; a keyframe held fixed counts as known); `None` when
+    /// the information is singular.
+    pub fn of(&self, functions: &[PoseFunction]) -> Option<nalgebra::DMatrix<f64>> {
+        if functions.is_empty() {
+            return Some(nalgebra::DMatrix::zeros(0, 0));
+        }
+        let total = self.information.ncols();
+        let mut rhs = faer::Mat::<f64>::zeros(total, functions.len());
+        for (j, f) in functions.iter().enumerate() {
+            for (k, g) in f {
+                if let Some(Some(c)) = self.keyframes.get(*k).map(|k| k.1) {
+                    for r in 0..3 {
+                        rhs[(c + r, j)] += g[r];
+                    }
+                }
+            }
+        }
+        let x =
+            tiny_solver::linear::SparseCholeskySolver::new().solve_jtj(&rhs, &self.information)?;
+        let n = functions.len();
+        let rows: Vec<Vec<usize>> = (0..n)
+            .map(|a| (0..total).filter(|&r| rhs[(r, a)] != 0.0).collect())
+            .collect();
+        let cov = nalgebra::DMatrix::from_fn(n, n, |a, b| {
+            rows[a]
+                .iter()
+                .map(|&r| rhs[(r, a)] * x[(r, b)])
+                .sum::<f64>()
+        });
+        cov.iter().all(|v| v.is_finite()).then_some(cov)
+    }
 }
 
 /// `k` columns of `n` random signs (a fixed seed: the same run gives the same estimate).
