@@ -5,7 +5,7 @@
 use crate::fusion::ekf::{compose_jacobians, Ekf};
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::{sighting_measurement, tag_in_robot};
-use crate::fusion::wall_fix::{RangeWindow, FIX_SIGMA_M, FIX_SIGMA_RAD};
+use crate::fusion::wall_fix::RangeWindow;
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
@@ -223,6 +223,10 @@ pub fn wall_misfits(sonar: &SonarInput<'_>, trajectory: &[StampedPose]) -> Vec<V
     }
     misfits
 }
+
+/// An ambiguous pose from the walls (several poses explain the ranges nearly as well) is taken
+/// only when its position sigma is under this share of the filter's: a third.
+const AMBIGUOUS_FIX_NARROWS: f64 = 1.0 / 3.0;
 
 /// Share of a survey's ranges off their walls ([`RANGE_OFF_M`]) above which `survey` warns that
 /// holding a later run to those walls may pull it off: 5% (the simulated homes: under 1%; a real
@@ -1055,8 +1059,18 @@ impl Localizer {
             .window
             .fix(odom, now.pose, reach, &self.walls, layout, &prior)
         {
+            // An ambiguous fix is taken only when it narrows the pose down.
+            let narrows = fix.clear || {
+                let position = fix.cov.fixed_view::<2, 2>(0, 0).into_owned();
+                let sigma = position.symmetric_eigenvalues().max().max(0.0).sqrt();
+                sigma < AMBIGUOUS_FIX_NARROWS * now.position_sigma_m()
+            };
+            if !narrows {
+                return;
+            }
             tracing::debug!(
-                "pose taken from the walls at t = {t_s:.1} s: {} of {} ranges agree",
+                "pose taken from the walls at t = {t_s:.1} s ({}): {} of {} ranges agree",
+                if fix.clear { "clear" } else { "among several" },
                 fix.inliers,
                 fix.ranges
             );
@@ -1064,11 +1078,7 @@ impl Localizer {
             // the sightings kept since the last are.
             self.drop_turn();
             self.kept.clear();
-            let (sm, sr) = (FIX_SIGMA_M, FIX_SIGMA_RAD);
-            self.ekf.reset_pose(
-                fix.pose,
-                &Matrix3::from_diagonal(&Vector3::new(sm * sm, sm * sm, sr * sr)),
-            );
+            self.ekf.reset_pose(fix.pose, &fix.cov);
             self.wall_fixes.push(t_s);
         }
     }
@@ -1668,6 +1678,15 @@ mod tests {
         let (fixes, errors) = run(off, &[]);
         assert!(fixes.is_empty(), "{fixes:?}");
         assert!(errors.last().unwrap().1 > 0.7, "{:?}", errors.last());
+        // Nor with a 10 m sigma, where a pose narrowed down among several would be taken: the
+        // poses the walls allow run along the corridor past both grids searched.
+        let lost = Start::Given {
+            pose: Pose2::new(2.8, 1.0, 0.0),
+            sigma_m: 10.0,
+            sigma_rad: 0.1,
+        };
+        let (fixes, _) = run(lost, &[]);
+        assert!(fixes.is_empty(), "{fixes:?}");
     }
 
     /// A filter started 0.7 m and 10 degrees off with a 1 m sigma (too unsure to match ranges

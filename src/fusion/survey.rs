@@ -249,14 +249,20 @@ fn hold_tail(
 }
 
 /// The corrected faces' placement: the covariance of their errors, two numbers a face (its
-/// offset along its normal at its middle, metres, and its turn, radians: [`WALL_PARTS`]), in the
-/// order of `walls`, with each face's sigma where its ranges met it ([`WallSegment::sigma_m`])
-/// set from it.
+/// offset along its normal, metres, and its turn, radians: [`WALL_PARTS`]), in the order of
+/// `walls`, with each face's offset sigma ([`WallSegment::sigma_m`]) set from it.
 ///
 /// A face's error is that of the poses its ranges were taken from, carried along its normal
 /// (each at the nearest keyframe) to its ranges (matched as `localize` matches ranges, within
-/// [`RANGE_OFF_M`]): the line fitted to them along the face (least squares) is its offset and
-/// turn, each with the fit's own noise (the range residuals' `rms²` over the fit). The covariance
+/// [`RANGE_OFF_M`]): the offset is their average, the turn their least-squares slope along the
+/// face, each with the fit's own noise (`rms² / n`, `rms² / Σ (a - ā)²`).
+///
+/// The average is the offset where the ranges met the face (their mean place `ā`), and
+/// `localize` takes it as the offset at the face's middle, with the turn apart. The exact line
+/// (the offset at the middle, `ā` times the turn less, and its covariance with the turn) was
+/// tried and measured worse: on the museum's ten unknown starts (seeds 2 and 3) the ATE once
+/// located rose on every start, by 0.1-0.4 cm, and the position NEES with it (docs/RESULTS.md,
+/// session 61): the looser prior where the ranges were taken serves `localize` better. The covariance
 /// comes from the offline solution's ([`OfflineResult::covariance`]): faces placed from the same
 /// stretch of trajectory err together, and a survey's heading error turns its long faces. A face
 /// no range is matched with keeps `None` (and zeros); without the solution's covariance nothing
@@ -294,29 +300,22 @@ fn place_walls(
             seen[m.wall].push((k, across_wall(w, sensor, pose.theta), along));
         }
     }
-    // The line e(a) = offset + turn a through the pose errors carried to each range, fitted by
-    // least squares: the turn is their slope about their mean place `mean`, the offset (at the
-    // middle) their mean less the turn times `mean`.
+    // The offset: the pose errors carried to its ranges, averaged (the offset where they met
+    // it, their mean place); the turn: their least-squares slope along it.
     let mut functions: Vec<PoseFunction> = Vec::with_capacity(WALL_PARTS * walls.len());
-    let mut fitted = vec![(0.0, 0.0); walls.len()];
+    let mut spread = vec![0.0; walls.len()];
     for (i, s) in seen.iter().enumerate() {
         let n = s.len().max(1) as f64;
         let mean = s.iter().map(|x| x.2).sum::<f64>() / n;
-        let spread = s.iter().map(|x| (x.2 - mean).powi(2)).sum::<f64>();
-        let slope = |a: f64| {
-            if spread > 0.0 {
-                (a - mean) / spread
-            } else {
-                0.0
-            }
-        };
-        functions.push(
+        spread[i] = s.iter().map(|x| (x.2 - mean).powi(2)).sum::<f64>();
+        functions.push(s.iter().map(|&(k, g, _)| (k, g / n)).collect());
+        functions.push(if spread[i] > 0.0 {
             s.iter()
-                .map(|&(k, g, a)| (k, g * (1.0 / n - mean * slope(a))))
-                .collect(),
-        );
-        functions.push(s.iter().map(|&(k, g, a)| (k, g * slope(a))).collect());
-        fitted[i] = (mean, spread);
+                .map(|&(k, g, a)| (k, g * (a - mean) / spread[i]))
+                .collect()
+        } else {
+            Vec::new()
+        });
     }
     let mut matrix = covariance.of(&functions)?;
     for (i, w) in walls.iter_mut().enumerate() {
@@ -324,19 +323,12 @@ fn place_walls(
             continue;
         }
         let (o, t) = (WALL_PARTS * i, WALL_PARTS * i + 1);
-        let n = seen[i].len() as f64;
-        let (mean, spread) = fitted[i];
-        // The fit's own noise in the line: a face seen from one place only has its turn as
-        // unknown as its fit leaves it over 10 cm.
-        let fit = w.rms_m.powi(2);
-        let s = spread.max(n * 0.01);
-        matrix[(o, o)] += fit * (1.0 / n + mean * mean / s);
-        matrix[(o, t)] -= fit * mean / s;
-        matrix[(t, o)] -= fit * mean / s;
-        matrix[(t, t)] += fit / s;
-        // Its sigma where its ranges met it (their mean place).
-        let there = matrix[(o, o)] + 2.0 * mean * matrix[(o, t)] + mean * mean * matrix[(t, t)];
-        w.sigma_m = Some(there.max(0.0).sqrt());
+        // The fit's own noise: a face seen from one place only has its turn as unknown as its
+        // fit leaves it over 10 cm.
+        let (n, fit) = (seen[i].len() as f64, w.rms_m.powi(2));
+        matrix[(o, o)] += fit / n;
+        matrix[(t, t)] += fit / spread[i].max(n * 0.01);
+        w.sigma_m = Some(matrix[(o, o)].max(0.0).sqrt());
     }
     Some(matrix)
 }

@@ -14,7 +14,7 @@
 use crate::geometry::{Pose2, Segment};
 use crate::sonar::walls::WallSegment;
 use crate::sonar::{SonarLayout, SonarReading};
-use nalgebra::Point2;
+use nalgebra::{Matrix3, Point2, Vector3};
 use rayon::prelude::*;
 use std::collections::VecDeque;
 
@@ -23,9 +23,12 @@ const WINDOW: usize = 48;
 /// A match is tried with at least this many ranges ...
 const MIN_RANGES: usize = 24;
 /// ... every this much travel, metres, or turn, radians (45 degrees: a robot looking around
-/// sees new walls without moving).
+/// sees new walls without moving), or this many new ranges (a match the ranges left ambiguous
+/// is tried again as soon as a few more come: a robot just placed metres off by a far tag needs
+/// its pose at once, and only a filter too unsure to match ranges one at a time tries).
 const TRY_EVERY_M: f64 = 0.5;
 const TRY_EVERY_RAD: f64 = std::f64::consts::FRAC_PI_4;
+const TRY_EVERY_RANGES: usize = 4;
 /// The search reaches this far around the estimate at most (or 3 sigma when less): metres, and
 /// radians (30 degrees).
 const MAX_REACH_M: f64 = 1.5;
@@ -61,6 +64,8 @@ pub(super) struct RangeWindow {
     ranges: VecDeque<(Pose2, SonarReading)>,
     /// The odometry pose at the last try.
     last_try: Option<Pose2>,
+    /// Ranges kept since the last try.
+    since_try: usize,
     /// The distance to the walls, once needed.
     field: Option<DistanceField>,
 }
@@ -165,6 +170,12 @@ impl DistanceField {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct WallFix {
     pub(super) pose: Pose2,
+    /// Its covariance: [`FIX_SIGMA_M`] and [`FIX_SIGMA_RAD`] for a clear fix; for an ambiguous
+    /// one, the spread of the poses that explain the ranges nearly as well as the best (at
+    /// least [`RIVAL_M`] a side).
+    pub(super) cov: Matrix3<f64>,
+    /// Whether no other pose explains the ranges nearly as well.
+    pub(super) clear: bool,
     /// Ranges that agree with it, of those matched.
     pub(super) inliers: usize,
     pub(super) ranges: usize,
@@ -182,20 +193,26 @@ impl RangeWindow {
                 self.ranges.pop_front();
             }
             self.ranges.push_back((odom, *reading));
+            self.since_try += 1;
         }
     }
 
-    /// Whether a match is due at odometry pose `odom`: enough ranges, and travel since the last.
+    /// Whether a match is due at odometry pose `odom`: enough ranges, and travel or new ranges
+    /// since the last.
     pub(super) fn due(&self, odom: Pose2) -> bool {
         self.ranges.len() >= MIN_RANGES
-            && self.last_try.is_none_or(|p| {
-                (p.x - odom.x).hypot(p.y - odom.y) >= TRY_EVERY_M
-                    || crate::geometry::wrap_angle(p.theta - odom.theta).abs() >= TRY_EVERY_RAD
-            })
+            && (self.since_try >= TRY_EVERY_RANGES
+                || self.last_try.is_none_or(|p| {
+                    (p.x - odom.x).hypot(p.y - odom.y) >= TRY_EVERY_M
+                        || crate::geometry::wrap_angle(p.theta - odom.theta).abs() >= TRY_EVERY_RAD
+                }))
     }
 
     /// Matches the ranges with `walls` around `estimate` (the pose now, at odometry pose `odom`)
-    /// within `reach` (metres, radians: 3 sigma, capped); `None` without a clear fix. `prior` says
+    /// within `reach` (metres, radians: 3 sigma, capped); `None` when no pose of the grid the
+    /// prior allows explains most ranges. When others explain them nearly as well the fix is
+    /// not clear, and its covariance spans them: a robot placed metres off by a far tag is
+    /// brought within decimetres at once, and the next ranges pick the pose. `prior` says
     /// what else is known of the pose: `None` for a pose it rules out, else its chi-square there,
     /// added to the ranges' (`Some(0.0)` everywhere: the walls alone).
     pub(super) fn fix(
@@ -208,6 +225,7 @@ impl RangeWindow {
         prior: &(dyn Fn(Pose2) -> Option<f64> + Sync),
     ) -> Option<WallFix> {
         self.last_try = Some(odom);
+        self.since_try = 0;
         let field = self
             .field
             .get_or_insert_with(|| DistanceField::new(walls, layout.max_range_m));
@@ -250,11 +268,6 @@ impl RangeWindow {
             (sum, inliers)
         };
         let (reach_m, reach_rad) = (reach.0.min(MAX_REACH_M), reach.1.min(MAX_REACH_RAD));
-        let coarse = grid(
-            estimate,
-            (reach_m, reach_rad),
-            (COARSE_STEP_M, COARSE_STEP_RAD),
-        );
         // A pose the prior allows: its ranges' summed truncated squares, those with the prior's
         // chi-square added (in the same units: times a range's variance), and its inliers.
         let weigh = |p: Pose2, truncate: f64| {
@@ -262,25 +275,72 @@ impl RangeWindow {
             let (walls, inliers) = cost(p, truncate);
             Some((p, walls, walls + RANGE_SIGMA_M.powi(2) * prior, inliers))
         };
-        let scored: Vec<(Pose2, f64, f64)> = coarse
-            .into_par_iter()
-            .filter_map(|p| weigh(p, COARSE_TRUNCATE_M).map(|(p, w, j, _)| (p, w, j)))
-            .collect();
-        let &(best, best_cost, _) = scored.iter().min_by(|a, b| a.2.total_cmp(&b.2))?;
-        let rival = scored
-            .iter()
-            .filter(|(p, _, _)| (p.x - best.x).hypot(p.y - best.y) > RIVAL_M)
-            .map(|&(_, c, _)| c)
-            .fold(f64::INFINITY, f64::min);
         // The ranges' own noise, so that a near-perfect best does not make every rival look far.
         let floor = arcs.len() as f64 * RANGE_SIGMA_M.powi(2);
-        if rival < RIVAL_RATIO * best_cost.max(floor) {
+        // Whether `p` lies inside the grid around `centre`, off its edge.
+        let inside = |centre: &Pose2, p: &Pose2| {
+            let edge_m = reach_m - 0.5 * COARSE_STEP_M;
+            (p.x - centre.x).abs() < edge_m
+                && (p.y - centre.y).abs() < edge_m
+                && crate::geometry::wrap_angle(p.theta - centre.theta).abs()
+                    < reach_rad - 0.5 * COARSE_STEP_RAD
+        };
+        // The coarse grid around the estimate; when the poses that explain the ranges nearly as
+        // well as the best reach its edge, once more around the best (the two grids' poses
+        // weighed together).
+        let mut centres = vec![estimate];
+        let mut scored: Vec<(Pose2, f64, f64)> = Vec::new();
+        let best = loop {
+            let centre = centres[centres.len() - 1];
+            scored.extend(
+                grid(
+                    centre,
+                    (reach_m, reach_rad),
+                    (COARSE_STEP_M, COARSE_STEP_RAD),
+                )
+                .into_par_iter()
+                .filter_map(|p| weigh(p, COARSE_TRUNCATE_M).map(|(p, w, j, _)| (p, w, j)))
+                .collect::<Vec<_>>(),
+            );
+            let &(best, best_cost, _) = scored.iter().min_by(|a, b| a.2.total_cmp(&b.2))?;
+            let rival = scored
+                .iter()
+                .filter(|(p, _, _)| (p.x - best.x).hypot(p.y - best.y) > RIVAL_M)
+                .map(|&(_, c, _)| c)
+                .fold(f64::INFINITY, f64::min);
+            let near = RIVAL_RATIO * best_cost.max(floor);
+            if rival >= near {
+                break best;
+            }
             tracing::debug!(
-                "no pose from the walls: {} ranges explained nearly as well {RIVAL_M} m apart (cost {best_cost:.4} and {rival:.4})",
+                "no clear pose from the walls: {} ranges explained nearly as well {RIVAL_M} m apart (cost {best_cost:.4} and {rival:.4})",
                 arcs.len()
             );
-            return None;
-        }
+            let (_, _, _, inliers) = weigh(best, COARSE_TRUNCATE_M)?;
+            if (inliers as f64) < MIN_INLIER_SHARE * arcs.len() as f64 {
+                return None;
+            }
+            let plausible: Vec<Pose2> = scored.iter().filter(|s| s.1 < near).map(|s| s.0).collect();
+            // They must lie inside a searched grid: one on the edge says the grid cut off others
+            // beyond it (a corridor's walls place the robot anywhere along it).
+            if plausible
+                .iter()
+                .all(|p| centres.iter().any(|c| inside(c, p)))
+            {
+                let (pose, cov) = spread(&plausible, best);
+                return Some(WallFix {
+                    pose,
+                    cov,
+                    clear: false,
+                    inliers,
+                    ranges: arcs.len(),
+                });
+            }
+            if centres.len() == 2 {
+                return None;
+            }
+            centres.push(best);
+        };
         let (fine, _, _, inliers) = grid(
             best,
             (COARSE_STEP_M, COARSE_STEP_RAD),
@@ -291,10 +351,49 @@ impl RangeWindow {
         .min_by(|a, b| a.2.total_cmp(&b.2))?;
         (inliers as f64 >= MIN_INLIER_SHARE * arcs.len() as f64).then_some(WallFix {
             pose: fine,
+            cov: Matrix3::from_diagonal(&Vector3::new(
+                FIX_SIGMA_M.powi(2),
+                FIX_SIGMA_M.powi(2),
+                FIX_SIGMA_RAD.powi(2),
+            )),
+            clear: true,
             inliers,
             ranges: arcs.len(),
         })
     }
+}
+
+/// The mean of `poses` (headings about `about`'s) and their spread: their covariance with a
+/// coarse step's rounding, at least [`RIVAL_M`] a side in position and a coarse step in heading.
+fn spread(poses: &[Pose2], about: Pose2) -> (Pose2, Matrix3<f64>) {
+    let n = poses.len().max(1) as f64;
+    let offsets: Vec<Vector3<f64>> = poses
+        .iter()
+        .map(|p| {
+            Vector3::new(
+                p.x - about.x,
+                p.y - about.y,
+                crate::geometry::wrap_angle(p.theta - about.theta),
+            )
+        })
+        .collect();
+    let mean = offsets.iter().sum::<Vector3<f64>>() / n;
+    let mut cov = offsets
+        .iter()
+        .map(|d| (d - mean) * (d - mean).transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let rounding =
+        Vector3::new(COARSE_STEP_M, COARSE_STEP_M, COARSE_STEP_RAD).map(|s| s * s / 12.0);
+    for (k, floor) in [RIVAL_M, RIVAL_M, COARSE_STEP_RAD].into_iter().enumerate() {
+        cov[(k, k)] = (cov[(k, k)] + rounding[k]).max(floor * floor);
+    }
+    let pose = Pose2::new(
+        about.x + mean[0],
+        about.y + mean[1],
+        crate::geometry::wrap_angle(about.theta + mean[2]),
+    );
+    (pose, cov)
 }
 
 /// Poses on a grid around `centre`: positions within `reach.0` and headings within `reach.1`, at

@@ -144,8 +144,8 @@ pub struct WallSegment {
     pub readings: usize,
     /// Root-mean-square range residual of the fit, metres.
     pub rms_m: f64,
-    /// How well the face is placed: one sigma along its normal where its ranges met it (their
-    /// mean place), metres, when known (a survey's corrected faces, from its trajectory's
+    /// How well the face is placed: one sigma along its normal where its survey's ranges met it
+    /// (their mean place), metres, when known (a survey's corrected faces, from its trajectory's
     /// covariance); `None` for a face whose placement was not measured, taken to
     /// [`crate::fusion::FuseConfig::wall_sigma_m`].
     pub sigma_m: Option<f64>,
