@@ -1673,23 +1673,18 @@ mod tests {
             }
         }
         // The walls alone cannot: started 0.8 m off along the corridor with a 1 m sigma, the
-        // filter takes no pose from them.
-        let off = Start::Given {
+        // filter takes no pose from them; nor with a 10 m sigma, where a pose narrowed down
+        // among several would be taken: the poses the walls allow run along the corridor past
+        // both grids searched.
+        let off = |sigma_m| Start::Given {
             pose: Pose2::new(2.8, 1.0, 0.0),
-            sigma_m: 1.0,
+            sigma_m,
             sigma_rad: 0.1,
         };
-        let (fixes, errors) = run(off, &[]);
+        let (fixes, errors) = run(off(1.0), &[]);
         assert!(fixes.is_empty(), "{fixes:?}");
         assert!(errors.last().unwrap().1 > 0.7, "{:?}", errors.last());
-        // Nor with a 10 m sigma, where a pose narrowed down among several would be taken: the
-        // poses the walls allow run along the corridor past both grids searched.
-        let lost = Start::Given {
-            pose: Pose2::new(2.8, 1.0, 0.0),
-            sigma_m: 10.0,
-            sigma_rad: 0.1,
-        };
-        let (fixes, _) = run(lost, &[]);
+        let (fixes, _) = run(off(10.0), &[]);
         assert!(fixes.is_empty(), "{fixes:?}");
     }
 
