@@ -213,7 +213,8 @@ impl RangeWindow {
     /// within `reach` (metres, radians: 3 sigma, capped); `None` when no pose of the grid the
     /// prior allows explains most ranges. When others explain them nearly as well the fix is
     /// not clear, and its covariance spans them: a robot placed metres off by a far tag is
-    /// brought within decimetres at once, and the next ranges pick the pose. `prior` says
+    /// brought within decimetres at once, and the next ranges pick the pose (`None` again when
+    /// they run past the grid, and past a second one around the best). `prior` says
     /// what else is known of the pose: `None` for a pose it rules out, else its chi-square there,
     /// added to the ranges' (`Some(0.0)` everywhere: the walls alone).
     pub(super) fn fix(
