@@ -123,21 +123,10 @@ impl Ekf {
         self.p = (&self.p + self.p.transpose()) * 0.5;
     }
 
-    /// Puts the pose at `pose` with covariance `cov`, known apart from the rest of the state
-    /// (a pose taken afresh: from a sighting, or from the walls).
-    pub(crate) fn reset_pose(&mut self, pose: Pose2, cov: &Matrix3<f64>) {
-        self.x
-            .fixed_rows_mut::<3>(0)
-            .copy_from(&Vector3::new(pose.x, pose.y, pose.theta));
-        let n = self.x.len();
-        self.p.view_mut((0, 3), (3, n - 3)).fill(0.0);
-        self.p.view_mut((3, 0), (n - 3, 3)).fill(0.0);
-        self.p.fixed_view_mut::<3, 3>(0, 0).copy_from(cov);
-    }
-
     /// Puts the pose at `pose`, taken as a linear function of landmarks plus noise: `Σ A ·
     /// landmark[slot]` over `from`'s `(slot, A)`, and noise of covariance `noise` apart from the
-    /// state. The pose's covariance with every state follows (`T P Tᵀ` for the map `T` that
+    /// state (no landmarks: a pose taken afresh, known apart from the rest of the state). The
+    /// pose's covariance with every state follows (`T P Tᵀ` for the map `T` that
     /// replaces the pose's rows), so a pose taken from a tag errs with the tag as the filter
     /// holds it, and a later sighting of the tag is not counted as news.
     pub(crate) fn reset_pose_from(

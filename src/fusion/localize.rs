@@ -1082,7 +1082,7 @@ impl Localizer {
             // the sightings kept since the last are.
             self.drop_turn();
             self.kept.clear();
-            self.ekf.reset_pose(fix.pose, &fix.cov);
+            self.ekf.reset_pose_from(fix.pose, &fix.cov, &[]);
             self.wall_fixes.push(t_s);
         }
     }
