@@ -80,6 +80,7 @@ impl LidarDescription {
             beam: BeamModel::Ray,
             cone_rad: self.angle_increment_rad.abs(),
             max_range_m: self.reach_m(),
+            min_range_m: 0.0,
             sensors: (0..self.beams)
                 .map(|k| {
                     let b = mount.compose(&Pose2::new(

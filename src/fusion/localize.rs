@@ -135,7 +135,7 @@ pub fn wall_in_beam(
 ) -> Option<WallMatch> {
     let range = reading.range_m?;
     let sensor = sonar.layout.sensors.get(reading.sensor)?;
-    if range >= sonar.layout.max_range_m - 1e-6 {
+    if !sonar.layout.measures(range) {
         return None;
     }
     let at = world_from_robot.compose(&sensor.robot_from_sensor());
@@ -1550,6 +1550,7 @@ mod tests {
             beam: BeamModel::Cone,
             cone_rad: 30f64.to_radians(),
             max_range_m: 5.0,
+            min_range_m: 0.0,
             sensors: vec![SonarSensor {
                 x_m: 0.0,
                 y_m: -0.2,
@@ -1604,6 +1605,7 @@ mod tests {
             beam: BeamModel::Cone,
             cone_rad: 30f64.to_radians(),
             max_range_m: 5.0,
+            min_range_m: 0.0,
             sensors: [-90.0f64, 90.0]
                 .iter()
                 .map(|b| SonarSensor {
@@ -1706,6 +1708,7 @@ mod tests {
             beam: BeamModel::Cone,
             cone_rad: 30f64.to_radians(),
             max_range_m: 5.0,
+            min_range_m: 0.0,
             sensors: [-90.0f64, -45.0, 0.0, 45.0, 90.0, 180.0]
                 .iter()
                 .map(|b| SonarSensor {
@@ -1828,6 +1831,24 @@ mod tests {
             wall_in_beam(&sonar, &at_max, Pose2::new(0.0, 0.0, 0.0)),
             None
         );
+        // A transducer reports anything nearer than its shortest range at that range: such a
+        // reading is no distance to the face (the robot 8 cm from it would seem 10 cm away).
+        let clamped = SonarLayout {
+            min_range_m: 0.1,
+            ..layout.clone()
+        };
+        let near = SonarInput {
+            layout: &clamped,
+            ..sonar
+        };
+        let at_min = SonarReading {
+            range_m: Some(0.1),
+            ..reading
+        };
+        let origin = Pose2::new(0.0, 0.0, 0.0);
+        assert_eq!(wall_in_beam(&near, &at_min, origin), None);
+        assert!(wall_in_beam(&near, &reading, origin).is_some());
+        assert!(wall_in_beam(&sonar, &at_min, origin).is_some());
         // A face beyond the sensor's reach cannot have sent the echo.
         let far = WallSegment {
             offset_m: wall.offset_m - layout.max_range_m,

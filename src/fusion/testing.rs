@@ -22,6 +22,7 @@ pub(crate) fn corridor() -> (
         beam: crate::sonar::BeamModel::Cone,
         cone_rad: 30f64.to_radians(),
         max_range_m: 2.1,
+        min_range_m: 0.0,
         sensors: vec![crate::sonar::SonarSensor {
             x_m: 0.0,
             y_m: 0.2,

@@ -186,10 +186,7 @@ impl RangeWindow {
     /// Keeps a reading taken at odometry pose `odom` (one with an echo short of the sensor's
     /// largest range).
     pub(super) fn push(&mut self, odom: Pose2, reading: &SonarReading, layout: &SonarLayout) {
-        if reading
-            .range_m
-            .is_some_and(|r| r < layout.max_range_m - 1e-6)
-        {
+        if reading.range_m.is_some_and(|r| layout.measures(r)) {
             if self.ranges.len() == WINDOW {
                 self.ranges.pop_front();
             }

@@ -282,7 +282,9 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     let layout = &meta.robot.sonar;
     if !(layout.cone_rad > 0.0
         && layout.cone_rad < std::f64::consts::PI
-        && layout.max_range_m > 0.0)
+        && layout.max_range_m > 0.0
+        && layout.min_range_m >= 0.0
+        && layout.min_range_m < layout.max_range_m)
         || layout
             .sensors
             .iter()
@@ -290,7 +292,8 @@ pub fn load_run(dir: &Path) -> Result<RunDataset, IoError> {
     {
         return Err(IoError::content(
             &meta_path,
-            "robot.sonar: cone_rad must be in (0, pi), max_range_m positive, sensor poses finite",
+            "robot.sonar: cone_rad must be in (0, pi), max_range_m positive, min_range_m (if given) \
+             from 0 up to max_range_m, sensor poses finite",
         ));
     }
     if let Some(lidar) = &meta.robot.lidar {

@@ -236,7 +236,6 @@ pub fn simulate(
 ) -> Result<SimOutput, SimError> {
     config.validate()?;
     let e = &config.exploration;
-    let layout = &config.sonar_layout;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     if world
         .nearest_wall_point(world.start.position(), e.robot_radius_m)
@@ -273,8 +272,7 @@ pub fn simulate(
     on_progress(t);
     let end_reason = explorer.end_reason(end_reason);
     let run = simulated_run(
-        layout,
-        config.seed,
+        config,
         &end_reason,
         log.odometry,
         log.sonar,
@@ -313,7 +311,6 @@ pub fn simulate_along(
         });
     }
     let e = &config.exploration;
-    let layout = &config.sonar_layout;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut wheels = Wheels::new(first.pose, e, &config.odometry)?;
     let mut log = Log::new(world, config)?;
@@ -341,8 +338,7 @@ pub fn simulate_along(
     let end_reason = format!("followed the given path of {} poses", path.len());
     Ok(SimOutput {
         run: simulated_run(
-            layout,
-            config.seed,
+            config,
             &end_reason,
             log.odometry,
             log.sonar,
@@ -354,10 +350,10 @@ pub fn simulate_along(
     })
 }
 
-/// A simulated run's dataset.
+/// A simulated run's dataset. Its sonar layout carries the simulated transducers' shortest
+/// range.
 fn simulated_run(
-    layout: &SonarLayout,
-    seed: u64,
+    config: &SimConfig,
     end_reason: &str,
     odometry: Vec<StampedPose>,
     sonar: Vec<SonarReading>,
@@ -367,7 +363,10 @@ fn simulated_run(
         meta: RunMeta {
             format: RUN_FORMAT.into(),
             robot: RobotDescription {
-                sonar: layout.clone(),
+                sonar: SonarLayout {
+                    min_range_m: config.sonar.min_range_m,
+                    ..config.sonar_layout.clone()
+                },
                 lidar: None,
                 ranging: None,
                 rig: None,
@@ -375,7 +374,7 @@ fn simulated_run(
             },
             world: None,
             mapping: None,
-            notes: format!("simulated by stereotag, seed {seed}; {end_reason}"),
+            notes: format!("simulated by stereotag, seed {}; {end_reason}", config.seed),
         },
         odometry,
         sonar,

@@ -65,6 +65,10 @@ impl BeamModel {
 /// (grazing returns beyond it are too rare and too noisy to vote for a wall): 80 degrees.
 pub const RAY_INCIDENCE_RAD: f64 = 80.0 * std::f64::consts::PI / 180.0;
 
+/// How near a range may come to the sensor's limits and still be a measured distance
+/// ([`SonarLayout::measures`]), metres: a micrometre, the rounding of a log's decimals.
+const RANGE_LIMIT_MARGIN_M: f64 = 1e-6;
+
 /// A robot's sonar ring (or, with [`BeamModel::Ray`], the beams of a laser).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -80,6 +84,11 @@ pub struct SonarLayout {
     /// Largest range the sensor reports, metres.
     #[serde(default = "default_max_range")]
     pub max_range_m: f64,
+    /// Shortest range the sensor reports, metres (0, the default: not known). A transducer
+    /// reports anything nearer at this range, so a reading there says only that something is
+    /// that near: it is not matched with walls as a distance ([`SonarLayout::measures`]).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub min_range_m: f64,
     /// The transducers; a reading's `sensor` is an index into this list.
     pub sensors: Vec<SonarSensor>,
 }
@@ -89,6 +98,9 @@ fn default_cone() -> f64 {
 }
 fn default_max_range() -> f64 {
     PAPER_MAX_RANGE_M
+}
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Default for SonarLayout {
@@ -119,6 +131,7 @@ impl SonarLayout {
             beam: BeamModel::Cone,
             cone_rad: PAPER_CONE_RAD,
             max_range_m: PAPER_MAX_RANGE_M,
+            min_range_m: 0.0,
             sensors,
         }
     }
@@ -158,22 +171,42 @@ impl SonarLayout {
             beam: BeamModel::Cone,
             cone_rad: PAPER_CONE_RAD,
             max_range_m: 5.0,
+            min_range_m: 0.0,
             sensors,
         }
     }
 
     /// The readings the Hough transforms and the wall fit vote with, and the half-width of the
-    /// directions each votes for: a sonar's placed readings and half its cone; for a laser
-    /// ([`BeamModel::Ray`]) each return as a surface point (see [`point_echoes`]) and
-    /// [`RAY_INCIDENCE_RAD`].
+    /// directions each votes for: a sonar's placed readings (but those at its shortest range,
+    /// which place no wall) and half its cone; for a laser ([`BeamModel::Ray`]) each return as
+    /// a surface point (see [`point_echoes`]) and [`RAY_INCIDENCE_RAD`].
     pub fn echoes_for_lines(&self, placed: &[PlacedReading]) -> (Vec<PlacedReading>, f64) {
         match self.beam {
+            BeamModel::Cone if self.min_range_m > 0.0 => (
+                placed
+                    .iter()
+                    .filter(|r| {
+                        r.range_m
+                            .is_none_or(|x| x > self.min_range_m + RANGE_LIMIT_MARGIN_M)
+                    })
+                    .copied()
+                    .collect(),
+                0.5 * self.cone_rad,
+            ),
             BeamModel::Cone => (placed.to_vec(), 0.5 * self.cone_rad),
             BeamModel::Ray => (
                 point_echoes(&keyframe_beams(placed, self.cone_rad), self.max_range_m),
                 RAY_INCIDENCE_RAD,
             ),
         }
+    }
+
+    /// Whether a range measures a distance: shorter than the largest the sensor reports (at it,
+    /// no echo came back within reach) and longer than the shortest (at it, something is at
+    /// most that near).
+    pub fn measures(&self, range_m: f64) -> bool {
+        range_m < self.max_range_m - RANGE_LIMIT_MARGIN_M
+            && range_m > self.min_range_m + RANGE_LIMIT_MARGIN_M
     }
 
     /// A layout by name: `frontal5` or `pioneer16`.

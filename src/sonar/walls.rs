@@ -775,6 +775,7 @@ mod tests {
             beam: crate::sonar::BeamModel::Ray,
             cone_rad: 1f64.to_radians(),
             max_range_m: 10.0,
+            min_range_m: 0.0,
             ..crate::sonar::SonarLayout::frontal5()
         };
         let mut grid =

@@ -797,6 +797,7 @@ mod tests {
             beam: BeamModel::Cone,
             cone_rad: 30f64.to_radians(),
             max_range_m: 2.1,
+            min_range_m: 0.0,
             sensors: vec![SonarSensor {
                 x_m: 0.0,
                 y_m: -0.2,

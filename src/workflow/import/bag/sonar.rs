@@ -142,6 +142,7 @@ impl Gathered {
                 beam: crate::sonar::BeamModel::Cone,
                 cone_rad: decimal(first_sensor.field_of_view),
                 max_range_m: decimal(first_sensor.max_range),
+                min_range_m: decimal(first_sensor.min_range.max(0.0)),
                 sensors,
             };
             let (mut too_close, mut left_out) = (0, 0);
