@@ -73,7 +73,9 @@ pub(super) fn sequential(
     config: &FuseConfig,
 ) -> Option<ScanMatches> {
     let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
-    let echo = |r: &SonarReading| r.range_m.is_some_and(|m| layout.measures(m));
+    // A reading at the transducer's shortest range is kept: the thing is at most that near, a
+    // centimetre or two off the arc, well within a match's tolerance.
+    let echo = |r: &SonarReading| r.range_m.is_some_and(|m| m < layout.max_range_m - 1e-6);
     // Times of the readings with an echo: the window of keyframe k is the WINDOW latest by then.
     let echo_times: Vec<f64> = readings.iter().filter(|r| echo(r)).map(|r| r.t_s).collect();
     let mut poses: Vec<Pose2> = Vec::with_capacity(frames.len());
@@ -167,7 +169,7 @@ pub(super) fn agreement(
     let field = occupied_distances(&counting.map());
     let (mut echoes, mut agree) = (0usize, 0usize);
     for p in &placed {
-        let Some(range) = p.range_m.filter(|&m| layout.measures(m)) else {
+        let Some(range) = p.range_m.filter(|&m| m < layout.max_range_m - 1e-6) else {
             continue;
         };
         let at = p.world_from_sensor;
