@@ -298,7 +298,7 @@ def main():
                 k = int(r["sensor"])
                 rng = float(r["range_m"]) if r["range_m"] else math.inf
                 msg = T["sensor_msgs/msg/Range"](
-                    header=header(t_ns, f"sonar_{k}"), radiation_type=0, field_of_view=float(layout["cone_rad"]), min_range=0.02, max_range=float(layout["max_range_m"]), range=rng
+                    header=header(t_ns, f"sonar_{k}"), radiation_type=0, field_of_view=float(layout["cone_rad"]), min_range=float(layout.get("min_range_m", 0.0)), max_range=float(layout["max_range_m"]), range=rng
                 )
                 write(f"sonar{k}", t_ns, msg)
             elif kind == "scan":

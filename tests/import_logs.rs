@@ -146,6 +146,10 @@ fn a_bag_of_the_office_imports_as_its_run_and_surveys_alike() {
     for f in ["stereo.csv", "sonar.csv"] {
         assert_eq!(text(&run.join(f)), text(&imported.join(f)), "{f}");
     }
+    // The transducers' shortest range comes from the Range messages' min_range: readings
+    // clamped there are no distances.
+    assert!(text(&run.join("run.yaml")).contains("min_range_m: 0.1\n"));
+    assert!(text(&imported.join("run.yaml")).contains("min_range_m: 0.1\n"));
     assert_csv_close(
         &run.join("odometry.csv"),
         &imported.join("odometry.csv"),
