@@ -387,8 +387,7 @@ pub fn localize(
     localize_from(obs, landmarks, sonar, config, Start::Survey)
 }
 
-/// [`localize`] from `start`: a loop over a [`Localizer`] fed the run's odometry, sightings,
-/// visual turns and ranges in time order.
+/// [`localize`] from `start`: a [`Localizer`] fed the run by [`track`].
 pub fn localize_from(
     obs: &Observations<'_>,
     landmarks: &[Landmark],
@@ -403,13 +402,24 @@ pub fn localize_from(
             filter = filter.with_walls_covariance(c.clone());
         }
     }
+    track(filter, obs, sonar.map_or(&[], |s| s.readings))
+}
+
+/// Feeds a recorded run to `filter` in time order: its odometry, sightings, visual turns and
+/// range `readings` (those of the filter's walls' layout; without walls it leaves them), and
+/// what it held after each odometry sample. `localize` is this over the filter a survey gives
+/// ([`crate::workflow::localize::SurveyedMap::localizer`]), fed the odometry as logged.
+pub fn track(
+    mut filter: Localizer,
+    obs: &Observations<'_>,
+    readings: &[SonarReading],
+) -> LocalizeResult {
     let mut out = LocalizeResult::with_capacity(obs.odometry.len());
     let first_t = obs.odometry.first().map_or(f64::NEG_INFINITY, |p| p.t_s);
-    let mut pending = events(obs.sightings, obs.visual, first_t, config)
+    let mut pending = events(obs.sightings, obs.visual, first_t, filter.config())
         .into_iter()
         .peekable();
-    let mut ranges: Vec<(usize, &SonarReading)> =
-        sonar.map_or(Vec::new(), |s| s.readings.iter().enumerate().collect());
+    let mut ranges: Vec<(usize, &SonarReading)> = readings.iter().enumerate().collect();
     ranges.sort_by(|a, b| a.1.t_s.total_cmp(&b.1.t_s));
     let mut ranges = ranges.into_iter().peekable();
     for sample in obs.odometry {

@@ -7,7 +7,7 @@ use super::survey::load_run_rig;
 use super::{load_run, load_world_of_run, Error, Result};
 use crate::dataset::RunDataset;
 use crate::fusion::{
-    self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, OdometryNoiseScale, SonarInput,
+    self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, OdometryNoiseScale,
 };
 use crate::geometry::{Pose2, StampedPose};
 use crate::io::{self, OutputDir};
@@ -106,35 +106,6 @@ fn surveyed_walls(
     Ok((walls, covariance))
 }
 
-/// The settings the filter predicts with: those given, with the turn noise that calibrated
-/// odometry leaves when the odometry is calibrated, and the odometry's noise scaled as the
-/// survey measured it (`noise_scale`, measured on the calibrated odometry).
-fn filter_config(
-    config: FuseConfig,
-    calibration: Option<&OdometryCalibration>,
-    noise_scale: Option<&OdometryNoiseScale>,
-) -> FuseConfig {
-    let Some(_) = calibration else {
-        return config;
-    };
-    let mut c = config.for_calibrated_odometry();
-    if let Some(scale) = noise_scale {
-        tracing::info!(
-            "the survey measured the calibrated odometry's noise against the model: translation {:.2}, turning {:.2}, drift {:.2} times the model's sigmas; predicting with them",
-            scale.translation,
-            scale.turning,
-            scale.drift
-        );
-        c = c.with_odometry_noise_scale(scale);
-    }
-    tracing::info!(
-        "predicting with {:.4} m per √m travelled, {:.4} heading noise per √rad turned (calibrated odometry)",
-        c.odometry_sigma_m_per_sqrt_m,
-        c.heading_sigma_per_sqrt_rad
-    );
-    c
-}
-
 /// What of a survey a localisation uses.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct SurveyUse {
@@ -203,7 +174,25 @@ impl SurveyedMap {
     /// odometry leaves and the odometry's noise as the survey measured it, when it calibrated
     /// the odometry.
     pub fn filter_config(&self, config: FuseConfig) -> FuseConfig {
-        filter_config(config, self.calibration.as_ref(), self.noise_scale.as_ref())
+        if self.calibration.is_none() {
+            return config;
+        }
+        let mut c = config.for_calibrated_odometry();
+        if let Some(scale) = &self.noise_scale {
+            tracing::info!(
+                "the survey measured the calibrated odometry's noise against the model: translation {:.2}, turning {:.2}, drift {:.2} times the model's sigmas; predicting with them",
+                scale.translation,
+                scale.turning,
+                scale.drift
+            );
+            c = c.with_odometry_noise_scale(scale);
+        }
+        tracing::info!(
+            "predicting with {:.4} m per √m travelled, {:.4} heading noise per √rad turned (calibrated odometry)",
+            c.odometry_sigma_m_per_sqrt_m,
+            c.heading_sigma_per_sqrt_rad
+        );
+        c
     }
 
     /// A streaming localiser in this map from `start`, fed the run's odometry as logged (each
@@ -319,7 +308,8 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             .collect::<Vec<_>>()
             .into();
     }
-    let config = surveyed.filter_config(io::load_fuse_config(request.config)?);
+    let layout = (!surveyed.walls.is_empty()).then_some(&run.meta.robot.sonar);
+    let filter = surveyed.localizer(io::load_fuse_config(request.config)?, request.start, layout);
     let world = load_world_of_run(request.world, request.run_dir, &run)?;
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
@@ -340,7 +330,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         } else {
             request.detect.tag_sizes.clone()
         },
-        visual_odometry: config.visual_odometry,
+        visual_odometry: filter.config().visual_odometry,
         keep_images: false,
         ..request.detect.clone()
     };
@@ -355,25 +345,17 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         )?,
         None => RunSightings::default(),
     };
-    let SurveyedMap {
-        landmarks,
-        walls,
-        walls_covariance,
-        ..
-    } = surveyed;
-    let sonar = SonarInput {
-        readings: &run.sonar,
-        layout: &run.meta.robot.sonar,
-        walls: &walls,
-        walls_covariance: walls_covariance.as_ref(),
-    };
+    // The filter corrects the odometry as logged with the survey's calibration, and moves it
+    // into an anchored survey's frame, itself; `odometry` is that for the report.
     let obs = fusion::Observations {
-        odometry: &odometry,
+        odometry: &run.odometry,
         sightings: &seen.sightings,
         visual: &seen.visual,
     };
-    let sonar = (!walls.is_empty()).then_some(sonar);
-    let result = fusion::localize_from(&obs, &landmarks, sonar, &config, request.start);
+    let result = fusion::track(filter, &obs, &run.sonar);
+    let SurveyedMap {
+        landmarks, walls, ..
+    } = surveyed;
     let truth = run.ground_truth.as_deref();
     let growth = error_growth(&result, truth);
     io::save_localization_csv(&dir.path("localization.csv"), &run.odometry, &result, truth)?;
