@@ -133,11 +133,23 @@ fn print_summary(output: &LocalizeOutput) {
         );
     }
     if !walls.is_empty() {
+        let at_shortest = output
+            .metrics
+            .get("ranges.at_shortest_range")
+            .and_then(|v| v.as_u64())
+            .unwrap_or(0);
         tracing::info!(
-            "{} sonar ranges fused against {} surveyed walls ({} gated out)",
+            "{} sonar ranges fused against {} surveyed walls ({} gated out{})",
             result.ranges_fused(),
             walls.len(),
-            result.ranges_gated_out()
+            result.ranges_gated_out(),
+            if at_shortest > 0 {
+                format!(
+                    "; {at_shortest} echoes at the sonar's shortest range not taken as distances"
+                )
+            } else {
+                String::new()
+            }
         );
     }
     tracing::info!("error against distance since the last sighting:");

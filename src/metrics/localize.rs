@@ -77,6 +77,10 @@ pub fn localization_metrics(
     metrics.insert("walls.surveyed".into(), counts.walls.into());
     metrics.insert("ranges.fused".into(), result.ranges_fused().into());
     metrics.insert("ranges.gated_out".into(), result.ranges_gated_out().into());
+    metrics.insert(
+        "ranges.at_shortest_range".into(),
+        counts.ranges_at_shortest.into(),
+    );
     metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
     metrics.insert("wall_fixes".into(), result.wall_fixed_t_s.len().into());
     metrics.insert("visual.turns".into(), counts.visual_turns.into());
@@ -168,4 +172,7 @@ pub struct LocalizationCounts {
     pub walls: usize,
     /// Visual turns measured.
     pub visual_turns: usize,
+    /// Echoes at the sonar's shortest range, not taken as distances
+    /// ([`crate::sonar::SonarLayout::measures`]).
+    pub ranges_at_shortest: usize,
 }

@@ -133,6 +133,9 @@ pub struct Hidden {
     pub features_below_threshold: usize,
     /// Readings at or beyond the sonar's range (`max_range_m`), taken as no echo.
     pub readings_beyond_range: usize,
+    /// Echoes at the sonar's shortest range (`min_range_m`): they mark the grid, but place no
+    /// line or wall ([`crate::sonar::SonarLayout::measures`]).
+    pub readings_at_shortest_range: usize,
     /// Offline features dropped for lying on no wall's line (rule 6 of [`crate::sonar::hough`],
     /// `mapping.hough.features_on_walls`).
     pub features_off_walls: usize,
@@ -140,7 +143,7 @@ pub struct Hidden {
 
 impl Hidden {
     /// The metrics for `report.json` (`hidden.*`).
-    pub fn metrics(&self) -> [(&'static str, f64); 6] {
+    pub fn metrics(&self) -> [(&'static str, f64); 7] {
         [
             ("hidden.cells_known", self.cells_known as f64),
             ("hidden.cells_below_floor", self.cells_below_floor as f64),
@@ -152,6 +155,10 @@ impl Hidden {
             (
                 "hidden.readings_beyond_range",
                 self.readings_beyond_range as f64,
+            ),
+            (
+                "hidden.readings_at_shortest_range",
+                self.readings_at_shortest_range as f64,
             ),
             ("hidden.features_off_walls", self.features_off_walls as f64),
         ]
@@ -300,6 +307,10 @@ pub fn map_trajectory(
         .iter()
         .filter(|r| r.range_m.is_some_and(|x| x >= layout.max_range_m))
         .count();
+    let readings_at_shortest_range = readings
+        .iter()
+        .filter(|r| r.range_m.is_some_and(|x| layout.at_shortest_range(x)))
+        .count();
     let (echoes, echoes_off_grid) = readings
         .iter()
         .filter_map(|r| {
@@ -387,6 +398,7 @@ pub fn map_trajectory(
         features_kept: offline.len(),
         features_below_threshold: hidden_features.len(),
         readings_beyond_range,
+        readings_at_shortest_range,
         features_off_walls: features_found - offline.len(),
     };
     timings_s.extend(online_times);

@@ -182,18 +182,14 @@ impl SonarLayout {
     /// a surface point (see [`point_echoes`]) and [`RAY_INCIDENCE_RAD`].
     pub fn echoes_for_lines(&self, placed: &[PlacedReading]) -> (Vec<PlacedReading>, f64) {
         match self.beam {
-            BeamModel::Cone if self.min_range_m > 0.0 => (
+            BeamModel::Cone => (
                 placed
                     .iter()
-                    .filter(|r| {
-                        r.range_m
-                            .is_none_or(|x| x > self.min_range_m + RANGE_LIMIT_MARGIN_M)
-                    })
+                    .filter(|r| r.range_m.is_none_or(|x| !self.at_shortest_range(x)))
                     .copied()
                     .collect(),
                 0.5 * self.cone_rad,
             ),
-            BeamModel::Cone => (placed.to_vec(), 0.5 * self.cone_rad),
             BeamModel::Ray => (
                 point_echoes(&keyframe_beams(placed, self.cone_rad), self.max_range_m),
                 RAY_INCIDENCE_RAD,
@@ -202,11 +198,15 @@ impl SonarLayout {
     }
 
     /// Whether a range measures a distance: shorter than the largest the sensor reports (at it,
-    /// no echo came back within reach) and longer than the shortest (at it, something is at
-    /// most that near).
+    /// no echo came back within reach) and not at the shortest ([`Self::at_shortest_range`]).
     pub fn measures(&self, range_m: f64) -> bool {
-        range_m < self.max_range_m - RANGE_LIMIT_MARGIN_M
-            && range_m > self.min_range_m + RANGE_LIMIT_MARGIN_M
+        range_m < self.max_range_m - RANGE_LIMIT_MARGIN_M && !self.at_shortest_range(range_m)
+    }
+
+    /// Whether a range is at the sensor's shortest (`min_range_m`, when known): something is at
+    /// most that near.
+    pub fn at_shortest_range(&self, range_m: f64) -> bool {
+        self.min_range_m > 0.0 && range_m <= self.min_range_m + RANGE_LIMIT_MARGIN_M
     }
 
     /// A layout by name: `frontal5` or `pioneer16`.

@@ -373,6 +373,12 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
     let counts = LocalizationCounts {
         walls: walls.len(),
         visual_turns: seen.visual.len(),
+        ranges_at_shortest: run
+            .sonar
+            .iter()
+            .filter_map(|r| r.range_m)
+            .filter(|&x| run.meta.robot.sonar.at_shortest_range(x))
+            .count(),
     };
     let calibrated = calibration.is_some();
     let mut metrics =
