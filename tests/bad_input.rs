@@ -296,6 +296,15 @@ fn mapping_settings_out_of_range_name_the_file_and_key() {
 }
 
 #[test]
+fn a_shortest_range_past_the_longest_is_refused() {
+    check(
+        "run.yaml",
+        "format: stereotag-run/1\nrobot:\n  sonar: {name: a, max_range_m: 2.1, min_range_m: 3.0, sensors: [{x_m: 0, y_m: 0, bearing_rad: 0}]}\n",
+        "min_range_m (if given) from 0 up to max_range_m",
+    );
+}
+
+#[test]
 fn run_from_another_version() {
     check("run.yaml", "format: stereotag-run/0\nrobot:\n  sonar: {name: a, sensors: [{x_m: 0, y_m: 0, bearing_rad: 0}]}\n", "this stereotag reads");
 }

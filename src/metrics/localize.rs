@@ -173,6 +173,6 @@ pub struct LocalizationCounts {
     /// Visual turns measured.
     pub visual_turns: usize,
     /// Echoes at the sonar's shortest range, not taken as distances
-    /// ([`crate::sonar::SonarLayout::measures`]).
+    /// ([`crate::sonar::SonarLayout::at_shortest_range`]).
     pub ranges_at_shortest: usize,
 }

@@ -134,7 +134,7 @@ pub struct Hidden {
     /// Readings at or beyond the sonar's range (`max_range_m`), taken as no echo.
     pub readings_beyond_range: usize,
     /// Echoes at the sonar's shortest range (`min_range_m`): they mark the grid, but place no
-    /// line or wall ([`crate::sonar::SonarLayout::measures`]).
+    /// line or wall ([`crate::sonar::SonarLayout::at_shortest_range`]).
     pub readings_at_shortest_range: usize,
     /// Offline features dropped for lying on no wall's line (rule 6 of [`crate::sonar::hough`],
     /// `mapping.hough.features_on_walls`).
