@@ -5,7 +5,7 @@
 use crate::fusion::ekf::{compose_jacobians, Ekf};
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::{sighting_measurement, tag_in_robot};
-use crate::fusion::wall_fix::{RangeWindow, MAX_REACH_M};
+use crate::fusion::wall_fix::RangeWindow;
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
 use crate::sonar::walls::WallSegment;
@@ -1048,11 +1048,7 @@ impl Localizer {
             return;
         }
         let now = self.estimate();
-        // A filter placed metres off (a far tag's pose) tries again at every few new ranges.
-        let eager = now.position_sigma_m() > MAX_REACH_M;
-        if !self.window.due(odom, eager)
-            || now.position_sigma_m() <= self.config.sonar_max_range_sigma_m
-        {
+        if !self.window.due(odom) || now.position_sigma_m() <= self.config.sonar_max_range_sigma_m {
             return;
         }
         let reach = (

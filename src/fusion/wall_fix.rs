@@ -22,17 +22,16 @@ use std::collections::VecDeque;
 const WINDOW: usize = 48;
 /// A match is tried with at least this many ranges ...
 const MIN_RANGES: usize = 24;
-/// ... every this much travel, metres, or turn, radians (45 degrees: a robot looking around
-/// sees new walls without moving), or, for a filter placed metres off (by a far tag: its sigma
-/// past [`MAX_REACH_M`]), this many new ranges: it needs its pose at once. (Tried every 4 new
-/// ranges whatever the sigma, a filter started 0.7 m off with a 1 m sigma took a clear fix
-/// 7.7 degrees off from the first 30 ranges, where the 45 degrees' turn gave a right one.)
+/// ... every this many new ranges (a filter placed metres off by a far tag needs its pose at
+/// once), or this much travel, metres, or turn, radians (45 degrees: a robot looking around sees
+/// new walls without moving). A clear fix from few ranges may leave the heading loose, and says
+/// so in its covariance ([`RangeWindow::fix`]).
 const TRY_EVERY_M: f64 = 0.5;
 const TRY_EVERY_RAD: f64 = std::f64::consts::FRAC_PI_4;
 const TRY_EVERY_RANGES: usize = 4;
 /// The search reaches this far around the estimate at most (or 3 sigma when less): metres, and
 /// radians (30 degrees).
-pub(super) const MAX_REACH_M: f64 = 1.5;
+const MAX_REACH_M: f64 = 1.5;
 const MAX_REACH_RAD: f64 = 0.52;
 /// Coarse grid steps and the residual beyond which a range counts as unexplained there, metres.
 const COARSE_STEP_M: f64 = 0.1;
@@ -171,7 +170,8 @@ impl DistanceField {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct WallFix {
     pub(super) pose: Pose2,
-    /// Its covariance: [`FIX_SIGMA_M`] and [`FIX_SIGMA_RAD`] for a clear fix; for an ambiguous
+    /// Its covariance: [`FIX_SIGMA_M`], and [`FIX_SIGMA_RAD`] or the spread of the headings
+    /// that explain the ranges nearly as well, for a clear fix; for an ambiguous
     /// one, the spread of the poses that explain the ranges nearly as well as the best (at
     /// least [`RIVAL_M`] a side).
     pub(super) cov: Matrix3<f64>,
@@ -195,11 +195,11 @@ impl RangeWindow {
         }
     }
 
-    /// Whether a match is due at odometry pose `odom`: enough ranges, and travel since the last
-    /// (or, when `eager`, new ranges).
-    pub(super) fn due(&self, odom: Pose2, eager: bool) -> bool {
+    /// Whether a match is due at odometry pose `odom`: enough ranges, and new ranges or travel
+    /// since the last.
+    pub(super) fn due(&self, odom: Pose2) -> bool {
         self.ranges.len() >= MIN_RANGES
-            && ((eager && self.since_try >= TRY_EVERY_RANGES)
+            && (self.since_try >= TRY_EVERY_RANGES
                 || self.last_try.is_none_or(|p| {
                     (p.x - odom.x).hypot(p.y - odom.y) >= TRY_EVERY_M
                         || crate::geometry::wrap_angle(p.theta - odom.theta).abs() >= TRY_EVERY_RAD
@@ -211,7 +211,10 @@ impl RangeWindow {
     /// prior allows explains most ranges. When others explain them nearly as well the fix is
     /// not clear, and its covariance spans them: a robot placed metres off by a far tag is
     /// brought within decimetres at once, and the next ranges pick the pose (`None` again when
-    /// they run past the grid, and past a second one around the best). `prior` says
+    /// they run past the grid, and past a second one around the best). A clear fix's heading
+    /// sigma spans the headings that explain the ranges nearly as well near it (a sonar's arc
+    /// touches a wall across the cone's width, so a few ranges may fix the place and leave the
+    /// heading loose), at least [`FIX_SIGMA_RAD`]. `prior` says
     /// what else is known of the pose: `None` for a pose it rules out, else its chi-square there,
     /// added to the ranges' (`Some(0.0)` everywhere: the walls alone).
     pub(super) fn fix(
@@ -309,7 +312,19 @@ impl RangeWindow {
                 .fold(f64::INFINITY, f64::min);
             let near = RIVAL_RATIO * best_cost.max(floor);
             if rival >= near {
-                break best;
+                // The headings that explain the ranges nearly as well, near the best: a sonar's
+                // arcs touch a wall over the cone's width, so few ranges may leave the heading
+                // loose where the place is sure.
+                let headings: Vec<f64> = scored
+                    .iter()
+                    .filter(|s| s.1 < near)
+                    .map(|s| crate::geometry::wrap_angle(s.0.theta - best.theta))
+                    .collect();
+                let n = headings.len().max(1) as f64;
+                let mean = headings.iter().sum::<f64>() / n;
+                let var = headings.iter().map(|h| (h - mean).powi(2)).sum::<f64>() / n
+                    + COARSE_STEP_RAD.powi(2) / 12.0;
+                break (best, var);
             }
             tracing::debug!(
                 "no clear pose from the walls: {} ranges explained nearly as well {RIVAL_M} m apart (cost {best_cost:.4} and {rival:.4})",
@@ -340,6 +355,7 @@ impl RangeWindow {
             }
             centres.push(best);
         };
+        let (best, heading_var) = best;
         let (fine, _, _, inliers) = grid(
             best,
             (COARSE_STEP_M, COARSE_STEP_RAD),
@@ -353,7 +369,7 @@ impl RangeWindow {
             cov: Matrix3::from_diagonal(&Vector3::new(
                 FIX_SIGMA_M.powi(2),
                 FIX_SIGMA_M.powi(2),
-                FIX_SIGMA_RAD.powi(2),
+                FIX_SIGMA_RAD.powi(2).max(heading_var),
             )),
             clear: true,
             inliers,
