@@ -118,6 +118,23 @@ fn print_summary(output: &LocalizeOutput) {
         result.rejected.len(),
         result.unknown.len()
     );
+    if let Some(t) = result.located_t_s {
+        // The first sample from then on: the pose the sighting gave, with its sigma.
+        let sigma = result
+            .trajectory
+            .iter()
+            .zip(&result.sigma_m)
+            .find(|(p, _)| p.t_s >= t)
+            .map_or(f64::NAN, |(_, s)| *s);
+        tracing::info!(
+            "located at t = {t:.1} s by the first sighting of a surveyed tag (position sigma then {sigma:.2} m{})",
+            if sigma > 1.0 {
+                ": a far tag places the robot on an arc around it; the next tags or the walls say where"
+            } else {
+                ""
+            }
+        );
+    }
     for t in &result.relocalised_t_s {
         tracing::warn!(
             "lost at t = {t:.1} s: {} sightings in a row were gated out and agreed among \

@@ -41,6 +41,9 @@ pub struct LocalizeResult {
     /// Times the filter was found lost and started again from the sightings (seconds): see
     /// [`RELOCALISE_AFTER`].
     pub relocalised_t_s: Vec<f64>,
+    /// When the first sighting of a surveyed tag placed a robot whose start was unknown
+    /// ([`Start::Unknown`]), seconds.
+    pub located_t_s: Option<f64>,
     /// Visual turns fused.
     pub visual_fused: usize,
     /// Visual turns gated out.
@@ -1164,6 +1167,7 @@ impl LocalizeResult {
             unknown: Vec::new(),
             range_outcomes: Vec::new(),
             relocalised_t_s: Vec::new(),
+            located_t_s: None,
             visual_fused: 0,
             visual_rejected: 0,
             wall_fixed_t_s: Vec::new(),
@@ -1176,7 +1180,7 @@ impl LocalizeResult {
             SightingOutcome::Fused => self.accepted.push(k),
             SightingOutcome::Located => {
                 self.accepted.push(k);
-                self.relocalised_t_s.push(t_s);
+                self.located_t_s.get_or_insert(t_s);
             }
             SightingOutcome::GatedOut => self.rejected.push(k),
             SightingOutcome::Relocalised => {
@@ -1382,7 +1386,8 @@ mod tests {
             )
         };
         let unknown = run(Start::Unknown);
-        let first = unknown.relocalised_t_s[0];
+        let first = unknown.located_t_s.expect("located");
+        assert!(unknown.relocalised_t_s.is_empty());
         for ((p, sigma), gt) in unknown.trajectory.iter().zip(&unknown.sigma_m).zip(&truth) {
             let error = (p.pose.x - gt.pose.x).hypot(p.pose.y - gt.pose.y);
             if p.t_s < first {
