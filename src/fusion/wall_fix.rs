@@ -183,8 +183,8 @@ pub(super) struct WallFix {
 }
 
 impl RangeWindow {
-    /// Keeps a reading taken at odometry pose `odom` (one with an echo short of the sensor's
-    /// largest range).
+    /// Keeps a reading taken at odometry pose `odom` (one whose range measures a distance:
+    /// [`SonarLayout::measures`]).
     pub(super) fn push(&mut self, odom: Pose2, reading: &SonarReading, layout: &SonarLayout) {
         if reading.range_m.is_some_and(|r| layout.measures(r)) {
             if self.ranges.len() == WINDOW {
