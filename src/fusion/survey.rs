@@ -262,7 +262,8 @@ fn hold_tail(
 /// (the offset at the middle, `ā` times the turn less, and its covariance with the turn) was
 /// tried and measured worse: on the museum's ten unknown starts (seeds 2 and 3) the ATE once
 /// located rose on every start, by 0.1-0.4 cm, and the position NEES with it (docs/RESULTS.md,
-/// session 61): the looser prior where the ranges were taken serves `localize` better. The covariance
+/// session 61; again in session 62, with the readings at the sonar's shortest range left out):
+/// the looser prior where the ranges were taken serves `localize` better. The covariance
 /// comes from the offline solution's ([`OfflineResult::covariance`]): faces placed from the same
 /// stretch of trajectory err together, and a survey's heading error turns its long faces. A face
 /// no range is matched with keeps `None` (and zeros); without the solution's covariance nothing

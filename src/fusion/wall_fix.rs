@@ -311,20 +311,12 @@ impl RangeWindow {
                 .map(|&(_, c, _)| c)
                 .fold(f64::INFINITY, f64::min);
             let near = RIVAL_RATIO * best_cost.max(floor);
+            let plausible: Vec<Pose2> = scored.iter().filter(|s| s.1 < near).map(|s| s.0).collect();
             if rival >= near {
-                // The headings that explain the ranges nearly as well, near the best: a sonar's
+                // Near the best, the headings that explain the ranges nearly as well: a sonar's
                 // arcs touch a wall over the cone's width, so few ranges may leave the heading
                 // loose where the place is sure.
-                let headings: Vec<f64> = scored
-                    .iter()
-                    .filter(|s| s.1 < near)
-                    .map(|s| crate::geometry::wrap_angle(s.0.theta - best.theta))
-                    .collect();
-                let n = headings.len().max(1) as f64;
-                let mean = headings.iter().sum::<f64>() / n;
-                let var = headings.iter().map(|h| (h - mean).powi(2)).sum::<f64>() / n
-                    + COARSE_STEP_RAD.powi(2) / 12.0;
-                break (best, var);
+                break (best, spread(&plausible, best).1[(2, 2)]);
             }
             tracing::debug!(
                 "no clear pose from the walls: {} ranges explained nearly as well {RIVAL_M} m apart (cost {best_cost:.4} and {rival:.4})",
@@ -334,14 +326,16 @@ impl RangeWindow {
             if (inliers as f64) < MIN_INLIER_SHARE * arcs.len() as f64 {
                 return None;
             }
-            let plausible: Vec<Pose2> = scored.iter().filter(|s| s.1 < near).map(|s| s.0).collect();
             // They must lie inside a searched grid: one on the edge says the grid cut off others
             // beyond it (a corridor's walls place the robot anywhere along it).
             if plausible
                 .iter()
                 .all(|p| centres.iter().any(|c| inside(c, p)))
             {
-                let (pose, cov) = spread(&plausible, best);
+                let (pose, mut cov) = spread(&plausible, best);
+                for (k, floor) in [RIVAL_M, RIVAL_M, COARSE_STEP_RAD].into_iter().enumerate() {
+                    cov[(k, k)] = cov[(k, k)].max(floor * floor);
+                }
                 return Some(WallFix {
                     pose,
                     cov,
@@ -379,7 +373,7 @@ impl RangeWindow {
 }
 
 /// The mean of `poses` (headings about `about`'s) and their spread: their covariance with a
-/// coarse step's rounding, at least [`RIVAL_M`] a side in position and a coarse step in heading.
+/// coarse step's rounding.
 fn spread(poses: &[Pose2], about: Pose2) -> (Pose2, Matrix3<f64>) {
     let n = poses.len().max(1) as f64;
     let offsets: Vec<Vector3<f64>> = poses
@@ -400,8 +394,8 @@ fn spread(poses: &[Pose2], about: Pose2) -> (Pose2, Matrix3<f64>) {
         / n;
     let rounding =
         Vector3::new(COARSE_STEP_M, COARSE_STEP_M, COARSE_STEP_RAD).map(|s| s * s / 12.0);
-    for (k, floor) in [RIVAL_M, RIVAL_M, COARSE_STEP_RAD].into_iter().enumerate() {
-        cov[(k, k)] = (cov[(k, k)] + rounding[k]).max(floor * floor);
+    for k in 0..3 {
+        cov[(k, k)] += rounding[k];
     }
     let pose = Pose2::new(
         about.x + mean[0],
