@@ -115,6 +115,7 @@ fn building_world(dir: &Path) -> Option<stereotag::world::World> {
         world: None,
         config: None,
         force: false,
+        recording: stereotag::viz::RecordingRequest::none(),
     })
     .expect("map freiburg-079");
     let world = dir.join("world.yaml");

@@ -114,6 +114,18 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
             assert!(length > 100.0, "{log}: {m}");
         }
         assert!(length > 0.0 || walls == 0, "{log}: {m}");
+        // The map's recording of a real log, checked by the rerun CLI of the crate's version.
+        let verify =
+            std::process::Command::new(std::env::var("RERUN").unwrap_or_else(|_| "rerun".into()))
+                .args(["rrd", "verify"])
+                .arg(map.join("map.rrd"))
+                .output()
+                .expect("the `rerun` CLI (pip install rerun-sdk==0.36.3) must be on PATH");
+        assert!(
+            verify.status.success(),
+            "{log}: rerun rrd verify: {}",
+            String::from_utf8_lossy(&verify.stderr)
+        );
         // The evidence floor follows the sampling: freiburg-079 (a reading every 9 cm of
         // travel) keeps the default 6, aces (a scan every 3 s, about a metre) gets 2.
         let floor = m["grid.min_evidence"].as_f64().unwrap();
@@ -226,6 +238,7 @@ fn radish_map_score(log: &str, as_sonar: Option<&str>) -> (f64, f64, usize, Valu
         world: None,
         config: None,
         force: false,
+        recording: stereotag::viz::RecordingRequest::none(),
     })
     .unwrap();
     let grid = stereotag::io::load_run(&run)

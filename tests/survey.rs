@@ -135,7 +135,7 @@ fn simulate(world: &Path, out: &Path, settings: SimSettings, no_stereo: bool) {
     .expect("the simulation runs");
 }
 
-/// The sonar map of `run` into `out`.
+/// The sonar map of `run` into `out`, with its recording (`map.rrd`).
 fn map(run: &Path, out: &Path, poses: PoseSource) {
     stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
         run_dir: run,
@@ -144,6 +144,7 @@ fn map(run: &Path, out: &Path, poses: PoseSource) {
         world: None,
         config: None,
         force: false,
+        recording: stereotag::viz::RecordingRequest::default(),
     })
     .expect("the map is made");
 }
@@ -691,6 +692,40 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
     // millimetres).
     let ate = metric(&read_report(&map), "ate_m.trajectory");
     assert!(ate < 0.05, "ate {ate}");
+    // The map's recording: verified and read back by the rerun CLI.
+    let rrd = map.join("map.rrd");
+    let verify = rerun().args(["rrd", "verify"]).arg(&rrd).output().unwrap();
+    assert!(
+        verify.status.success(),
+        "rerun rrd verify: {}",
+        String::from_utf8_lossy(&verify.stderr)
+    );
+    let print = rerun()
+        .args(["rrd", "print", "-vvv"])
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&print.stdout);
+    for entity in [
+        "/map/final/grid",
+        "/map/final/corners",
+        "/map/final/walls",
+        "/map/final/trajectories/odometry",
+        "/map/final/trajectories/ground_truth",
+        "/map/growing/grid",
+        "/map/log_odds/grid",
+        "/map/hough",
+        "/world/walls",
+        "/world/sonar/beams",
+        "/world/robot",
+        "/report",
+        "/viewport",
+    ] {
+        assert!(
+            text.contains(&format!("- {entity} - ")),
+            "map.rrd has no {entity}"
+        );
+    }
     let plan_dir = dir.path().join("plan");
     plan(&map, &plan_dir, None, false);
     let plan: Value =

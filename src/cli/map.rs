@@ -17,7 +17,9 @@ pub struct Map {
     /// Run dataset directory.
     #[arg(long)]
     run: PathBuf,
-    /// Output directory.
+    /// Output directory: map.pgm/.yaml and map.png (the counting grid), map_log_odds.*,
+    /// hough.png, corners.csv, corners_online.csv, walls.csv, report.json and map.rrd (the Rerun
+    /// recording: the map growing over the run, its corners and walls).
     #[arg(long)]
     out: PathBuf,
     /// Trajectory that places the readings.
@@ -32,6 +34,8 @@ pub struct Map {
     /// Replace the output directory if it exists.
     #[arg(long)]
     force: bool,
+    #[command(flatten)]
+    rerun: super::RerunArgs,
 }
 
 impl Map {
@@ -46,6 +50,7 @@ impl Map {
             world: self.world.as_deref(),
             config: self.config.as_deref(),
             force: self.force,
+            recording: self.rerun.request()?,
         })?;
         print_summary(&output);
         Ok(())
@@ -55,11 +60,7 @@ impl Map {
 /// Prints the off-grid warning, the counts and, with a world, the scores.
 fn print_summary(output: &MapOutput) {
     let (map, metrics) = (&output.map, &output.metrics);
-    for w in [map.off_grid_warning(), map.unplaced_warning()]
-        .into_iter()
-        .flatten()
-        .chain(map.hidden_warnings())
-    {
+    for w in output.warnings() {
         tracing::warn!("{w}");
     }
     let get = |k: &str| metrics.get(k).copied().unwrap_or(f64::NAN);

@@ -7,6 +7,7 @@ use super::{VizError, ELLIPSOID_SIGMAS, POSE_SAMPLE_S};
 use crate::fusion::Landmark;
 use crate::geometry::StampedPose;
 use crate::sonar::grid::OccupancyMap;
+use crate::sonar::hough::Feature;
 use crate::sonar::walls::WallSegment;
 use crate::world::World;
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion};
@@ -63,7 +64,7 @@ pub(super) fn map_image(map: &OccupancyMap) -> rerun::Image {
     rerun::Image::from_l8(pixels, [g.width as u32, g.height as u32])
 }
 
-/// The map as a ROS OccupancyGrid (0 free .. 100 occupied, 255 unknown) for the GridMap archetype.
+/// The colour of a Hough feature of this kind.
 pub(super) fn feature_color(kind: crate::sonar::hough::FeatureKind) -> rerun::Color {
     match kind {
         crate::sonar::hough::FeatureKind::Corner => palette::CORNER,
@@ -72,6 +73,50 @@ pub(super) fn feature_color(kind: crate::sonar::hough::FeatureKind) -> rerun::Co
     }
 }
 
+/// Hough features as dots on `map`'s image, coloured by kind, with their votes as (hidden)
+/// labels.
+pub(super) fn map_features(map: &OccupancyMap, features: &[Feature]) -> rerun::Points2D {
+    rerun::Points2D::new(features.iter().map(|f| map_pixel(map, f.x_m, f.y_m)))
+        .with_colors(
+            features
+                .iter()
+                .map(|f| feature_color(f.kind))
+                .collect::<Vec<_>>(),
+        )
+        .with_labels(
+            features
+                .iter()
+                .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes)),
+        )
+        .with_show_labels(false)
+        .with_radii([0.8f32])
+}
+
+/// Each trajectory as a line on `map`'s image under `{path}/NAME` (spaces in the name become
+/// underscores), in its colour.
+pub(super) fn log_map_trajectories(
+    rec: &rerun::RecordingStream,
+    path: &str,
+    map: &OccupancyMap,
+    lines: &[(&str, &[StampedPose], rerun::Color)],
+) -> Result<(), VizError> {
+    for (name, trajectory, color) in lines {
+        let pixels: Vec<[f32; 2]> = trajectory
+            .iter()
+            .map(|p| map_pixel(map, p.pose.x, p.pose.y))
+            .collect();
+        rec.log_static(
+            format!("{path}/{}", name.replace(' ', "_")),
+            &rerun::LineStrips2D::new([pixels])
+                .with_colors([*color])
+                .with_labels([*name])
+                .with_show_labels(false),
+        )?;
+    }
+    Ok(())
+}
+
+/// The map as a ROS OccupancyGrid (0 free .. 100 occupied, 255 unknown) for the GridMap archetype.
 pub(super) fn grid_map(map: &OccupancyMap) -> rerun::GridMap {
     let g = &map.geometry;
     let data: Vec<u8> = map
@@ -190,14 +235,15 @@ pub(super) fn log_world(
     Ok(())
 }
 
-/// Each trajectory as a line under `world/trajectories/NAME`, in its colour.
+/// Each trajectory as a line under `world/trajectories/NAME` (spaces in the name become
+/// underscores), in its colour.
 pub(super) fn log_trajectory_lines(
     rec: &rerun::RecordingStream,
     lines: &[(&str, &[StampedPose], rerun::Color)],
 ) -> Result<(), VizError> {
     for (name, t, c) in lines {
         rec.log_static(
-            format!("world/trajectories/{name}"),
+            format!("world/trajectories/{}", name.replace(' ', "_")),
             &rerun::LineStrips3D::new([strip(t, 0.02)])
                 .with_colors([*c])
                 .with_radii([rerun::Radius::new_ui_points(1.5)])
@@ -281,11 +327,11 @@ pub(super) fn log_landmark(rec: &rerun::RecordingStream, l: &Landmark) -> Result
 }
 
 /// The surveyed walls (what `localize` holds a later run's sonar to): in the scene a low line
-/// along each face, and on `map` when given.
+/// along each face, and under `{path}/walls` on a map when given (`(path, map)`).
 pub(super) fn log_surveyed_walls(
     rec: &rerun::RecordingStream,
     walls: &[WallSegment],
-    map: Option<&OccupancyMap>,
+    on_map: Option<(&str, &OccupancyMap)>,
 ) -> Result<(), VizError> {
     let labels: Vec<String> = walls
         .iter()
@@ -311,9 +357,9 @@ pub(super) fn log_surveyed_walls(
         .with_labels(labels.clone())
         .with_show_labels(false),
     )?;
-    if let Some(map) = map {
+    if let Some((path, map)) = on_map {
         rec.log_static(
-            "map/corrected/walls",
+            format!("{path}/walls"),
             &rerun::LineStrips2D::new(walls.iter().map(|w| {
                 [
                     map_pixel(map, w.from_m[0], w.from_m[1]),

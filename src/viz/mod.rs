@@ -1,5 +1,5 @@
 //! Recording to the Rerun viewer: the only module that imports rerun. Each workflow hands it
-//! plain data (a [`SurveyScene`], [`LocalizeScene`] or [`CalibrationScene`]); it logs static
+//! plain data (a [`SurveyScene`], [`LocalizeScene`], [`CalibrationScene`], [`PlanScene`] or [`MapScene`]); it logs static
 //! things once (walls, cameras, landmarks) and everything else on the `time` timeline (seconds of
 //! the run) and the `frame` sequence (stereo pairs), under entity paths that mirror the stages
 //! (`world/walls`, `world/robot/left/image`, `world/sonar/beams`, `map/grid`, `map/hough`,
@@ -20,11 +20,15 @@ mod layout;
 #[cfg(feature = "rerun")]
 mod localize;
 #[cfg(feature = "rerun")]
+mod map;
+#[cfg(feature = "rerun")]
 mod palette;
 #[cfg(feature = "rerun")]
 mod plan;
 #[cfg(feature = "rerun")]
 mod recorder;
+#[cfg(feature = "rerun")]
+mod sonar;
 #[cfg(feature = "rerun")]
 mod survey;
 
@@ -35,7 +39,7 @@ mod off;
 pub use off::{jpeg_image, jpeg_pair, Recorder};
 #[cfg(feature = "rerun")]
 pub use recorder::{jpeg_image, jpeg_pair, Recorder};
-pub use scene::{CalibrationScene, LocalizeScene, PlanScene, SurveyScene};
+pub use scene::{CalibrationScene, LocalizeScene, MapScene, PlanScene, SurveyScene};
 
 use std::path::{Path, PathBuf};
 
@@ -113,6 +117,8 @@ pub enum Recording {
     Localization,
     /// Where to put tags, with the error to expect.
     Plan,
+    /// A sonar (or laser) map of a run.
+    Map,
 }
 
 impl Recording {
@@ -123,13 +129,14 @@ impl Recording {
             Recording::Calibration => "stereotag calibration",
             Recording::Localization => "stereotag localize",
             Recording::Plan => "stereotag plan",
+            Recording::Map => "stereotag map",
         }
     }
 }
 
 /// Where the caller wants a recording: nowhere, or to a file, a new viewer and/or a running
 /// viewer. With no sink named, a workflow records to its output directory's default file
-/// (`survey.rrd`, `localize.rrd`, `calibration.rrd`, `plan.rrd`).
+/// (`survey.rrd`, `localize.rrd`, `calibration.rrd`, `plan.rrd`, `map.rrd`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RecordingRequest {
     /// Record nothing.

@@ -1,7 +1,8 @@
 //! The recording in a build without the `rerun` feature: the same API, recording nothing.
 
 use super::{
-    CalibrationScene, LocalizeScene, PlanScene, Recording, RecordingRequest, SurveyScene, VizError,
+    CalibrationScene, LocalizeScene, MapScene, PlanScene, Recording, RecordingRequest, SurveyScene,
+    VizError,
 };
 use std::path::Path;
 
@@ -38,6 +39,11 @@ impl Recorder {
 
     /// Never called: there is no recorder.
     pub fn log_plan(&self, _scene: &PlanScene<'_>) -> Result<(), VizError> {
+        match *self {}
+    }
+
+    /// Never called: there is no recorder.
+    pub fn log_map(&self, _scene: &MapScene<'_>) -> Result<(), VizError> {
         match *self {}
     }
 

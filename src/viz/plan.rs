@@ -49,25 +49,7 @@ impl Recorder {
         rec.log_static("map/grid", &map_image(map))?;
         let max = scene.prediction.predicted_error_max_m;
         log_error_image(rec, scene, &frame, max)?;
-        rec.log_static(
-            "map/corners",
-            &rerun::Points2D::new(scene.corners.iter().map(|f| map_pixel(map, f.x_m, f.y_m)))
-                .with_colors(
-                    scene
-                        .corners
-                        .iter()
-                        .map(|f| feature_color(f.kind))
-                        .collect::<Vec<_>>(),
-                )
-                .with_labels(
-                    scene
-                        .corners
-                        .iter()
-                        .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes)),
-                )
-                .with_show_labels(false)
-                .with_radii([0.8f32]),
-        )?;
+        rec.log_static("map/corners", &map_features(map, scene.corners))?;
         rec.log_static(
             "map/tags",
             &rerun::Points2D::new(scene.tags_m.iter().map(|t| map_pixel(map, t[0], t[1])))

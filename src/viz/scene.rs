@@ -80,3 +80,24 @@ pub struct PlanScene<'a> {
     /// What makes the figures speak for little ([`crate::workflow::plan::PlanOutput::warnings`]).
     pub warnings: &'a [String],
 }
+
+/// What a sonar map's recording shows.
+pub struct MapScene<'a> {
+    /// The run mapped.
+    pub run: &'a RunDataset,
+    /// The poses that placed the readings.
+    pub trajectory: &'a [StampedPose],
+    /// Their name (`odometry` or `ground truth`).
+    pub poses: &'a str,
+    /// The world, when known.
+    pub world: Option<&'a World>,
+    /// The map.
+    pub map: &'a crate::sonar::map::SonarMap,
+    /// The grid's settings as used (the evidence floor set for the run's sampling), which the
+    /// growing grid is rebuilt with.
+    pub grid: &'a crate::sonar::grid::GridConfig,
+    /// The report's figures.
+    pub metrics: &'a BTreeMap<String, f64>,
+    /// What the map hides or leaves out (the warnings printed).
+    pub warnings: &'a [String],
+}

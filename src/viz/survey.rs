@@ -4,13 +4,11 @@
 use super::draw::*;
 use super::layout::{column, row, tabs, Layout, View};
 use super::palette;
-use super::{Recorder, SurveyScene, VizError, GRID_SNAPSHOT_S, POSE_SAMPLE_S};
+use super::sonar::{log_features, log_growing_grid, log_hough};
+use super::{Recorder, SurveyScene, VizError, POSE_SAMPLE_S};
 use crate::fusion::{Nis, TagSighting};
-use crate::geometry::{pose_at, Pose2, StampedPose};
+use crate::geometry::{pose_at, StampedPose};
 use crate::sonar::grid::OccupancyMap;
-use crate::sonar::grid::{CountingGrid, OccupancyGrid};
-use crate::sonar::hough::{Accumulator, Feature};
-use crate::sonar::BeamModel;
 use nalgebra::Matrix3;
 use rerun::blueprint::components::PlayState;
 use std::collections::BTreeMap;
@@ -278,7 +276,7 @@ fn log_sonar_and_grid(
     frame: &MapFrame,
 ) -> Result<(), VizError> {
     let s = scene.survey;
-    log_hough(rec, &s.raw.accumulator)?;
+    log_hough(rec, "map/hough", &s.raw.accumulator)?;
     for (name, features) in [
         ("raw", &s.raw.features_offline),
         ("corrected", &s.corrected.features_offline),
@@ -286,44 +284,15 @@ fn log_sonar_and_grid(
         log_features(rec, name, features)?;
     }
     log_corrected_map(rec, scene, frame)?;
-    log_growing_grid(rec, scene, frame)
-}
-
-/// The final Hough accumulator as an image, votes on a log scale.
-fn log_hough(rec: &rerun::RecordingStream, acc: &Accumulator) -> Result<(), VizError> {
-    let max = acc.votes.iter().copied().max().unwrap_or(1).max(1) as f64;
-    let pixels: Vec<u8> = acc
-        .votes
-        .iter()
-        .map(|&v| (255.0 * (1.0 + v as f64).ln() / (1.0 + max).ln()).round() as u8)
-        .collect();
-    rec.log_static(
-        "map/hough",
-        &rerun::Image::from_l8(pixels, [acc.n_phi as u32, acc.n_rho as u32]),
-    )?;
-    Ok(())
-}
-
-/// The Hough corners and edges in the 3D scene, coloured by kind.
-fn log_features(
-    rec: &rerun::RecordingStream,
-    name: &str,
-    features: &[Feature],
-) -> Result<(), VizError> {
-    let colors: Vec<rerun::Color> = features.iter().map(|f| feature_color(f.kind)).collect();
-    let labels: Vec<String> = features
-        .iter()
-        .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes))
-        .collect();
-    rec.log_static(
-        format!("world/features_{name}"),
-        &rerun::Points3D::new(features.iter().map(|f| [f.x_m as f32, f.y_m as f32, 0.0]))
-            .with_colors(colors)
-            .with_labels(labels)
-            .with_show_labels(false)
-            .with_radii([0.05f32]),
-    )?;
-    Ok(())
+    // The online grid: the readings placed with the online poses.
+    log_growing_grid(
+        rec,
+        scene.run,
+        &s.online.trajectory,
+        &scene.mapping.grid,
+        frame,
+        "map/online",
+    )
 }
 
 /// The top-down map: the corrected grid with every trajectory, the Hough features, the surveyed
@@ -343,42 +312,16 @@ fn log_corrected_map(
     if let Some(gt) = &scene.run.ground_truth {
         lines.insert(0, ("ground truth", gt, palette::GROUND_TRUTH));
     }
-    let pixels = |trajectory: &[StampedPose]| -> Vec<[f32; 2]> {
-        trajectory
-            .iter()
-            .map(|p| map_pixel(map, p.pose.x, p.pose.y))
-            .collect()
-    };
-    for (name, trajectory, color) in &lines {
-        rec.log_static(
-            format!("map/corrected/trajectories/{}", name.replace(' ', "_")),
-            &rerun::LineStrips2D::new([pixels(trajectory)])
-                .with_colors([*color])
-                .with_labels([*name])
-                .with_show_labels(false),
-        )?;
-    }
-    rec.log_static(
-        "map/online/trajectory",
-        &rerun::LineStrips2D::new([pixels(&s.online.trajectory)]).with_colors([palette::ONLINE]),
+    log_map_trajectories(rec, "map/corrected/trajectories", map, &lines)?;
+    log_map_trajectories(
+        rec,
+        "map/online",
+        map,
+        &[("trajectory", &s.online.trajectory, palette::ONLINE)],
     )?;
-    let features = &s.corrected.features_offline;
     rec.log_static(
         "map/corrected/features",
-        &rerun::Points2D::new(features.iter().map(|f| map_pixel(map, f.x_m, f.y_m)))
-            .with_colors(
-                features
-                    .iter()
-                    .map(|f| feature_color(f.kind))
-                    .collect::<Vec<_>>(),
-            )
-            .with_labels(
-                features
-                    .iter()
-                    .map(|f| format!("{} {} votes", f.kind.as_str(), f.votes)),
-            )
-            .with_show_labels(false)
-            .with_radii([0.8f32]),
+        &map_features(map, &s.corrected.features_offline),
     )?;
     log_map_landmarks(rec, scene, map)?;
     let mut legend: Vec<(String, rerun::Color)> = lines
@@ -389,11 +332,12 @@ fn log_corrected_map(
         ("tags".to_string(), palette::FUSED),
         ("Hough corners".to_string(), palette::CORNER),
         ("Hough edges".to_string(), palette::EDGE),
+        ("Hough, kind unknown".to_string(), palette::UNKNOWN_FEATURE),
         ("walls".to_string(), palette::SURVEYED_WALL),
     ]);
     log_legend(rec, "map/corrected/legend", map, &legend)?;
     rec.log_static("map/corrected/grid", &map_image(map))?;
-    log_surveyed_walls(rec, &s.corrected.walls, Some(map))
+    log_surveyed_walls(rec, &s.corrected.walls, Some(("map/corrected", map)))
 }
 
 /// The landmarks on the map: a dot, the 3-sigma ellipse of the position and the tag's number.
@@ -433,69 +377,6 @@ fn log_map_landmarks(
         .with_radii([1.0f32]),
     )?;
     Ok(())
-}
-
-/// A laser's beams are drawn one every 10 degrees of its fan (all of them would hide the map).
-const LASER_BEAM_DRAWN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
-
-/// The online grid (readings placed with the online poses) as it grows, with the sonar cones.
-fn log_growing_grid(
-    rec: &rerun::RecordingStream,
-    scene: &SurveyScene<'_>,
-    frame: &MapFrame,
-) -> Result<(), VizError> {
-    let layout = &scene.run.meta.robot.sonar;
-    let readings = scene.run.placed_readings(&scene.survey.online.trajectory);
-    let Ok(mut grid) = CountingGrid::for_layout(scene.mapping.grid.clone(), layout) else {
-        return Ok(());
-    };
-    let log_grid = |grid: &CountingGrid, t_s: f64| -> Result<(), VizError> {
-        let map = frame.crop(&grid.map());
-        rec.set_duration_secs("time", t_s);
-        rec.log("world/grid", &grid_map(&map))?;
-        rec.log("map/online/grid", &map_image(&map))?;
-        Ok(())
-    };
-    let mut beams = StripBatches::new(rec, "world/sonar/beams");
-    let mut next_snapshot = f64::NEG_INFINITY;
-    // A laser's beams are drawn as lines, one in every [`LASER_BEAM_DRAWN_RAD`] of its fan.
-    let stride = match layout.beam {
-        BeamModel::Cone => 1,
-        BeamModel::Ray => (LASER_BEAM_DRAWN_RAD / layout.cone_rad).round().max(1.0) as usize,
-    };
-    for (k, r) in readings.iter().enumerate() {
-        grid.insert(r);
-        if let (Some(range), true) = (r.range_m, k.is_multiple_of(stride)) {
-            let cone = match layout.beam {
-                BeamModel::Cone => cone_outline(&r.world_from_sensor, range, layout.cone_rad),
-                BeamModel::Ray => cone_outline(&r.world_from_sensor, range, 0.0)[..2].to_vec(),
-            };
-            beams.push(r.t_s, cone, palette::SONAR_BEAM)?;
-        }
-        if r.t_s >= next_snapshot {
-            next_snapshot = r.t_s + GRID_SNAPSHOT_S;
-            log_grid(&grid, r.t_s)?;
-        }
-    }
-    beams.flush()?;
-    if let Some(last) = readings.last() {
-        log_grid(&grid, last.t_s)?;
-    }
-    rec.reset_time();
-    Ok(())
-}
-
-/// A sonar cone drawn as a fan: from the sensor out to the range along seven rays and back.
-fn cone_outline(o: &Pose2, range: f64, cone_rad: f64) -> Vec<[f32; 3]> {
-    const RAYS: usize = 7;
-    let at = |x: f64, y: f64| [x as f32, y as f32, SONAR_Z_M];
-    let mut cone = vec![at(o.x, o.y)];
-    for k in 0..RAYS {
-        let a = o.theta - 0.5 * cone_rad + cone_rad * k as f64 / (RAYS - 1) as f64;
-        cone.push(at(o.x + range * a.cos(), o.y + range * a.sin()));
-    }
-    cone.push(at(o.x, o.y));
-    cone
 }
 
 fn log_cameras(

@@ -6,7 +6,10 @@ use super::{load_run, world_of_run, Error, Result};
 use crate::dataset::{PoseSource, RunDataset};
 use crate::io::{self, OutputDir};
 use crate::metrics::score_sonar_map;
+use crate::sonar::grid::GridConfig;
 use crate::sonar::map::{map_trajectory, MappingConfig, SonarMap};
+use crate::viz::{MapScene, Recorder, Recording, RecordingRequest};
+use crate::world::World;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -25,6 +28,8 @@ pub struct MapRequest<'a> {
     pub config: Option<&'a Path>,
     /// Replace the output directory if it exists.
     pub force: bool,
+    /// Where the recording goes (default: `map.rrd` in `out`).
+    pub recording: RecordingRequest,
 }
 
 /// The map made, and the figures of its `report.json`.
@@ -39,11 +44,13 @@ pub struct MapOutput {
 }
 
 /// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
-/// `corners.csv`, `corners_online.csv`, `walls.csv` and `report.json` into a new directory.
+/// `corners.csv`, `corners_online.csv`, `walls.csv`, `report.json` and the recording
+/// (`map.rrd`, unless asked for elsewhere or none) into a new directory.
 ///
 /// ```no_run
 /// use std::path::Path;
 /// use stereotag::dataset::PoseSource;
+/// use stereotag::viz::RecordingRequest;
 /// use stereotag::workflow::map::{map, MapRequest};
 ///
 /// let out = map(&MapRequest {
@@ -53,6 +60,7 @@ pub struct MapOutput {
 ///     world: None,
 ///     config: None,
 ///     force: false,
+///     recording: RecordingRequest::default(),
 /// })?;
 /// println!("{} corners", out.map.features_offline.len());
 /// # Ok::<(), stereotag::workflow::Error>(())
@@ -64,31 +72,87 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
         None => None,
     };
     let config = super::mapping_of_run(&run, given);
-    let world = world_of_run(request.world, request.run_dir, &run);
-    let output = map_and_score(&run, request.poses, &config, world.as_deref())?;
+    let world = match world_of_run(request.world, request.run_dir, &run) {
+        Some(w) => Some(io::load_world(&w)?.world),
+        None => None,
+    };
     let dir = OutputDir::create(request.out, request.force)?;
+    // Opened before the work, so that a sink that cannot be used fails at once.
+    let recorder = Recorder::open(&request.recording, Recording::Map, &dir.path("map.rrd"))?;
+    let mut output = map_and_score(&run, request.poses, &config, world.as_ref())?;
+    if let Some(rec) = recorder {
+        let started = std::time::Instant::now();
+        record(&rec, &run, &output, &config, world.as_ref())?;
+        rec.finish()?;
+        output
+            .map
+            .timings_s
+            .insert("record".into(), started.elapsed().as_secs_f64());
+    }
     save_map(&dir.path(""), &output)?;
     dir.commit()?;
     Ok(output)
 }
 
-/// Maps a run and scores it when a world file is given; with the run's ground truth, the
+impl MapOutput {
+    /// What the map leaves out or hides that a user should know of: readings off the grid or
+    /// outside the trajectory's span, and knobs that hid most of the map.
+    pub fn warnings(&self) -> Vec<String> {
+        [self.map.off_grid_warning(), self.map.unplaced_warning()]
+            .into_iter()
+            .flatten()
+            .chain(self.map.hidden_warnings())
+            .collect()
+    }
+}
+
+/// Logs the map to the recording.
+fn record(
+    rec: &Recorder,
+    run: &RunDataset,
+    output: &MapOutput,
+    config: &MappingConfig,
+    world: Option<&World>,
+) -> Result<()> {
+    let trajectory = run.trajectory(output.poses).unwrap_or_default();
+    // The grid as the map built it: the floor set for the run's sampling.
+    let grid = GridConfig {
+        min_evidence: output.map.min_evidence,
+        floor_follows_sampling: false,
+        ..config.grid.clone()
+    };
+    rec.log_map(&MapScene {
+        run,
+        trajectory,
+        poses: match output.poses {
+            PoseSource::Odometry => "odometry",
+            PoseSource::GroundTruth => "ground truth",
+        },
+        world,
+        map: &output.map,
+        grid: &grid,
+        metrics: &output.metrics,
+        warnings: &output.warnings(),
+    })?;
+    Ok(())
+}
+
+/// Maps a run and scores it against the world when one is given; with the run's ground truth, the
 /// trajectory mapped on is scored against it (`ate_m.trajectory`: the odometry's error, or 0
 /// with `--poses ground-truth`).
 pub fn map_and_score(
     run: &RunDataset,
     poses: PoseSource,
     config: &MappingConfig,
-    world: Option<&Path>,
+    world: Option<&World>,
 ) -> Result<MapOutput> {
     let trajectory = run.trajectory(poses).ok_or_else(|| {
         Error::Request("the run has no ground_truth.csv; use --poses odometry".into())
     })?;
     let map = map_trajectory(&run.sonar_log(), trajectory, config)?;
     let mut metrics = BTreeMap::new();
-    if let Some(w) = world {
-        let loaded = io::load_world(w)?;
-        metrics = score_sonar_map(&map, run, &loaded.world).metrics();
+    if let Some(world) = world {
+        metrics = score_sonar_map(&map, run, world).metrics();
     }
     // With the ground truth, how far the mapped trajectory is from it, world or not.
     if let Some(ate) = run
