@@ -41,6 +41,28 @@ fn rerun() -> Command {
     Command::new(std::env::var("RERUN").unwrap_or_else(|_| "rerun".into()))
 }
 
+/// `rerun rrd print -vvv` of a recording that `rerun rrd verify` accepts.
+fn verified_recording(rrd: &Path) -> String {
+    let verify = rerun()
+        .args(["rrd", "verify"])
+        .arg(rrd)
+        .output()
+        .expect("the `rerun` CLI (pip install rerun-sdk==0.36.3) must be on PATH");
+    assert!(
+        verify.status.success(),
+        "rerun rrd verify {}: {}",
+        rrd.display(),
+        String::from_utf8_lossy(&verify.stderr)
+    );
+    let print = rerun()
+        .args(["rrd", "print", "-vvv"])
+        .arg(rrd)
+        .output()
+        .unwrap();
+    assert!(print.status.success());
+    String::from_utf8_lossy(&print.stdout).into_owned()
+}
+
 fn metric(report: &Value, key: &str) -> f64 {
     report["metrics"][key]
         .as_f64()
@@ -289,23 +311,7 @@ fn office_survey_meets_the_figures_and_records_what_it_wrote() {
     let rrd = out.join("survey.rrd");
     let size = std::fs::metadata(&rrd).unwrap().len();
     assert!(size < 50_000_000, "survey.rrd is {size} bytes");
-    let verify = rerun()
-        .args(["rrd", "verify"])
-        .arg(&rrd)
-        .output()
-        .expect("the `rerun` CLI (pip install rerun-sdk==0.36.3) must be on PATH");
-    assert!(
-        verify.status.success(),
-        "rerun rrd verify: {}",
-        String::from_utf8_lossy(&verify.stderr)
-    );
-    let print = rerun()
-        .args(["rrd", "print", "-vvv"])
-        .arg(&rrd)
-        .output()
-        .unwrap();
-    assert!(print.status.success());
-    let text = String::from_utf8_lossy(&print.stdout);
+    let text = verified_recording(&rrd);
     for entity in [
         "/world/walls",
         "/world/trajectories/offline",
@@ -594,19 +600,8 @@ fn a_later_run_localises_against_the_survey() {
         );
     }
 
-    // The recording of the localisation, read back by the rerun CLI.
-    let rrd = dir.path().join("loc/localize.rrd");
-    let print = rerun()
-        .args(["rrd", "print", "-vvv"])
-        .arg(&rrd)
-        .output()
-        .unwrap();
-    assert!(
-        print.status.success(),
-        "{}",
-        String::from_utf8_lossy(&print.stderr)
-    );
-    let text = String::from_utf8_lossy(&print.stdout);
+    // The recording of the localisation, verified and read back by the rerun CLI.
+    let text = verified_recording(&dir.path().join("loc/localize.rrd"));
     for entity in [
         "/world/trajectories/localized",
         "/world/walls_surveyed",
@@ -693,19 +688,7 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
     let ate = metric(&read_report(&map), "ate_m.trajectory");
     assert!(ate < 0.05, "ate {ate}");
     // The map's recording: verified and read back by the rerun CLI.
-    let rrd = map.join("map.rrd");
-    let verify = rerun().args(["rrd", "verify"]).arg(&rrd).output().unwrap();
-    assert!(
-        verify.status.success(),
-        "rerun rrd verify: {}",
-        String::from_utf8_lossy(&verify.stderr)
-    );
-    let print = rerun()
-        .args(["rrd", "print", "-vvv"])
-        .arg(&rrd)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&print.stdout);
+    let text = verified_recording(&map.join("map.rrd"));
     for entity in [
         "/map/final/grid",
         "/map/final/corners",
@@ -736,12 +719,7 @@ fn plan_proposes_tags_from_a_sonar_only_museum_map() {
     let coverage = plan["plan"]["coverage"].as_f64().unwrap();
     assert!(coverage > 0.5, "coverage {coverage}");
     // Its recording: the error over the map, the tags, the layout.
-    let print = rerun()
-        .args(["rrd", "print", "-vvv"])
-        .arg(plan_dir.join("plan.rrd"))
-        .output()
-        .expect("the `rerun` CLI (pip install rerun-sdk==0.36.3) must be on PATH");
-    let text = String::from_utf8_lossy(&print.stdout);
+    let text = verified_recording(&plan_dir.join("plan.rrd"));
     for entity in [
         "/map/grid",
         "/map/predicted_error",

@@ -487,10 +487,44 @@ impl MapFrame {
         )
     }
 
+    /// A 3D view of the scene at `/world` looking at the map's middle from the south, above it.
+    pub(super) fn scene_view(&self, name: &str) -> View {
+        let (lo, hi) = self.extent;
+        let centre = [
+            0.5 * (lo[0] + hi[0]) as f32,
+            0.5 * (lo[1] + hi[1]) as f32,
+            0.0,
+        ];
+        let size = (hi[0] - lo[0]).max(hi[1] - lo[1]) as f32;
+        View::spatial_3d(name, "/world").eye([centre[0], centre[1] - 0.9 * size, size], centre)
+    }
+
     /// Another map of the same grid, cropped the same.
     pub(super) fn crop(&self, map: &OccupancyMap) -> OccupancyMap {
         map.cropped(self.extent.0, self.extent.1)
     }
+}
+
+/// A map's legend: each trajectory drawn, the tags when `tags`, the Hough features by kind and
+/// the walls.
+pub(super) fn map_legend(
+    lines: &[(&str, &[StampedPose], rerun::Color)],
+    tags: bool,
+) -> Vec<(String, rerun::Color)> {
+    let mut legend: Vec<(String, rerun::Color)> = lines
+        .iter()
+        .map(|(name, _, color)| (name.to_string(), *color))
+        .collect();
+    if tags {
+        legend.push(("tags".to_string(), palette::FUSED));
+    }
+    legend.extend([
+        ("Hough corners".to_string(), palette::CORNER),
+        ("Hough edges".to_string(), palette::EDGE),
+        ("Hough, kind unknown".to_string(), palette::UNKNOWN_FEATURE),
+        ("walls".to_string(), palette::SURVEYED_WALL),
+    ]);
+    legend
 }
 
 /// A legend right of the map: each name in its colour, one row each.

@@ -13,15 +13,7 @@ use rerun::blueprint::components::PlayState;
 /// The default layout of a map: the finished map (with the grid growing, the 3D scene, the
 /// log-odds map and the Hough accumulator in tabs) beside the report.
 fn layout(frame: &MapFrame) -> Layout {
-    let (lo, hi) = frame.extent;
-    let centre = [
-        0.5 * (lo[0] + hi[0]) as f32,
-        0.5 * (lo[1] + hi[1]) as f32,
-        0.0,
-    ];
-    let size = (hi[0] - lo[0]).max(hi[1] - lo[1]) as f32;
-    let scene = View::spatial_3d("Scene (3D)", "/world")
-        .eye([centre[0], centre[1] - 0.9 * size, 1.0 * size], centre);
+    let scene = frame.scene_view("Scene (3D)");
     let maps = tabs([
         frame
             .view("Map: trajectory, Hough corners, walls", "/map/final")
@@ -77,17 +69,7 @@ impl Recorder {
             &map_features(map, &sonar.features_offline),
         )?;
         log_surveyed_walls(rec, &sonar.walls, Some(("map/final", map)))?;
-        let mut legend: Vec<(String, rerun::Color)> = lines
-            .iter()
-            .map(|(name, _, color)| (name.to_string(), *color))
-            .collect();
-        legend.extend([
-            ("Hough corners".to_string(), palette::CORNER),
-            ("Hough edges".to_string(), palette::EDGE),
-            ("Hough, kind unknown".to_string(), palette::UNKNOWN_FEATURE),
-            ("walls".to_string(), palette::SURVEYED_WALL),
-        ]);
-        log_legend(rec, "map/final/legend", map, &legend)?;
+        log_legend(rec, "map/final/legend", map, &map_legend(&lines, false))?;
         rec.log_static(
             "map/log_odds/grid",
             &map_image(&frame.crop(&sonar.log_odds)),

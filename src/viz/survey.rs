@@ -19,16 +19,9 @@ use std::collections::BTreeMap;
 /// rest).
 fn layout(frame: &MapFrame, tag_frame: Option<&TagFrame>, pictures: bool) -> Layout {
     let map_view = |name: &str, origin: &str| frame.view(name, origin);
-    let (lo, hi) = frame.extent;
-    let centre = [
-        0.5 * (lo[0] + hi[0]) as f32,
-        0.5 * (lo[1] + hi[1]) as f32,
-        0.0,
-    ];
-    let size = (hi[0] - lo[0]).max(hi[1] - lo[1]) as f32;
-    let scene = View::spatial_3d("Scene (3D)", "/world")
-        .with_contents(["+ /world/**", "+ /landmarks/**"])
-        .eye([centre[0], centre[1] - 0.9 * size, 1.0 * size], centre);
+    let scene = frame
+        .scene_view("Scene (3D)")
+        .with_contents(["+ /world/**", "+ /landmarks/**"]);
     let maps = tabs([
         map_view("Map", "/map/corrected").into(),
         scene.into(),
@@ -324,18 +317,7 @@ fn log_corrected_map(
         &map_features(map, &s.corrected.features_offline),
     )?;
     log_map_landmarks(rec, scene, map)?;
-    let mut legend: Vec<(String, rerun::Color)> = lines
-        .iter()
-        .map(|(name, _, color)| (name.to_string(), *color))
-        .collect();
-    legend.extend([
-        ("tags".to_string(), palette::FUSED),
-        ("Hough corners".to_string(), palette::CORNER),
-        ("Hough edges".to_string(), palette::EDGE),
-        ("Hough, kind unknown".to_string(), palette::UNKNOWN_FEATURE),
-        ("walls".to_string(), palette::SURVEYED_WALL),
-    ]);
-    log_legend(rec, "map/corrected/legend", map, &legend)?;
+    log_legend(rec, "map/corrected/legend", map, &map_legend(&lines, true))?;
     rec.log_static("map/corrected/grid", &map_image(map))?;
     log_surveyed_walls(rec, &s.corrected.walls, Some(("map/corrected", map)))
 }
