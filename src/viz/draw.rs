@@ -439,6 +439,15 @@ impl<'a> StripBatches<'a> {
 
 /// Width kept right of the map for its legend, pixels of the map.
 const LEGEND_WIDTH_PX: f32 = 30.0;
+/// Legend rows a map's height is shared among (more when there are more entries).
+const LEGEND_ROWS: usize = 8;
+
+/// Height of one legend row on a map `w` by `h` pixels with `rows` entries: an eighth of the
+/// map's height, but at least a 25th of its width, so that the labels of a long, thin map (a
+/// corridor) do not overlap.
+fn legend_step(w: f32, h: f32, rows: usize) -> f32 {
+    (h / rows.max(LEGEND_ROWS) as f32).max(w / 25.0)
+}
 
 /// The part of the home the maps show: a map's observed cells and a margin, on the grid's own
 /// cells (every map image of a recording is cropped to it).
@@ -483,7 +492,10 @@ impl MapFrame {
         let margin = 0.06 * w.max(h);
         View::spatial_2d(name, origin).framed(
             [-margin, -margin],
-            [w + LEGEND_WIDTH_PX + margin, h + margin],
+            [
+                w + LEGEND_WIDTH_PX + margin,
+                h.max(LEGEND_ROWS as f32 * legend_step(w, h, LEGEND_ROWS)) + margin,
+            ],
         )
     }
 
@@ -535,7 +547,11 @@ pub(super) fn log_legend(
     entries: &[(String, rerun::Color)],
 ) -> Result<(), VizError> {
     let x = map.geometry.width as f32 + 0.5 * LEGEND_WIDTH_PX;
-    let step = map.geometry.height as f32 / entries.len().max(8) as f32;
+    let step = legend_step(
+        map.geometry.width as f32,
+        map.geometry.height as f32,
+        entries.len(),
+    );
     rec.log_static(
         path,
         &rerun::Points2D::new((0..entries.len()).map(|i| [x, step * (i as f32 + 0.5)]))
