@@ -59,11 +59,10 @@ impl Map {
 
 /// Prints the off-grid warning, the counts and, with a world, the scores.
 fn print_summary(output: &MapOutput) {
-    let (map, metrics) = (&output.map, &output.metrics);
+    let map = &output.map;
     for w in output.warnings() {
         tracing::warn!("{w}");
     }
-    let get = |k: &str| metrics.get(k).copied().unwrap_or(f64::NAN);
     tracing::info!(
         "{} readings; {} features offline, {} online; mapped in {:.3} s",
         map.readings,
@@ -71,15 +70,17 @@ fn print_summary(output: &MapOutput) {
         map.features_online.len(),
         map.timings_s.get("total").copied().unwrap_or(0.0)
     );
-    if metrics.contains_key("map.occupied_precision") {
+    if let Some(scores) = &output.scores {
+        let (counting, log_odds, features) =
+            (&scores.counting, &scores.log_odds, &scores.features_offline);
         tracing::info!(
             "counting grid: occupied precision {:.3}, recall {:.3}; log-odds: {:.3}, {:.3}; features precision {:.3}, recall {:.3}",
-            get("map.occupied_precision"),
-            get("map.occupied_recall"),
-            get("map_log_odds.occupied_precision"),
-            get("map_log_odds.occupied_recall"),
-            get("features.precision"),
-            get("features.recall"),
+            counting.occupied_precision,
+            counting.occupied_recall,
+            log_odds.occupied_precision,
+            log_odds.occupied_recall,
+            features.precision,
+            features.recall,
         );
     }
 }

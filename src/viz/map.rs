@@ -117,17 +117,13 @@ fn report(scene: &MapScene<'_>) -> String {
             s
         )),
     ));
-    let get = |k: &str| scene.metrics.get(k).copied();
-    if let (Some(p), Some(r)) = (get("map.occupied_precision"), get("map.occupied_recall")) {
+    if let Some(scores) = scene.scores {
+        let (grid, features) = (&scores.counting, &scores.features_offline);
         glance.push_str(&format!(
-            "Against the world: occupied cells precision **{p:.3}**, recall **{r:.3}**"
+            "Against the world: occupied cells precision **{:.3}**, recall **{:.3}**; corners \
+             and edges precision **{:.3}**, recall **{:.3}**.\n\n",
+            grid.occupied_precision, grid.occupied_recall, features.precision, features.recall
         ));
-        if let (Some(fp), Some(fr)) = (get("features.precision"), get("features.recall")) {
-            glance.push_str(&format!(
-                "; corners and edges precision **{fp:.3}**, recall **{fr:.3}**"
-            ));
-        }
-        glance.push_str(".\n\n");
     }
     if !scene.warnings.is_empty() {
         glance.push_str("## Warnings\n\n");

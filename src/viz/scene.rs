@@ -98,6 +98,8 @@ pub struct MapScene<'a> {
     pub grid: &'a crate::sonar::grid::GridConfig,
     /// The report's figures.
     pub metrics: &'a BTreeMap<String, f64>,
+    /// The scores against the world, when known.
+    pub scores: Option<&'a crate::metrics::SonarScores>,
     /// What the map hides or leaves out (the warnings printed).
     pub warnings: &'a [String],
 }

@@ -39,6 +39,8 @@ pub struct MapOutput {
     pub map: SonarMap,
     /// Scores (with a world) and counts.
     pub metrics: BTreeMap<String, f64>,
+    /// The scores against the world, when one was given (also in `metrics`).
+    pub scores: Option<crate::metrics::SonarScores>,
     /// Which trajectory placed the readings (`report.json`'s `poses`).
     pub poses: PoseSource,
 }
@@ -132,6 +134,7 @@ fn record(
         map: &output.map,
         grid: &grid,
         metrics: &output.metrics,
+        scores: output.scores.as_ref(),
         warnings: &output.warnings(),
     })?;
     Ok(())
@@ -150,10 +153,8 @@ pub fn map_and_score(
         Error::Request("the run has no ground_truth.csv; use --poses odometry".into())
     })?;
     let map = map_trajectory(&run.sonar_log(), trajectory, config)?;
-    let mut metrics = BTreeMap::new();
-    if let Some(world) = world {
-        metrics = score_sonar_map(&map, run, world).metrics();
-    }
+    let scores = world.map(|world| score_sonar_map(&map, run, world));
+    let mut metrics = scores.as_ref().map(|s| s.metrics()).unwrap_or_default();
     // With the ground truth, how far the mapped trajectory is from it, world or not.
     if let Some(ate) = run
         .ground_truth
@@ -194,6 +195,7 @@ pub fn map_and_score(
     Ok(MapOutput {
         map,
         metrics,
+        scores,
         poses,
     })
 }
