@@ -72,7 +72,7 @@ enum Command {
     ///
     /// Example: stereotag import --carmen ../shared/data/radish/aces-corrected.log.gz --as-sonar frontal5 --out runs/aces
     Import(import::Import),
-    /// Build the occupancy grid and Hough corner features of a run; scores them if the world is known.
+    /// Build the occupancy grids, Hough corner features and walls of a run, scored if the world is known, with a recording (map.rrd).
     ///
     /// Example: stereotag map --run runs/office --out maps/office --poses ground-truth
     Map(map::Map),
