@@ -150,11 +150,7 @@ fn print_summary(output: &LocalizeOutput) {
         );
     }
     if !walls.is_empty() {
-        let at_shortest = output
-            .metrics
-            .get("ranges.at_shortest_range")
-            .and_then(|v| v.as_u64())
-            .unwrap_or(0);
+        let at_shortest = output.counts.ranges_at_shortest;
         tracing::info!(
             "{} sonar ranges fused against {} surveyed walls ({} gated out{})",
             result.ranges_fused(),

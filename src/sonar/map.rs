@@ -307,10 +307,8 @@ pub fn map_trajectory(
         .iter()
         .filter(|r| r.range_m.is_some_and(|x| x >= layout.max_range_m))
         .count();
-    let readings_at_shortest_range = readings
-        .iter()
-        .filter(|r| r.range_m.is_some_and(|x| layout.at_shortest_range(x)))
-        .count();
+    let readings_at_shortest_range =
+        layout.count_at_shortest_range(readings.iter().map(|r| r.range_m));
     let (echoes, echoes_off_grid) = readings
         .iter()
         .filter_map(|r| {

@@ -209,6 +209,16 @@ impl SonarLayout {
         self.min_range_m > 0.0 && range_m <= self.min_range_m + RANGE_LIMIT_MARGIN_M
     }
 
+    /// How many of `ranges` (no echo: `None`) are at the sensor's shortest
+    /// ([`Self::at_shortest_range`]).
+    pub fn count_at_shortest_range(&self, ranges: impl IntoIterator<Item = Option<f64>>) -> usize {
+        ranges
+            .into_iter()
+            .flatten()
+            .filter(|&x| self.at_shortest_range(x))
+            .count()
+    }
+
     /// A layout by name: `frontal5` or `pioneer16`.
     pub fn by_name(name: &str) -> Option<Self> {
         match name {

@@ -62,6 +62,8 @@ pub struct LocalizeOutput {
     pub growth: Vec<GrowthBin>,
     /// The figures of `report.json`.
     pub metrics: serde_json::Map<String, serde_json::Value>,
+    /// What it had to work with (also in `metrics`).
+    pub counts: LocalizationCounts,
 }
 
 /// The survey's walls, unless told not to use them or the survey has none, and the covariance
@@ -374,11 +376,10 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         walls: walls.len(),
         visual_turns: seen.visual.len(),
         ranges_at_shortest: run
+            .meta
+            .robot
             .sonar
-            .iter()
-            .filter_map(|r| r.range_m)
-            .filter(|&x| run.meta.robot.sonar.at_shortest_range(x))
-            .count(),
+            .count_at_shortest_range(run.sonar.iter().map(|r| r.range_m)),
     };
     let calibrated = calibration.is_some();
     let mut metrics =
@@ -423,5 +424,6 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         walls,
         growth,
         metrics,
+        counts,
     })
 }
