@@ -103,11 +103,7 @@ fn report(scene: &MapScene<'_>) -> String {
         sonar.features_offline.len(),
         sonar.features_online.len(),
         sonar.walls.len(),
-        sonar
-            .walls
-            .iter()
-            .map(|w| (w.to_m[0] - w.from_m[0]).hypot(w.to_m[1] - w.from_m[1]))
-            .sum::<f64>(),
+        sonar.walls.iter().map(|w| w.length_m()).sum::<f64>(),
     );
     glance.push_str(&format!(
         "A cell needs {} of evidence before the map calls it free or occupied{}.\n\n",
