@@ -81,7 +81,13 @@
 //! }
 //! assert!(!surveyed.survey.landmarks.is_empty());
 //! // Scored against the world's planned tag places: within centimetres.
-//! assert!(surveyed.metrics["landmarks.median_error_m"] < 0.02);
+//! let scored = surveyed.scores.world.expect("the run names its world");
+//! assert!(scored.landmarks.median_m.is_some_and(|m| m < 0.02));
+//! // Every figure also lies in `report.json`'s metrics, by key.
+//! assert_eq!(
+//!     surveyed.metrics["landmarks.median_error_m"],
+//!     scored.landmarks.median_m.unwrap()
+//! );
 //! # Ok(())
 //! # }
 //! ```

@@ -831,7 +831,7 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
     // The sonar matched with its own older readings corrects the odometry (issue 31, item 3:
     // offline ATE at most a third of the odometry's; 0.14 on this seed).
     let corrected = dir.path().join("corrected");
-    stereotag::workflow::survey::survey(
+    let output = stereotag::workflow::survey::survey(
         &stereotag::workflow::survey::SurveyRequest::new(&run, &corrected),
         &Silent,
     )
@@ -843,6 +843,15 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
         metric(&read_report(&corrected), "ate_m.offline"),
     );
     assert!(offline <= odometry / 3.0, "ATE {offline} for {odometry}");
+    // The library gives the same scores typed: against the truth only, no world.
+    assert!(output.scores.world.is_none());
+    let truth = output
+        .scores
+        .truth
+        .as_ref()
+        .expect("scored against the ground truth");
+    assert_eq!(truth.ate_m.offline, Some(offline));
+    assert!(truth.corrected_vs_ground_truth_map.is_some());
     assert!(m["offline.sonar_matches"].as_f64().unwrap() > 100.0, "{m}");
     assert_eq!(m["offline.converged"], 1.0);
     // Why it is kept: the echoes agree with one another better along it (0.61 -> 0.81).

@@ -1,5 +1,6 @@
 use super::Bars;
 use std::path::{Path, PathBuf};
+use stereotag::metrics::map::MapScore;
 use stereotag::visual::tags::Backend;
 use stereotag::workflow::demo::{demo, DemoRequest};
 use stereotag::workflow::sightings::DetectOptions;
@@ -61,8 +62,7 @@ impl Demo {
             return Ok(());
         }
         let survey = &output.survey;
-        super::survey::print_summary(&survey.survey, &survey.metrics, survey.world.as_ref());
-        let get = |k: &str| survey.metrics.get(k).copied().unwrap_or(f64::NAN);
+        super::survey::print_summary(&survey.survey, &survey.scores, survey.world.as_ref());
         let mut see = format!("{}/landmarks.json, map_corrected.png", self.out.display());
         let default_rrd = self.out.join("survey.rrd");
         match self.rerun.request()?.file(&default_rrd) {
@@ -75,31 +75,39 @@ impl Demo {
             self.world.display(),
             self.out.display()
         );
+        // The demo simulates its run from a world: the truth and the world are both known.
+        let (truth, world) = (survey.scores.truth.as_ref(), survey.scores.world.as_ref());
+        let figure = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
+        let ate = truth.map(|t| t.ate_m).unwrap_or_default();
         text += &format!(
-            "  trajectory error (ATE): odometry {:.3} m -> online {:.3} m -> offline {:.3} m\n",
-            get("ate_m.odometry"),
-            get("ate_m.online"),
-            get("ate_m.offline")
+            "  trajectory error (ATE): odometry {} m -> online {} m -> offline {} m\n",
+            figure(ate.odometry),
+            figure(ate.online),
+            figure(ate.offline)
         );
+        let pr = |m: Option<MapScore>| {
+            m.map_or("n/a".to_string(), |m| {
+                format!("{:.3}/{:.3}", m.occupied_precision, m.occupied_recall)
+            })
+        };
         text += &format!(
-            "  map occupied precision/recall: raw {:.3}/{:.3} -> corrected {:.3}/{:.3} (ground-truth poses {:.3}/{:.3})\n",
-            get("map.occupied_precision"),
-            get("map.occupied_recall"),
-            get("map_corrected.occupied_precision"),
-            get("map_corrected.occupied_recall"),
-            get("map_ground_truth.occupied_precision"),
-            get("map_ground_truth.occupied_recall"),
+            "  map occupied precision/recall: raw {} -> corrected {} (ground-truth poses {})\n",
+            pr(world.map(|w| w.raw.counting)),
+            pr(world.map(|w| w.corrected_map)),
+            pr(world.and_then(|w| w.ground_truth_map)),
         );
         text += &if survey.survey.landmarks.is_empty() {
             format!(
                 "  no landmarks: the robot saw no tag ({} sightings); see {see}\n",
-                get("sightings.total"),
+                survey.sightings,
             )
         } else {
             format!(
-                "  {} landmarks, median position error {:.1} mm; see {see}\n",
+                "  {} landmarks, median position error {} mm; see {see}\n",
                 survey.survey.landmarks.len(),
-                get("landmarks.median_error_m") * 1e3,
+                world
+                    .and_then(|w| w.landmarks.median_m)
+                    .map_or("n/a".to_string(), |m| format!("{:.1}", m * 1e3)),
             )
         };
         super::print_out(&text)

@@ -1,6 +1,7 @@
 use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::fusion::Start;
+use stereotag::metrics::LocalizationScores;
 use stereotag::workflow::localize::{localize, LocalizeOutput, LocalizeRequest};
 
 /// Arguments of `stereotag localize`.
@@ -177,8 +178,12 @@ fn print_summary(output: &LocalizeOutput) {
                 .map_or(String::new(), |e| format!(", RMS error {e:.3} m"))
         );
     }
-    let get = |k: &str| output.metrics.get(k).and_then(|v| v.as_f64());
-    if let (Some(a), Some(b)) = (get("ate_m.odometry"), get("ate_m.localized")) {
+    if let Some(LocalizationScores {
+        ate_odometry_m: Some(a),
+        ate_localized_m: Some(b),
+        ..
+    }) = output.scores
+    {
         tracing::info!("ATE: odometry {a:.3} m, localised {b:.3} m");
     }
 }

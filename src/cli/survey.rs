@@ -1,7 +1,8 @@
 use super::Bars;
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use stereotag::fusion::Survey;
+use stereotag::metrics::map::MapScore;
+use stereotag::metrics::{SurveyScores, TrajectoryErrors};
 use stereotag::workflow::sightings::{survey_decimate, DetectOptions, SURVEY_MIN_CONTRAST};
 use stereotag::workflow::survey::{survey, SurveyRequest};
 use stereotag::world::World;
@@ -180,13 +181,13 @@ impl SurveyArgs {
             },
             &Bars::new(quiet),
         )?;
-        print_summary(&output.survey, &output.metrics, output.world.as_ref());
+        print_summary(&output.survey, &output.scores, output.world.as_ref());
         Ok(())
     }
 }
 
 /// Prints the landmarks, the planned-versus-surveyed table and the before/after figures.
-pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: Option<&World>) {
+pub(crate) fn print_summary(s: &Survey, scores: &SurveyScores, world: Option<&World>) {
     for w in [s.raw.off_grid_warning(), s.raw.unplaced_warning()]
         .into_iter()
         .flatten()
@@ -194,7 +195,6 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
     {
         tracing::warn!("{w}");
     }
-    let get = |k: &str| metrics.get(k).copied();
     tracing::info!(
         "{} landmarks ({} matched with a Hough corner); {} sightings fused, {} gated out; offline graph: {} keyframes, {} factors",
         s.landmarks.len(),
@@ -231,47 +231,43 @@ pub(crate) fn print_summary(s: &Survey, metrics: &BTreeMap<String, f64>, world: 
             }
         }
     }
-    if let (Some(o), Some(on), Some(off)) = (
-        get("ate_m.odometry"),
-        get("ate_m.online"),
-        get("ate_m.offline"),
-    ) {
-        tracing::info!(
-            "trajectory ATE: odometry {:.3} m, online {:.3} m, offline {:.3} m",
-            o,
-            on,
-            off
-        );
+    let truth = scores.truth.as_ref();
+    if let Some(TrajectoryErrors {
+        odometry: Some(o),
+        online: Some(on),
+        offline: Some(off),
+    }) = truth.map(|t| t.ate_m)
+    {
+        tracing::info!("trajectory ATE: odometry {o:.3} m, online {on:.3} m, offline {off:.3} m");
     }
+    let pr = |m: MapScore| format!("{:.3}/{:.3}", m.occupied_precision, m.occupied_recall);
     if s.raw.readings == 0 {
         tracing::info!(
             "no sonar readings: the survey stands on the tags and the odometry, its map is empty"
         );
-    } else if let (Some(p0), Some(r0), Some(p1), Some(r1)) = (
-        get("map.occupied_precision"),
-        get("map.occupied_recall"),
-        get("map_corrected.occupied_precision"),
-        get("map_corrected.occupied_recall"),
-    ) {
-        let online = match (
-            get("map_online.occupied_precision"),
-            get("map_online.occupied_recall"),
-        ) {
-            (Some(p), Some(r)) => format!(", online {p:.3}/{r:.3}"),
-            _ => String::new(),
-        };
+    } else if let Some(w) = &scores.world {
         tracing::info!(
-            "map occupied precision/recall: raw {p0:.3}/{r0:.3}{online}, corrected {p1:.3}/{r1:.3}{}",
-            match (
-                get("map_ground_truth.occupied_precision"),
-                get("map_ground_truth.occupied_recall")
-            ) {
-                (Some(p), Some(r)) => format!(", with ground-truth poses {p:.3}/{r:.3}"),
-                _ => String::new(),
-            }
+            "map occupied precision/recall: raw {}, online {}, corrected {}{}",
+            pr(w.raw.counting),
+            pr(w.online_map),
+            pr(w.corrected_map),
+            w.ground_truth_map.map_or(String::new(), |g| format!(
+                ", with ground-truth poses {}",
+                pr(g)
+            ))
+        );
+    } else if let Some((raw, corrected)) = truth.and_then(|t| {
+        t.raw_vs_ground_truth_map
+            .zip(t.corrected_vs_ground_truth_map)
+    }) {
+        // No world: the map the ground-truth poses give is the reference.
+        tracing::info!(
+            "map occupied precision/recall against the ground-truth poses' map: raw {}, corrected {}",
+            pr(raw),
+            pr(corrected)
         );
     }
-    if let Some(m) = get("landmarks.median_error_m") {
+    if let Some(m) = scores.world.as_ref().and_then(|w| w.landmarks.median_m) {
         tracing::info!("landmark position error: median {:.1} mm", m * 1e3);
     }
 }

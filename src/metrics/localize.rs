@@ -59,15 +59,84 @@ pub fn error_growth(result: &LocalizeResult, truth: Option<&[StampedPose]>) -> V
     bins
 }
 
-/// What a localisation fused and, with ground truth, its ATE: the figures of `localize`'s
-/// `report.json`. `odometry` is the odometry the filter ran on (`run_odometry` corrected with a
-/// survey's calibration when `calibrated`).
-pub fn localization_metrics(
+/// A localisation against the run's ground truth ([`score_localization`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalizationScores {
+    /// ATE of the run's odometry as logged, metres (`None`: no overlap with the truth).
+    pub ate_odometry_m: Option<f64>,
+    /// ATE of the odometry the filter ran on, when a survey's calibration corrected it
+    /// (`Some(None)`: corrected, but no overlap).
+    pub ate_odometry_calibrated_m: Option<Option<f64>>,
+    /// ATE of the localised trajectory, metres.
+    pub ate_localized_m: Option<f64>,
+    /// Mean position NEES per degree of freedom where the pose is known (about 1 when the
+    /// reported sigma is honest, below when cautious).
+    pub nees_located: f64,
+    /// The same from the first instant (an unknown start's guess counts near 0).
+    pub nees_from_start: f64,
+    /// The largest error over the worst-direction sigma, from the first instant.
+    pub worst_error_over_sigma: f64,
+    /// When the filter first knew where it was, seconds, and its ATE from then on.
+    pub located: Option<(f64, Option<f64>)>,
+}
+
+/// Scores a localisation against the truth. `odometry` is the odometry the filter ran on
+/// (`run_odometry` corrected with a survey's calibration when `calibrated`).
+pub fn score_localization(
     result: &LocalizeResult,
     run_odometry: &[StampedPose],
     odometry: &[StampedPose],
     calibrated: bool,
-    truth: Option<&[StampedPose]>,
+    truth: &[StampedPose],
+) -> LocalizationScores {
+    let c = sigma_consistency(result, truth);
+    let located = result.located.iter().position(|&l| l).map(|first| {
+        (
+            result.trajectory[first].t_s,
+            ate_m(&result.trajectory[first..], truth),
+        )
+    });
+    LocalizationScores {
+        ate_odometry_m: ate_m(run_odometry, truth),
+        ate_odometry_calibrated_m: calibrated.then(|| ate_m(odometry, truth)),
+        ate_localized_m: ate_m(&result.trajectory, truth),
+        nees_located: c.nees_located,
+        nees_from_start: c.nees_all,
+        worst_error_over_sigma: c.worst,
+        located,
+    }
+}
+
+impl LocalizationScores {
+    /// Adds the scores to `report.json`'s metrics (`ate_m.*`, `nees.*`, `located.from_t_s`).
+    pub fn add_to(&self, metrics: &mut serde_json::Map<String, serde_json::Value>) {
+        metrics.insert("ate_m.odometry".into(), self.ate_odometry_m.into());
+        if let Some(ate) = self.ate_odometry_calibrated_m {
+            metrics.insert("ate_m.odometry_calibrated".into(), ate.into());
+        }
+        metrics.insert("ate_m.localized".into(), self.ate_localized_m.into());
+        metrics.insert("nees.position_mean".into(), self.nees_located.into());
+        metrics.insert(
+            "nees.position_mean_from_start".into(),
+            self.nees_from_start.into(),
+        );
+        metrics.insert(
+            "error_over_sigma.max".into(),
+            self.worst_error_over_sigma.into(),
+        );
+        if let Some((from_t_s, ate)) = self.located {
+            metrics.insert("located.from_t_s".into(), from_t_s.into());
+            metrics.insert("ate_m.located".into(), ate.into());
+        }
+    }
+}
+
+/// What a localisation fused and, with its [`LocalizationScores`], the figures of `localize`'s
+/// `report.json`.
+pub fn localization_metrics(
+    result: &LocalizeResult,
+    calibrated: bool,
+    scores: Option<&LocalizationScores>,
     counts: LocalizationCounts,
 ) -> serde_json::Map<String, serde_json::Value> {
     let mut metrics = serde_json::Map::new();
@@ -90,32 +159,8 @@ pub fn localization_metrics(
         "odometry.calibrated".into(),
         f64::from(u8::from(calibrated)).into(),
     );
-    if let Some(t) = truth {
-        metrics.insert("ate_m.odometry".into(), ate_m(run_odometry, t).into());
-        if calibrated {
-            metrics.insert(
-                "ate_m.odometry_calibrated".into(),
-                ate_m(odometry, t).into(),
-            );
-        }
-        metrics.insert(
-            "ate_m.localized".into(),
-            ate_m(&result.trajectory, t).into(),
-        );
-        let c = sigma_consistency(result, t);
-        metrics.insert("nees.position_mean".into(), c.nees_located.into());
-        metrics.insert("nees.position_mean_from_start".into(), c.nees_all.into());
-        metrics.insert("error_over_sigma.max".into(), c.worst.into());
-        if let Some(first) = result.located.iter().position(|&l| l) {
-            metrics.insert(
-                "located.from_t_s".into(),
-                result.trajectory[first].t_s.into(),
-            );
-            metrics.insert(
-                "ate_m.located".into(),
-                ate_m(&result.trajectory[first..], t).into(),
-            );
-        }
+    if let Some(scores) = scores {
+        scores.add_to(&mut metrics);
     }
     metrics
 }

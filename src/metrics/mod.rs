@@ -7,8 +7,11 @@ pub mod survey;
 pub mod trajectory;
 
 pub use localize::{
-    error_growth, localization_metrics, position_nees, GrowthBin, LocalizationCounts,
-    GROWTH_BANDS_M,
+    error_growth, localization_metrics, position_nees, score_localization, GrowthBin,
+    LocalizationCounts, LocalizationScores, GROWTH_BANDS_M,
 };
-pub use survey::{score_sonar_map, score_survey, survey_metrics, SonarScores};
+pub use survey::{
+    score_sonar_map, score_survey, survey_metrics, LandmarkErrors, SonarScores, SurveyScores,
+    TrajectoryErrors, TruthScores, TurnErrors, WorldScores,
+};
 pub use trajectory::{align_se2, ate_m};

@@ -22,7 +22,7 @@ fn sonar_positions(run: &RunDataset) -> Vec<nalgebra::Point2<f64>> {
 }
 
 /// Scores of a [`SonarMap`] against a world.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct SonarScores {
     /// Counting grid.
     pub counting: MapScore,
@@ -34,85 +34,215 @@ pub struct SonarScores {
     pub features_offline: FeatureScore,
 }
 
+/// A survey's scores against what is known of the truth ([`score_survey`]): the run's ground
+/// truth, the world, both or neither.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SurveyScores {
+    /// Against the run's ground truth, when it has one.
+    pub truth: Option<TruthScores>,
+    /// Against the world, when it is known.
+    pub world: Option<WorldScores>,
+}
+
+/// A survey against its run's ground truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthScores {
+    /// ATE of the odometry, the online and the offline trajectories, metres.
+    pub ate_m: TrajectoryErrors,
+    /// The visual turns' errors, when any turn was measured.
+    pub visual_turns: Option<TurnErrors>,
+    /// The raw map's occupied cells against the map the ground-truth poses give (within a cell
+    /// of its occupied cells), when the two grids are alike.
+    pub raw_vs_ground_truth_map: Option<MapScore>,
+    /// The corrected map's, the same way.
+    pub corrected_vs_ground_truth_map: Option<MapScore>,
+}
+
+/// ATE of a survey's trajectories, metres: `None` where a trajectory does not overlap the truth.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TrajectoryErrors {
+    /// The odometry.
+    pub odometry: Option<f64>,
+    /// The online filter.
+    pub online: Option<f64>,
+    /// The offline pass.
+    pub offline: Option<f64>,
+}
+
+/// The visual turns against the truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TurnErrors {
+    /// RMS error, degrees.
+    pub rms_deg: f64,
+    /// Mean normalised squared error under each turn's stated sigma.
+    pub nees: f64,
+}
+
+/// A survey against the world.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldScores {
+    /// The raw map (made on the odometry): its grids and features.
+    pub raw: SonarScores,
+    /// The map made on the online filter's poses.
+    pub online_map: MapScore,
+    /// The map made on the offline pass's poses.
+    pub corrected_map: MapScore,
+    /// The map made on the ground-truth poses, when the run has them.
+    pub ground_truth_map: Option<MapScore>,
+    /// The corrected map's offline features.
+    pub features_corrected: FeatureScore,
+    /// The landmarks against their tags.
+    pub landmarks: LandmarkErrors,
+    /// Tags the world holds.
+    pub planned: usize,
+    /// Landmarks the survey holds.
+    pub surveyed: usize,
+}
+
+/// The landmarks against their tags in the world.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LandmarkErrors {
+    /// Median and largest position error, metres (`None` without a landmark of the world's).
+    pub median_m: Option<f64>,
+    /// See `median_m`.
+    pub max_m: Option<f64>,
+    /// Median and largest angle between a landmark's orientation and its tag's, degrees.
+    pub median_orientation_deg: Option<f64>,
+    /// See `median_orientation_deg`.
+    pub max_orientation_deg: Option<f64>,
+    /// Diagnostics, with the ground truth: the median position error after the best rigid
+    /// alignment of the offline trajectory with the truth (the survey's anchoring taken out)...
+    pub median_aligned_m: Option<f64>,
+    /// ... and the offline ATE after it.
+    pub ate_offline_aligned_m: Option<f64>,
+}
+
+impl SurveyScores {
+    /// The scores as `report.json` metrics (DESIGN.md keys plus ours); empty with neither truth
+    /// nor world.
+    pub fn metrics(&self) -> BTreeMap<String, f64> {
+        let mut m = BTreeMap::new();
+        let mut put = |k: &str, v: Option<f64>| {
+            if let Some(v) = v {
+                m.insert(k.to_string(), v);
+            }
+        };
+        if let Some(t) = &self.truth {
+            put("ate_m.odometry", t.ate_m.odometry);
+            put("ate_m.online", t.ate_m.online);
+            put("ate_m.offline", t.ate_m.offline);
+            put(
+                "visual.turn_error_rms_deg",
+                t.visual_turns.map(|v| v.rms_deg),
+            );
+            put("visual.turn_nees", t.visual_turns.map(|v| v.nees));
+            for (name, score) in [
+                ("map_raw", t.raw_vs_ground_truth_map),
+                ("map_corrected", t.corrected_vs_ground_truth_map),
+            ] {
+                let key = |what: &str| format!("{name}.vs_ground_truth_map.occupied_{what}");
+                put(&key("precision"), score.map(|s| s.occupied_precision));
+                put(&key("recall"), score.map(|s| s.occupied_recall));
+            }
+        }
+        let Some(w) = &self.world else {
+            return m;
+        };
+        m.extend(w.raw.metrics());
+        let mut put = |k: &str, v: Option<f64>| {
+            if let Some(v) = v {
+                m.insert(k.to_string(), v);
+            }
+        };
+        for (name, score) in [
+            ("map_online", Some(w.online_map)),
+            ("map_corrected", Some(w.corrected_map)),
+            ("map_ground_truth", w.ground_truth_map),
+        ] {
+            put(
+                &format!("{name}.occupied_precision"),
+                score.map(|s| s.occupied_precision),
+            );
+            put(
+                &format!("{name}.occupied_recall"),
+                score.map(|s| s.occupied_recall),
+            );
+        }
+        let f = &w.features_corrected;
+        put("features_corrected.precision", Some(f.precision));
+        put("features_corrected.recall", Some(f.recall));
+        put("features_corrected.count", Some(f.features as f64));
+        let l = &w.landmarks;
+        put("landmarks.median_error_m", l.median_m);
+        put("landmarks.max_error_m", l.max_m);
+        put(
+            "landmarks.median_orientation_error_deg",
+            l.median_orientation_deg,
+        );
+        put("landmarks.max_orientation_error_deg", l.max_orientation_deg);
+        put("landmarks.median_error_aligned_m", l.median_aligned_m);
+        put("ate_m.offline_aligned", l.ate_offline_aligned_m);
+        put("landmarks.count", Some(w.surveyed as f64));
+        put("landmarks.planned", Some(w.planned as f64));
+        m
+    }
+}
+
 /// Scores a survey against what is known of the truth: with the run's ground truth, ATE of each
 /// trajectory, the visual turns' errors, and the raw and corrected maps against the map the
 /// ground-truth poses give (their occupied cells within a cell of its occupied cells); with the
 /// world, the sonar scores of the raw map, the online and corrected maps and the ground-truth-pose
-/// map, the corrected map's features (`features_corrected.*`) and the landmark position errors
-/// (also after aligning the whole survey). Empty with neither.
+/// map, the corrected map's features and the landmark errors (also after aligning the whole
+/// survey). Neither without them.
 pub fn score_survey(
     survey: &Survey,
     run: &RunDataset,
     world: Option<&World>,
     mapping: &MappingConfig,
-) -> Result<BTreeMap<String, f64>, GridError> {
-    let mut m = BTreeMap::new();
+) -> Result<SurveyScores, GridError> {
+    let mut scores = SurveyScores::default();
     let gt_map = match &run.ground_truth {
         Some(truth) => {
             // Only its counting grid: not the Hough passes and walls a full map builds.
             let gt_map = counting_map_along(&run.sonar_log(), truth, mapping)?;
-            for (key, estimate) in [
-                ("ate_m.odometry", &run.odometry),
-                ("ate_m.online", &survey.online.trajectory),
-                ("ate_m.offline", &survey.offline.trajectory),
-            ] {
-                if let Some(ate) = ate_m(estimate, truth) {
-                    m.insert(key.into(), ate);
-                }
-            }
-            m.extend(visual_turn_metrics(&survey.visual, truth));
             let reference: Vec<bool> = (0..gt_map.occupancy.len())
                 .map(|i| gt_map.is_occupied(i))
                 .collect();
-            for (name, map) in [
-                ("map_raw", &survey.raw.counting),
-                ("map_corrected", &survey.corrected.counting),
-            ] {
-                if map.geometry == gt_map.geometry {
-                    let score = score_map_against(map, &reference);
-                    m.insert(
-                        format!("{name}.vs_ground_truth_map.occupied_precision"),
-                        score.occupied_precision,
-                    );
-                    m.insert(
-                        format!("{name}.vs_ground_truth_map.occupied_recall"),
-                        score.occupied_recall,
-                    );
-                }
-            }
+            let against = |map: &crate::sonar::grid::OccupancyMap| {
+                (map.geometry == gt_map.geometry).then(|| score_map_against(map, &reference))
+            };
+            scores.truth = Some(TruthScores {
+                ate_m: TrajectoryErrors {
+                    odometry: ate_m(&run.odometry, truth),
+                    online: ate_m(&survey.online.trajectory, truth),
+                    offline: ate_m(&survey.offline.trajectory, truth),
+                },
+                visual_turns: visual_turn_errors(&survey.visual, truth),
+                raw_vs_ground_truth_map: against(&survey.raw.counting),
+                corrected_vs_ground_truth_map: against(&survey.corrected.counting),
+            });
             Some(gt_map)
         }
         None => None,
     };
     let Some(world) = world else {
-        return Ok(m);
+        return Ok(scores);
     };
-    m.extend(score_sonar_map(&survey.raw, run, world).metrics());
-    let mut occupied = |name: &str, map: &crate::sonar::grid::OccupancyMap| {
-        let score = score_map(map, world);
-        m.insert(
-            format!("{name}.occupied_precision"),
-            score.occupied_precision,
-        );
-        m.insert(format!("{name}.occupied_recall"), score.occupied_recall);
-    };
-    occupied("map_online", &survey.online_map);
-    occupied("map_corrected", &survey.corrected.counting);
-    if let Some(gt_map) = &gt_map {
-        occupied("map_ground_truth", gt_map);
-    }
-    let corrected = score_features(
-        &survey.corrected.features_offline,
-        world,
-        &sonar_positions(run),
-    );
-    m.insert("features_corrected.precision".into(), corrected.precision);
-    m.insert("features_corrected.recall".into(), corrected.recall);
-    m.insert("features_corrected.count".into(), corrected.features as f64);
-    m.extend(landmark_metrics(survey, run, world));
-    m.insert("landmarks.count".into(), survey.landmarks.len() as f64);
-    m.insert("landmarks.planned".into(), world.tags.len() as f64);
-    Ok(m)
+    scores.world = Some(WorldScores {
+        raw: score_sonar_map(&survey.raw, run, world),
+        online_map: score_map(&survey.online_map, world),
+        corrected_map: score_map(&survey.corrected.counting, world),
+        ground_truth_map: gt_map.as_ref().map(|map| score_map(map, world)),
+        features_corrected: score_features(
+            &survey.corrected.features_offline,
+            world,
+            &sonar_positions(run),
+        ),
+        landmarks: landmark_errors_of(survey, run, world),
+        planned: world.tags.len(),
+        surveyed: survey.landmarks.len(),
+    });
+    Ok(scores)
 }
 
 /// `error` of each landmark against its tag in the world, sorted.
@@ -148,33 +278,25 @@ fn orientation_errors_deg(survey: &Survey, world: &World) -> Vec<f64> {
     })
 }
 
-/// The landmarks' median and largest error; and, as diagnostics, the median and the offline
-/// ATE after the best rigid alignment of the offline trajectory with the truth (the shift and
-/// turn of the whole survey, its anchoring, taken out).
-fn landmark_metrics(survey: &Survey, run: &RunDataset, world: &World) -> BTreeMap<String, f64> {
-    let mut m = BTreeMap::new();
+/// The landmarks' median and largest errors; and, as diagnostics, the median and the offline
+/// ATE after the best rigid alignment of the offline trajectory with the truth.
+fn landmark_errors_of(survey: &Survey, run: &RunDataset, world: &World) -> LandmarkErrors {
     let errors = landmark_errors(survey, world, Pose2::new(0.0, 0.0, 0.0));
-    if let Some(median) = median_sorted(&errors) {
-        m.insert("landmarks.median_error_m".into(), median);
-        m.insert("landmarks.max_error_m".into(), errors[errors.len() - 1]);
-    }
     let turned = orientation_errors_deg(survey, world);
-    if let Some(median) = median_sorted(&turned) {
-        m.insert("landmarks.median_orientation_error_deg".into(), median);
-        m.insert(
-            "landmarks.max_orientation_error_deg".into(),
-            turned[turned.len() - 1],
-        );
-    }
+    let mut out = LandmarkErrors {
+        median_m: median_sorted(&errors),
+        max_m: errors.last().copied(),
+        median_orientation_deg: median_sorted(&turned),
+        max_orientation_deg: turned.last().copied(),
+        ..LandmarkErrors::default()
+    };
     let Some(truth) = run.ground_truth.as_deref() else {
-        return m;
+        return out;
     };
     let Some(align) = align_se2(&survey.offline.trajectory, truth) else {
-        return m;
+        return out;
     };
-    if let Some(median) = median_sorted(&landmark_errors(survey, world, align)) {
-        m.insert("landmarks.median_error_aligned_m".into(), median);
-    }
+    out.median_aligned_m = median_sorted(&landmark_errors(survey, world, align));
     let aligned: Vec<StampedPose> = survey
         .offline
         .trajectory
@@ -184,18 +306,15 @@ fn landmark_metrics(survey: &Survey, run: &RunDataset, world: &World) -> BTreeMa
             pose: align.compose(&p.pose),
         })
         .collect();
-    if let Some(ate) = ate_m(&aligned, truth) {
-        m.insert("ate_m.offline_aligned".into(), ate);
-    }
-    m
+    out.ate_offline_aligned_m = ate_m(&aligned, truth);
+    out
 }
 
-/// The visual turns' RMS error against the truth, degrees, and their NEES.
-fn visual_turn_metrics(
+/// The visual turns' RMS error against the truth and their NEES; `None` without a turn.
+fn visual_turn_errors(
     visual: &[crate::visual::vo::VisualTurn],
     truth: &[StampedPose],
-) -> BTreeMap<String, f64> {
-    let mut m = BTreeMap::new();
+) -> Option<TurnErrors> {
     let errors: Vec<(f64, f64)> = visual
         .iter()
         .filter_map(|v| {
@@ -205,14 +324,16 @@ fn visual_turn_metrics(
             Some((e, v.sigma_rad))
         })
         .collect();
-    if !errors.is_empty() {
-        let n = errors.len() as f64;
-        let rms = (errors.iter().map(|(e, _)| e * e).sum::<f64>() / n).sqrt();
-        let nees = errors.iter().map(|(e, s)| (e / s).powi(2)).sum::<f64>() / n;
-        m.insert("visual.turn_error_rms_deg".into(), rms.to_degrees());
-        m.insert("visual.turn_nees".into(), nees);
+    if errors.is_empty() {
+        return None;
     }
-    m
+    let n = errors.len() as f64;
+    let rms = (errors.iter().map(|(e, _)| e * e).sum::<f64>() / n).sqrt();
+    let nees = errors.iter().map(|(e, s)| (e / s).powi(2)).sum::<f64>() / n;
+    Some(TurnErrors {
+        rms_deg: rms.to_degrees(),
+        nees,
+    })
 }
 
 /// Median of a sorted list.

@@ -21,6 +21,8 @@ pub struct SurveyScene<'a> {
     pub sightings: &'a [TagSighting],
     /// The report's figures.
     pub metrics: &'a BTreeMap<String, f64>,
+    /// The scores among them.
+    pub scores: &'a crate::metrics::SurveyScores,
     /// The mapping settings (the online grid is rebuilt with them).
     pub mapping: &'a crate::sonar::map::MappingConfig,
     /// The stereo rig's cameras and mounting, when the run has pictures.

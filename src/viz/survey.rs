@@ -579,11 +579,13 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
     let m = scene.metrics;
     let get = |k: &str| m.get(k).copied();
     let mut md = String::from("## At a glance\n\n");
-    if let (Some(o), Some(on), Some(off)) = (
-        get("ate_m.odometry"),
-        get("ate_m.online"),
-        get("ate_m.offline"),
-    ) {
+    let ate = scene.scores.truth.as_ref().map(|t| t.ate_m);
+    if let Some(crate::metrics::TrajectoryErrors {
+        odometry: Some(o),
+        online: Some(on),
+        offline: Some(off),
+    }) = ate
+    {
         md.push_str(&format!(
             "Position error (ATE): odometry **{:.3} m**, online **{:.3} m**, offline **{:.3} m**.\n\n",
             o, on, off

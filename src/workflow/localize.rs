@@ -11,7 +11,10 @@ use crate::fusion::{
 };
 use crate::geometry::{Pose2, StampedPose};
 use crate::io::{self, OutputDir};
-use crate::metrics::{error_growth, localization_metrics, GrowthBin, LocalizationCounts};
+use crate::metrics::{
+    error_growth, localization_metrics, score_localization, GrowthBin, LocalizationCounts,
+    LocalizationScores,
+};
 use crate::progress::Progress;
 use crate::sonar::walls::WallSegment;
 use crate::visual::tags::TagFamily;
@@ -60,6 +63,8 @@ pub struct LocalizeOutput {
     pub walls: Vec<WallSegment>,
     /// Error statistics by distance since the last sighting.
     pub growth: Vec<GrowthBin>,
+    /// The scores against the run's ground truth, when it has one.
+    pub scores: Option<LocalizationScores>,
     /// The figures of `report.json`.
     pub metrics: serde_json::Map<String, serde_json::Value>,
     /// What it had to work with (also in `metrics`).
@@ -382,8 +387,9 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             .count_at_shortest_range(run.sonar.iter().map(|r| r.range_m)),
     };
     let calibrated = calibration.is_some();
-    let mut metrics =
-        localization_metrics(&result, &run.odometry, &odometry, calibrated, truth, counts);
+    let scores =
+        truth.map(|t| score_localization(&result, &run.odometry, &odometry, calibrated, t));
+    let mut metrics = localization_metrics(&result, calibrated, scores.as_ref(), counts);
     if let Some(scale) = surveyed.noise_scale {
         metrics.insert(
             "odometry.noise_scale_translation".into(),
@@ -423,6 +429,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         landmarks,
         walls,
         growth,
+        scores,
         metrics,
         counts,
     })

@@ -10,7 +10,7 @@ use crate::dataset::RunDataset;
 use crate::fusion::{self, OdometryCalibration, Survey};
 use crate::geometry::Pose2;
 use crate::io::{self, OutputDir};
-use crate::metrics::{score_survey, survey_metrics};
+use crate::metrics::{score_survey, survey_metrics, SurveyScores};
 use crate::progress::{timed, Progress};
 use crate::sonar::grid::GridError;
 use crate::sonar::map::{map_trajectory, SonarMap};
@@ -128,7 +128,12 @@ impl Anchoring<'_> {
 pub struct SurveyOutput {
     /// The survey.
     pub survey: Survey,
-    /// The figures of `report.json`.
+    /// The scores against the run's ground truth and the world, where known (none for a survey
+    /// in a tag's frame).
+    pub scores: SurveyScores,
+    /// Tag sightings in the run's stereo pairs, fused or not.
+    pub sightings: usize,
+    /// Every figure of `report.json`: the scores' and what needs no truth.
     pub metrics: BTreeMap<String, f64>,
     /// The world it was scored against, if any.
     pub world: Option<World>,
@@ -390,14 +395,16 @@ pub fn survey_into(
     }
     // With the ground truth alone, the trajectories and maps are scored; with the world, all.
     // A survey in a tag's frame is not in theirs: it is not scored.
-    if let Some(tag) = request.anchors.origin_tag {
+    let scores = if let Some(tag) = request.anchors.origin_tag {
         tracing::info!(
             "the survey is in tag {}'s frame, not the world's or the ground truth's: it is not scored against them",
             tag.id
         );
+        SurveyScores::default()
     } else {
-        metrics.extend(score_survey(&result, run, world, mapping)?);
-    }
+        score_survey(&result, run, world, mapping)?
+    };
+    metrics.extend(scores.metrics());
     timings.extend(result.timings_s.clone());
     if let Some(rec) = &recorder {
         // Alongside the survey's stages above, which it slows down on a two-core machine.
@@ -408,6 +415,7 @@ pub fn survey_into(
             survey: &result,
             sightings: &seen.sightings,
             metrics: &metrics,
+            scores: &scores,
             mapping,
             rig: survey_rig.as_ref(),
             images: &images,
@@ -423,6 +431,8 @@ pub fn survey_into(
     }
     Ok(SurveyOutput {
         survey: result,
+        scores,
+        sightings: seen.sightings.len(),
         metrics,
         world: inputs.world,
     })
