@@ -121,69 +121,80 @@ impl SurveyScores {
     /// The scores as `report.json` metrics (DESIGN.md keys plus ours); empty with neither truth
     /// nor world.
     pub fn metrics(&self) -> BTreeMap<String, f64> {
-        let mut m = BTreeMap::new();
-        let mut put = |k: &str, v: Option<f64>| {
-            if let Some(v) = v {
-                m.insert(k.to_string(), v);
+        fn put(m: &mut BTreeMap<String, f64>, key: &str, value: Option<f64>) {
+            if let Some(v) = value {
+                m.insert(key.to_string(), v);
             }
-        };
+        }
+        let mut m = BTreeMap::new();
         if let Some(t) = &self.truth {
-            put("ate_m.odometry", t.ate_m.odometry);
-            put("ate_m.online", t.ate_m.online);
-            put("ate_m.offline", t.ate_m.offline);
+            put(&mut m, "ate_m.odometry", t.ate_m.odometry);
+            put(&mut m, "ate_m.online", t.ate_m.online);
+            put(&mut m, "ate_m.offline", t.ate_m.offline);
             put(
+                &mut m,
                 "visual.turn_error_rms_deg",
                 t.visual_turns.map(|v| v.rms_deg),
             );
-            put("visual.turn_nees", t.visual_turns.map(|v| v.nees));
+            put(&mut m, "visual.turn_nees", t.visual_turns.map(|v| v.nees));
             for (name, score) in [
                 ("map_raw", t.raw_vs_ground_truth_map),
                 ("map_corrected", t.corrected_vs_ground_truth_map),
             ] {
                 let key = |what: &str| format!("{name}.vs_ground_truth_map.occupied_{what}");
-                put(&key("precision"), score.map(|s| s.occupied_precision));
-                put(&key("recall"), score.map(|s| s.occupied_recall));
+                put(
+                    &mut m,
+                    &key("precision"),
+                    score.map(|s| s.occupied_precision),
+                );
+                put(&mut m, &key("recall"), score.map(|s| s.occupied_recall));
             }
         }
         let Some(w) = &self.world else {
             return m;
         };
         m.extend(w.raw.metrics());
-        let mut put = |k: &str, v: Option<f64>| {
-            if let Some(v) = v {
-                m.insert(k.to_string(), v);
-            }
-        };
         for (name, score) in [
             ("map_online", Some(w.online_map)),
             ("map_corrected", Some(w.corrected_map)),
             ("map_ground_truth", w.ground_truth_map),
         ] {
             put(
+                &mut m,
                 &format!("{name}.occupied_precision"),
                 score.map(|s| s.occupied_precision),
             );
             put(
+                &mut m,
                 &format!("{name}.occupied_recall"),
                 score.map(|s| s.occupied_recall),
             );
         }
         let f = &w.features_corrected;
-        put("features_corrected.precision", Some(f.precision));
-        put("features_corrected.recall", Some(f.recall));
-        put("features_corrected.count", Some(f.features as f64));
+        put(&mut m, "features_corrected.precision", Some(f.precision));
+        put(&mut m, "features_corrected.recall", Some(f.recall));
+        put(&mut m, "features_corrected.count", Some(f.features as f64));
         let l = &w.landmarks;
-        put("landmarks.median_error_m", l.median_m);
-        put("landmarks.max_error_m", l.max_m);
+        put(&mut m, "landmarks.median_error_m", l.median_m);
+        put(&mut m, "landmarks.max_error_m", l.max_m);
         put(
+            &mut m,
             "landmarks.median_orientation_error_deg",
             l.median_orientation_deg,
         );
-        put("landmarks.max_orientation_error_deg", l.max_orientation_deg);
-        put("landmarks.median_error_aligned_m", l.median_aligned_m);
-        put("ate_m.offline_aligned", l.ate_offline_aligned_m);
-        put("landmarks.count", Some(w.surveyed as f64));
-        put("landmarks.planned", Some(w.planned as f64));
+        put(
+            &mut m,
+            "landmarks.max_orientation_error_deg",
+            l.max_orientation_deg,
+        );
+        put(
+            &mut m,
+            "landmarks.median_error_aligned_m",
+            l.median_aligned_m,
+        );
+        put(&mut m, "ate_m.offline_aligned", l.ate_offline_aligned_m);
+        put(&mut m, "landmarks.count", Some(w.surveyed as f64));
+        put(&mut m, "landmarks.planned", Some(w.planned as f64));
         m
     }
 }
