@@ -1,7 +1,6 @@
 use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::fusion::Start;
-use stereotag::metrics::LocalizationScores;
 use stereotag::workflow::localize::{localize, LocalizeOutput, LocalizeRequest};
 
 /// Arguments of `stereotag localize`.
@@ -178,12 +177,28 @@ fn print_summary(output: &LocalizeOutput) {
                 .map_or(String::new(), |e| format!(", RMS error {e:.3} m"))
         );
     }
-    if let Some(LocalizationScores {
-        ate_odometry_m: Some(a),
-        ate_localized_m: Some(b),
-        ..
-    }) = output.scores
-    {
+    let Some(scores) = output.scores else {
+        return;
+    };
+    if let (Some(a), Some(b)) = (scores.ate_odometry_m, scores.ate_localized_m) {
         tracing::info!("ATE: odometry {a:.3} m, localised {b:.3} m");
     }
+    // After an unknown start: how well it did once a sighting placed it, and whether the sigma
+    // it reported covered its error before that too.
+    let nees = match (result.located_t_s, scores.located) {
+        (Some(_), Some((from_t_s, ate))) => {
+            if let Some(ate) = ate {
+                tracing::info!("from t = {from_t_s:.1} s, once located: ATE {ate:.3} m");
+            }
+            format!(
+                "{:.2} once located, {:.2} from the start",
+                scores.nees_located, scores.nees_from_start
+            )
+        }
+        _ => format!("{:.2}", scores.nees_located),
+    };
+    tracing::info!(
+        "position NEES {nees} (near 1: the sigma reported is honest; well above it: overconfident); largest error {:.1} sigmas",
+        scores.worst_error_over_sigma
+    );
 }
