@@ -465,7 +465,8 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
     let m = &json(&out.join("report.json"))["metrics"];
     assert!(m["walls.ranges_matched"].as_f64().unwrap() > 1000.0, "{m}");
     assert!(m["walls.ranges_off_share"].as_f64().unwrap() > 0.1, "{m}");
-    // The recording's opening gives the same warning, by the same rule, from these figures.
+    // The warning follows one rule from these figures (the recording's opening gives the same
+    // words).
     let get = |k: &str| m[k].as_f64().unwrap();
     assert!(stereotag::fusion::scatter_too_wide(
         get("walls.ranges_off_share"),

@@ -178,6 +178,29 @@ pub struct RangeScatter {
     pub median_range_m: f64,
 }
 
+impl RangeScatter {
+    /// The range sigma `localize` assumes (`sonar_sigma_m`, `sonar_sigma_frac`) at these ranges'
+    /// median, metres.
+    pub fn assumed_sigma_m(&self, config: &FuseConfig) -> f64 {
+        config.sonar_sigma_m + config.sonar_sigma_frac * self.median_range_m
+    }
+
+    /// What to tell the user when the ranges scatter so about their walls that holding a later
+    /// run to them may pull it off ([`scatter_too_wide`]); `None` otherwise.
+    pub fn warning(&self, config: &FuseConfig) -> Option<String> {
+        let assumed = self.assumed_sigma_m(config);
+        scatter_too_wide(self.off_share, self.sigma_m, assumed).then(|| {
+            format!(
+                "the run's ranges scatter about its walls with a robust sigma of {:.1} cm, and {:.0}% of them lie over {:.0} cm off (furniture, door frames), where localize assumes {:.1} cm (sonar_sigma_m, sonar_sigma_frac): holding a later run to these walls may pull it off; compare `localize --no-walls` (docs/RESULTS.md, \"Localising a real log\")",
+                100.0 * self.sigma_m,
+                100.0 * self.off_share,
+                100.0 * RANGE_OFF_M,
+                100.0 * assumed
+            )
+        })
+    }
+}
+
 /// A matched range this far off its face (metres) is another object in the beam: 10 cm.
 pub const RANGE_OFF_M: f64 = 0.10;
 
@@ -1788,6 +1811,30 @@ mod tests {
     }
 
     /// The face a range is matched with: the nearest one in the beam, none without an echo.
+    #[test]
+    fn ranges_scattering_far_off_their_walls_are_warned_about_once_by_one_rule() {
+        let config = FuseConfig::default();
+        let scatter = |off_share, sigma_m| RangeScatter {
+            matched: 1000,
+            sigma_m,
+            off_share,
+            median_range_m: 1.0,
+        };
+        // freiburg-079 as sonar: 16% of its ranges over 10 cm off, a robust sigma of 3.4 cm.
+        let real = scatter(0.16, 0.034);
+        let warning = real
+            .warning(&config)
+            .expect("a real log's scatter is warned about");
+        assert!(warning.contains("16%") && warning.contains("localize --no-walls"));
+        assert!(scatter_too_wide(
+            real.off_share,
+            real.sigma_m,
+            real.assumed_sigma_m(&config)
+        ));
+        // The simulated office: none off, 1.6 cm.
+        assert_eq!(scatter(0.0, 0.016).warning(&config), None);
+    }
+
     #[test]
     fn a_range_is_matched_with_the_nearest_face_in_its_beam() {
         let (layout, wall, _, _, readings) = corridor();

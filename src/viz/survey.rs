@@ -576,8 +576,6 @@ fn error_over_sigma(scene: &SurveyScene<'_>) -> Option<f64> {
 
 /// The report's opening lines: the figures a reader looks for first, and how to read the plots.
 fn at_a_glance(scene: &SurveyScene<'_>) -> String {
-    let m = scene.metrics;
-    let get = |k: &str| m.get(k).copied();
     let mut md = String::from("## At a glance\n\n");
     let ate = scene.scores.truth.as_ref().map(|t| t.ate_m);
     if let Some(crate::metrics::TrajectoryErrors {
@@ -617,21 +615,13 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
             )
         });
     }
-    if let (Some(share), Some(sigma), Some(assumed)) = (
-        get("walls.ranges_off_share"),
-        get("walls.range_residual_sigma_m"),
-        get("walls.range_sigma_assumed_m"),
-    ) {
-        if crate::fusion::scatter_too_wide(share, sigma, assumed) {
-            md.push_str(&format!(
-                "The run's ranges scatter about its walls (robust σ {:.1} cm) and {:.0}% lie \
-                 over {:.0} cm off them (furniture, door frames): holding a later run to these \
-                 walls may pull it off; compare `localize --no-walls`.\n\n",
-                100.0 * sigma,
-                100.0 * share,
-                100.0 * crate::fusion::RANGE_OFF_M
-            ));
+    if let Some(w) = scene.range_scatter_warning {
+        // The same words as on stderr, as a sentence.
+        let mut w = w.to_string();
+        if let Some(first) = w.get(..1) {
+            w.replace_range(..1, &first.to_uppercase());
         }
+        md.push_str(&format!("{w}.\n\n"));
     }
     if let Some(r) = error_over_sigma(scene) {
         md.push_str(&format!(

@@ -355,7 +355,7 @@ pub fn survey_into(
         "online.calibration_from_earlier_survey".into(),
         f64::from(u8::from(inputs.calibration.is_some())),
     );
-    report_range_scatter(run, &result, &inputs.fuse, &mut metrics);
+    let scatter_warning = report_range_scatter(run, &result, &inputs.fuse, &mut metrics);
     if anchored {
         report_anchors(&result.landmarks, &inputs.anchors, &mut metrics);
     }
@@ -416,6 +416,7 @@ pub fn survey_into(
             sightings: &seen.sightings,
             metrics: &metrics,
             scores: &scores,
+            range_scatter_warning: scatter_warning.as_deref(),
             mapping,
             rig: survey_rig.as_ref(),
             images: &images,
@@ -602,7 +603,7 @@ fn report_range_scatter(
     result: &fusion::Survey,
     fuse: &fusion::FuseConfig,
     metrics: &mut BTreeMap<String, f64>,
-) {
+) -> Option<String> {
     let mut placed: Vec<f64> = result
         .corrected
         .walls
@@ -626,23 +627,19 @@ fn report_range_scatter(
         walls: &result.corrected.walls,
         walls_covariance: None,
     };
-    let Some(scatter) = fusion::range_scatter(&sonar, &result.offline.trajectory) else {
-        return;
-    };
+    let scatter = fusion::range_scatter(&sonar, &result.offline.trajectory)?;
     metrics.insert("walls.range_residual_sigma_m".into(), scatter.sigma_m);
     metrics.insert("walls.ranges_off_share".into(), scatter.off_share);
     metrics.insert("walls.ranges_matched".into(), scatter.matched as f64);
-    let assumed = fuse.sonar_sigma_m + fuse.sonar_sigma_frac * scatter.median_range_m;
-    metrics.insert("walls.range_sigma_assumed_m".into(), assumed);
-    if fusion::scatter_too_wide(scatter.off_share, scatter.sigma_m, assumed) {
-        tracing::warn!(
-            "the run's ranges scatter about its walls with a robust sigma of {:.1} cm, and {:.0}% of them lie over {:.0} cm off (furniture, door frames), where localize assumes {:.1} cm (sonar_sigma_m, sonar_sigma_frac): holding a later run to these walls may pull it off; compare `localize --no-walls` (docs/RESULTS.md, \"Localising a real log\")",
-            100.0 * scatter.sigma_m,
-            100.0 * scatter.off_share,
-            100.0 * fusion::RANGE_OFF_M,
-            100.0 * assumed
-        );
+    metrics.insert(
+        "walls.range_sigma_assumed_m".into(),
+        scatter.assumed_sigma_m(fuse),
+    );
+    let warning = scatter.warning(fuse);
+    if let Some(w) = &warning {
+        tracing::warn!("{w}");
     }
+    warning
 }
 
 /// Each anchor's residual in the survey, on stderr and in the metrics (`anchors.*`); a warning for
