@@ -1810,7 +1810,8 @@ mod tests {
         assert!(end_error(&unfixed) > 0.3, "{}", end_error(&unfixed));
     }
 
-    /// The face a range is matched with: the nearest one in the beam, none without an echo.
+    /// A survey's ranges far off its walls give one warning, by one rule, for stderr and the
+    /// recording alike.
     #[test]
     fn ranges_scattering_far_off_their_walls_are_warned_about_once_by_one_rule() {
         let config = FuseConfig::default();
@@ -1835,6 +1836,7 @@ mod tests {
         assert_eq!(scatter(0.0, 0.016).warning(&config), None);
     }
 
+    /// The face a range is matched with: the nearest one in the beam, none without an echo.
     #[test]
     fn a_range_is_matched_with_the_nearest_face_in_its_beam() {
         let (layout, wall, _, _, readings) = corridor();
