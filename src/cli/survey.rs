@@ -188,13 +188,6 @@ impl SurveyArgs {
 
 /// Prints the landmarks, the planned-versus-surveyed table and the before/after figures.
 pub(crate) fn print_summary(s: &Survey, scores: &SurveyScores, world: Option<&World>) {
-    for w in [s.raw.off_grid_warning(), s.raw.unplaced_warning()]
-        .into_iter()
-        .flatten()
-        .chain(s.raw.hidden_warnings())
-    {
-        tracing::warn!("{w}");
-    }
     tracing::info!(
         "{} landmarks ({} matched with a Hough corner); {} sightings fused, {} gated out; offline graph: {} keyframes, {} factors",
         s.landmarks.len(),
@@ -209,12 +202,6 @@ pub(crate) fn print_summary(s: &Survey, scores: &SurveyScores, world: Option<&Wo
         tracing::info!(
             "{closing} re-sightings the filter's gate turned away closed a loop: the graph of the run so far explained them within the odometry's noise ({} loop hypotheses tested)",
             s.online.loop_tests
-        );
-    }
-    for c in &s.online.conflicts {
-        tracing::warn!(
-            "tag {} ({}): {} — landmark at ({:.2}, {:.2}) m but {} sightings from t = {:.1} s put it at ({:.2}, {:.2}) m; not fused",
-            c.id, c.family, c.kind, c.landmark_m[0], c.landmark_m[1], c.sightings, c.first_t_s, c.seen_at_m[0], c.seen_at_m[1]
         );
     }
     if let Some(w) = world {

@@ -23,9 +23,8 @@ pub struct SurveyScene<'a> {
     pub metrics: &'a BTreeMap<String, f64>,
     /// The scores among them.
     pub scores: &'a crate::metrics::SurveyScores,
-    /// The warning that the run's ranges scatter too far about its walls to hold a later run to
-    /// them, when they do ([`crate::fusion::RangeScatter::warning`]).
-    pub range_scatter_warning: Option<&'a str>,
+    /// What the survey warned about ([`crate::workflow::survey::SurveyOutput::warnings`]).
+    pub warnings: &'a [String],
     /// The mapping settings (the online grid is rebuilt with them).
     pub mapping: &'a crate::sonar::map::MappingConfig,
     /// The stereo rig's cameras and mounting, when the run has pictures.

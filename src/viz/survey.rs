@@ -615,14 +615,6 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
             )
         });
     }
-    if let Some(w) = scene.range_scatter_warning {
-        // The same words as on stderr, as a sentence.
-        let mut w = w.to_string();
-        if let Some(first) = w.get(..1) {
-            w.replace_range(..1, &first.to_uppercase());
-        }
-        md.push_str(&format!("{w}.\n\n"));
-    }
     if let Some(r) = error_over_sigma(scene) {
         md.push_str(&format!(
             "The plot's *online σ* is the filter's own 1-σ position uncertainty (its longest \
@@ -637,6 +629,14 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
                 "consistent"
             }
         ));
+    }
+    // The same words as on stderr.
+    if !scene.warnings.is_empty() {
+        md.push_str("## Warnings\n\n");
+        for w in scene.warnings {
+            md.push_str(&format!("- {w}\n"));
+        }
+        md.push('\n');
     }
     md
 }

@@ -131,6 +131,11 @@ pub struct SurveyOutput {
     /// The scores against the run's ground truth and the world, where known (none for a survey
     /// in a tag's frame).
     pub scores: SurveyScores,
+    /// The warnings about what the survey found, as printed on stderr: what the raw map hid or
+    /// left out, tags the filter would not fuse, sizes the sightings disagree about, sightings
+    /// mostly gated out, ranges scattering far off the walls. (Notes on how a stage ran, such as
+    /// a correction not kept, are on stderr only.)
+    pub warnings: Vec<String>,
     /// Tag sightings in the run's stereo pairs, fused or not.
     pub sightings: usize,
     /// Every figure of `report.json`: the scores' and what needs no truth.
@@ -160,22 +165,35 @@ fn size_landmarks(
     landmarks: &mut [fusion::Landmark],
     world: Option<&World>,
     sizes: &crate::visual::sightings::TagSizes,
+    warnings: &mut Warnings,
 ) {
     for l in landmarks {
         match known_tag_size(world, sizes, l.family, l.id) {
             Some(size) => l.size_m = size,
             None if l.observations >= 3 && l.size_spread > SIZE_SPREAD_WARNING => {
-                tracing::warn!(
+                warnings.warn(format!(
                     "{} {}: its {} sightings triangulate to sizes {:.0}% apart (mean {:.3} m) and no printed size is known: give it with --tag-sizes or --tag-size-m",
                     l.family,
                     l.id,
                     l.observations,
                     100.0 * l.size_spread,
                     l.size_triangulated_m
-                );
+                ));
             }
             None => {}
         }
+    }
+}
+
+/// The warnings a survey prints, kept for its recording and its caller.
+#[derive(Debug, Default)]
+struct Warnings(Vec<String>);
+
+impl Warnings {
+    /// Prints `text` as a warning and keeps it.
+    fn warn(&mut self, text: String) {
+        tracing::warn!("{text}");
+        self.0.push(text);
     }
 }
 
@@ -345,7 +363,29 @@ pub fn survey_into(
     );
     let mut result = result?;
     result.frame_from_odometry = frame_from_odometry;
-    size_landmarks(&mut result.landmarks, world, &request.detect.tag_sizes);
+    // What the raw map hid or left out, the tags the filter would not fuse, and what follows.
+    let mut warnings = Warnings::default();
+    let raw = &result.raw;
+    for w in [raw.off_grid_warning(), raw.unplaced_warning()]
+        .into_iter()
+        .flatten()
+        .chain(raw.hidden_warnings())
+    {
+        warnings.warn(w);
+    }
+    for c in &result.online.conflicts {
+        warnings.warn(format!(
+            "tag {} ({}): {} — landmark at ({:.2}, {:.2}) m but {} sightings from t = {:.1} s put it at ({:.2}, {:.2}) m; not fused",
+            c.id, c.family, c.kind, c.landmark_m[0], c.landmark_m[1], c.sightings, c.first_t_s,
+            c.seen_at_m[0], c.seen_at_m[1]
+        ));
+    }
+    size_landmarks(
+        &mut result.landmarks,
+        world,
+        &request.detect.tag_sizes,
+        &mut warnings,
+    );
     let mut metrics = survey_metrics(&result, seen.sightings.len());
     metrics.insert(
         "sightings.implausible_height".into(),
@@ -355,7 +395,9 @@ pub fn survey_into(
         "online.calibration_from_earlier_survey".into(),
         f64::from(u8::from(inputs.calibration.is_some())),
     );
-    let scatter_warning = report_range_scatter(run, &result, &inputs.fuse, &mut metrics);
+    if let Some(w) = report_range_scatter(run, &result, &inputs.fuse, &mut metrics) {
+        warnings.warn(w);
+    }
     if anchored {
         report_anchors(&result.landmarks, &inputs.anchors, &mut metrics);
     }
@@ -372,11 +414,11 @@ pub fn survey_into(
     } else if result.online.rejected.len() > result.online.accepted.len() {
         // A camera mounted other than the rig says breaks the filters this way (museum: 5 cm
         // and 5 degrees off, 214 of 297 sightings gated out).
-        tracing::warn!(
+        warnings.warn(format!(
             "{} of {} sightings were gated out: the sightings disagree with each other and the odometry; is the rig's robot_from_left right? survey --estimate-mounting estimates it",
             result.online.rejected.len(),
             result.online.rejected.len() + result.online.accepted.len()
-        );
+        ));
     }
     if let (true, Some(m), Some(rig)) = (request.estimate_mounting, mounting.as_ref(), rig.as_ref())
     {
@@ -416,7 +458,7 @@ pub fn survey_into(
             sightings: &seen.sightings,
             metrics: &metrics,
             scores: &scores,
-            range_scatter_warning: scatter_warning.as_deref(),
+            warnings: &warnings.0,
             mapping,
             rig: survey_rig.as_ref(),
             images: &images,
@@ -433,6 +475,7 @@ pub fn survey_into(
     Ok(SurveyOutput {
         survey: result,
         scores,
+        warnings: warnings.0,
         sightings: seen.sightings.len(),
         metrics,
         world: inputs.world,
@@ -596,8 +639,8 @@ fn report_mounting(
 /// How well the survey placed its corrected walls (`walls.placed`, the faces whose placement it
 /// measured, and `walls.placement_sigma_m_median`), how its own ranges scatter about them along
 /// its corrected trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
-/// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes), and a
-/// warning when they scatter far more than `localize` assumes ([`fusion::scatter_too_wide`]).
+/// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes); returns the
+/// warning when they scatter far more than `localize` assumes ([`fusion::RangeScatter::warning`]).
 fn report_range_scatter(
     run: &RunDataset,
     result: &fusion::Survey,
@@ -635,11 +678,7 @@ fn report_range_scatter(
         "walls.range_sigma_assumed_m".into(),
         scatter.assumed_sigma_m(fuse),
     );
-    let warning = scatter.warning(fuse);
-    if let Some(w) = &warning {
-        tracing::warn!("{w}");
-    }
-    warning
+    scatter.warning(fuse)
 }
 
 /// Each anchor's residual in the survey, on stderr and in the metrics (`anchors.*`); a warning for
