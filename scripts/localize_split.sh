@@ -10,8 +10,10 @@
 # Prints each localised ATE beside the odometry's, then the median, the mean, how many runs end
 # over 1 m off and how many end worse than their odometry.
 #   scripts/localize_split.sh [LOG] [OUT_DIR]     FLAGS adds localize flags to every run
-# A second call with the same OUT_DIR reuses the surveys and the runs; the 32 localisations take
-# about 3 minutes either way (a run whose sigma grows searches the walls for its pose often).
+# A second call with the same OUT_DIR reuses the surveys and the runs. Each localisation takes
+# about a minute on two cores (session 64; a run whose sigma grows searches the walls for its pose
+# often), so the 32 take about half an hour; a shorter `sigmas` list below makes a quicker
+# comparison.
 log=${1:-../shared/data/radish/freiburg-079-corrected.log.gz}
 out=${2:-localize_split}
 # shellcheck source=scripts/real_log_localize.sh
