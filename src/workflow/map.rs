@@ -43,6 +43,8 @@ pub struct MapOutput {
     pub scores: Option<crate::metrics::SonarScores>,
     /// Which trajectory placed the readings (`report.json`'s `poses`).
     pub poses: PoseSource,
+    /// The range sensor mapped with (`ranging.lidar` in `metrics`).
+    pub ranging: crate::dataset::RangeSensor,
 }
 
 /// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
@@ -180,9 +182,10 @@ pub fn map_and_score(
     metrics.insert("readings.unplaced".into(), map.readings_unplaced as f64);
     metrics.insert("walls".into(), map.walls.len() as f64);
     metrics.insert("features".into(), map.features_offline.len() as f64);
+    let ranging = run.ranging();
     metrics.insert(
         "ranging.lidar".into(),
-        (run.ranging() == crate::dataset::RangeSensor::Lidar) as u8 as f64,
+        (ranging == crate::dataset::RangeSensor::Lidar) as u8 as f64,
     );
     let duration =
         run.odometry.last().map_or(0.0, |p| p.t_s) - run.odometry.first().map_or(0.0, |p| p.t_s);
@@ -196,6 +199,7 @@ pub fn map_and_score(
         map,
         metrics,
         scores,
+        ranging,
         poses,
     })
 }
@@ -209,9 +213,9 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         mark_legend: vec![("Hough corner", crate::picture::colours::CORNER)],
         ..Default::default()
     };
-    let sensor = match output.metrics.get("ranging.lidar") {
-        Some(&lidar) if lidar > 0.0 => "laser",
-        _ => "sonar",
+    let sensor = match output.ranging {
+        crate::dataset::RangeSensor::Lidar => "laser",
+        crate::dataset::RangeSensor::Sonar => "sonar",
     };
     io::save_map_png(
         &dir.join("map.png"),
