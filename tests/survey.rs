@@ -854,6 +854,16 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
     assert!(truth.corrected_vs_ground_truth_map.is_some());
     assert!(m["offline.sonar_matches"].as_f64().unwrap() > 100.0, "{m}");
     assert_eq!(m["offline.converged"], 1.0);
+    // What it warned of: the run has no pictures; the offline pass kept its solution.
+    assert!(
+        output
+            .warnings
+            .iter()
+            .any(|w| w.contains("no stereo pairs")),
+        "{:?}",
+        output.warnings
+    );
+    assert!(output.survey.offline.notes.is_empty());
     // Why it is kept: the echoes agree with one another better along it (0.61 -> 0.81).
     let agree = |key: &str| m[key].as_f64().unwrap();
     assert!(
@@ -879,7 +889,20 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
         ..stereotag::workflow::survey::SurveyRequest::new(&run, out)
     };
     let out = dir.path().join("survey");
-    stereotag::workflow::survey::survey(&request(&out, None), &Silent).unwrap();
+    let output = stereotag::workflow::survey::survey(&request(&out, None), &Silent).unwrap();
+    // The offline pass's note is kept with the survey's warnings (and so in its recording).
+    let said = "the offline pass has nothing to correct the odometry against";
+    assert!(output
+        .survey
+        .offline
+        .notes
+        .iter()
+        .any(|n| n.starts_with(said)));
+    assert!(
+        output.warnings.iter().any(|w| w.starts_with(said)),
+        "{:?}",
+        output.warnings
+    );
     let report = read_report(&out);
     let m = &report["metrics"];
     eprintln!("sonar-only survey without a world: {m}");

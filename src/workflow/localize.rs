@@ -350,7 +350,10 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             world.as_ref(),
             progress,
         )?,
-        None => RunSightings::default(),
+        None => {
+            tracing::warn!("{}", super::survey::NO_STEREO_PAIRS);
+            RunSightings::default()
+        }
     };
     // The filter corrects the odometry as logged with the survey's calibration, and moves it
     // into an anchored survey's frame, itself; `odometry` is that for the report.

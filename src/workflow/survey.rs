@@ -131,10 +131,11 @@ pub struct SurveyOutput {
     /// The scores against the run's ground truth and the world, where known (none for a survey
     /// in a tag's frame).
     pub scores: SurveyScores,
-    /// The warnings about what the survey found, as printed on stderr: what the raw map hid or
-    /// left out, tags the filter would not fuse, sizes the sightings disagree about, sightings
-    /// mostly gated out, ranges scattering far off the walls. (Notes on how a stage ran, such as
-    /// a correction not kept, are on stderr only.)
+    /// The warnings about what the survey found, as printed on stderr: a run without stereo
+    /// pairs, what the raw map hid or left out, tags the filter would not fuse, sizes the
+    /// sightings disagree about, sightings mostly gated out, what the offline pass did not keep
+    /// ([`fusion::OfflineResult::notes`]), ranges scattering far off the walls, anchors far
+    /// from their surveyed tags, a mounting off or not estimated.
     pub warnings: Vec<String>,
     /// Tag sightings in the run's stereo pairs, fused or not.
     pub sightings: usize,
@@ -197,6 +198,10 @@ impl Warnings {
     }
 }
 
+/// What a survey says of a run without stereo pairs.
+pub(super) const NO_STEREO_PAIRS: &str =
+    "the run has no stereo pairs (stereo.csv is empty): sonar and odometry only";
+
 /// The odometry calibration an earlier survey found, from its `landmarks.json`.
 fn calibration_of(survey_dir: &Path) -> Result<OdometryCalibration> {
     let path = survey_dir.join("landmarks.json");
@@ -220,9 +225,6 @@ pub fn load_run_rig(
     default_mounting: bool,
 ) -> Result<Option<StereoRig>> {
     if run.stereo.is_empty() {
-        tracing::warn!(
-            "the run has no stereo pairs (stereo.csv is empty): sonar and odometry only"
-        );
         return Ok(None);
     }
     let rig_name = run.meta.robot.rig.as_ref().ok_or_else(|| {
@@ -291,6 +293,10 @@ pub fn survey_into(
         &inputs.run,
         request.detect.default_mounting,
     )?;
+    let mut warnings = Warnings::default();
+    if rig.is_none() {
+        warnings.warn(NO_STEREO_PAIRS.into());
+    }
     let options = DetectOptions {
         keep_images: recorder.is_some(),
         visual_odometry: inputs.fuse.visual_odometry,
@@ -303,7 +309,13 @@ pub fn survey_into(
     // camera's with it; the offline pass refines what is left.
     let first_mounting = match (&rig, inputs.fuse.estimate_mounting) {
         (Some(rig), true) => timed("detect_for_mounting", &mut timings, || {
-            first_mounting(&inputs, &options, request.run_dir, rig, progress)
+            first_mounting(
+                &inputs,
+                &options,
+                (request.run_dir, rig),
+                &mut warnings,
+                progress,
+            )
         })?,
         _ => None,
     };
@@ -364,7 +376,6 @@ pub fn survey_into(
     let mut result = result?;
     result.frame_from_odometry = frame_from_odometry;
     // What the raw map hid or left out, the tags the filter would not fuse, and what follows.
-    let mut warnings = Warnings::default();
     let raw = &result.raw;
     for w in [raw.off_grid_warning(), raw.unplaced_warning()]
         .into_iter()
@@ -386,6 +397,8 @@ pub fn survey_into(
         &request.detect.tag_sizes,
         &mut warnings,
     );
+    // Printed by the offline pass as it ran.
+    warnings.0.extend(result.offline.notes.iter().cloned());
     let mut metrics = survey_metrics(&result, seen.sightings.len());
     metrics.insert(
         "sightings.implausible_height".into(),
@@ -399,7 +412,12 @@ pub fn survey_into(
         warnings.warn(w);
     }
     if anchored {
-        report_anchors(&result.landmarks, &inputs.anchors, &mut metrics);
+        report_anchors(
+            &result.landmarks,
+            &inputs.anchors,
+            &mut metrics,
+            &mut warnings,
+        );
     }
     // The mounting error in all: the offline pass's refinement after the first estimate.
     let mounting = match (first_mounting, result.offline.mounting) {
@@ -410,7 +428,7 @@ pub fn survey_into(
         (first, rest) => rest.or(first),
     };
     if inputs.fuse.estimate_mounting {
-        report_mounting(mounting.as_ref(), &mut metrics);
+        report_mounting(mounting.as_ref(), &mut metrics, &mut warnings);
     } else if result.online.rejected.len() > result.online.accepted.len() {
         // A camera mounted other than the rig says breaks the filters this way (museum: 5 cm
         // and 5 degrees off, 214 of 297 sightings gated out).
@@ -487,8 +505,8 @@ pub fn survey_into(
 fn first_mounting(
     inputs: &Inputs,
     options: &DetectOptions,
-    run_dir: &Path,
-    rig: &StereoRig,
+    (run_dir, rig): (&Path, &StereoRig),
+    warnings: &mut Warnings,
     progress: &dyn Progress,
 ) -> Result<Option<fusion::MountingEstimate>> {
     let options = DetectOptions {
@@ -507,10 +525,10 @@ fn first_mounting(
     )?;
     let found = fusion::estimate_mounting(&inputs.run.odometry, &seen.sightings, &inputs.fuse);
     if found.is_none() {
-        tracing::warn!(
+        warnings.warn(format!(
             "the camera's mounting cannot be estimated before the survey: no tag is seen twice within {} m of travel",
             fusion::MOUNTING_STRETCH_M
-        );
+        ));
     }
     Ok(found)
 }
@@ -593,10 +611,12 @@ const MOUNTING_WARN_SIGMAS: f64 = 3.0;
 fn report_mounting(
     mounting: Option<&fusion::MountingEstimate>,
     metrics: &mut BTreeMap<String, f64>,
+    warnings: &mut Warnings,
 ) {
     let Some(m) = mounting else {
-        tracing::warn!(
+        warnings.warn(
             "the camera's mounting was not estimated: the offline pass kept no solution, or no tag was seen"
+                .into(),
         );
         return;
     };
@@ -606,12 +626,12 @@ fn report_mounting(
         metrics.insert(format!("mounting.{name}"), v);
     }
     let Some(sigmas) = m.sigmas() else {
-        tracing::warn!(
+        warnings.warn(format!(
             "the camera's mounting error estimated as x {:+.4} m, y {:+.4} m, yaw {:+.3} degrees, with no sigma (the run does not determine it: turn the robot while it sees a tag)",
             values[0],
             values[1],
             values[2]
-        );
+        ));
         return;
     };
     let sigmas = [sigmas[0], sigmas[1], sigmas[2].to_degrees()];
@@ -628,9 +648,9 @@ fn report_mounting(
         values[0], sigmas[0], values[1], sigmas[1], values[2], sigmas[2]
     );
     if off > MOUNTING_WARN_SIGMAS {
-        tracing::warn!(
+        warnings.warn(format!(
             "the rig's mounting (robot_from_left) is off by {text} ({off:.1} sigmas): survey --estimate-mounting writes the corrected rig"
-        );
+        ));
     } else {
         tracing::info!("the camera's mounting error: {text} (within its sigmas)");
     }
@@ -687,6 +707,7 @@ fn report_anchors(
     landmarks: &[fusion::Landmark],
     anchors: &[fusion::Anchor],
     metrics: &mut BTreeMap<String, f64>,
+    warnings: &mut Warnings,
 ) {
     let residuals = fusion::anchor_residuals(landmarks, anchors);
     metrics.insert("anchors.given".into(), anchors.len() as f64);
@@ -702,13 +723,13 @@ fn report_anchors(
             format!(", facing {:+.2} degrees", y.to_degrees())
         });
         if r.sigmas > 3.0 {
-            tracing::warn!(
+            warnings.warn(format!(
                 "anchor {} {}: surveyed {:.3} m from where the anchors put it ({:.1} sigmas{yaw}): is the anchor's pose right, or the tag moved?",
                 r.tag.family,
                 r.tag.id,
                 r.distance_m,
                 r.sigmas
-            );
+            ));
         } else {
             tracing::info!(
                 "anchor {} {}: residual {:.3} m ({:.1} sigmas{yaw})",

@@ -73,6 +73,16 @@ pub struct OfflineResult {
     /// unless measured, and in a pass with ranges off walls (walls mapped from the run's own
     /// trajectory are no independent check on it).
     pub covariance: Option<SolutionCovariance>,
+    /// What the pass says of the estimate it returns, as it printed them (warnings): nothing to
+    /// correct the odometry against, a solution or the sonar's correction not kept, a solver
+    /// failure. Empty when the solution is kept.
+    pub notes: Vec<String>,
+}
+
+/// Prints `text` as a warning and keeps it in `notes` ([`OfflineResult::notes`]).
+fn note(notes: &mut Vec<String>, text: String) {
+    tracing::warn!("{text}");
+    notes.push(text);
 }
 
 /// The camera's planar mounting error the offline pass found: where the sightings must be moved
@@ -316,21 +326,28 @@ pub fn run_offline_sonar(
             100.0 * after
         );
         if after < before + SONAR_MIN_GAIN {
-            tracing::warn!(
-                "the sonar's correction is not kept: its ranges agree with one another hardly better along it ({:.1}%) than along the odometry ({:.1}%)",
-                100.0 * after,
-                100.0 * before
+            let mut notes = Vec::new();
+            note(
+                &mut notes,
+                format!(
+                    "the sonar's correction is not kept: its ranges agree with one another hardly better along it ({:.1}%) than along the odometry ({:.1}%)",
+                    100.0 * after,
+                    100.0 * before
+                ),
             );
+            let odometry = solve(
+                obs,
+                online,
+                config,
+                (None, None),
+                &[],
+                (SonarUse::None, false),
+            );
+            notes.extend(odometry.notes.iter().cloned());
             return OfflineResult {
                 sonar_agreement: result.sonar_agreement,
-                ..solve(
-                    obs,
-                    online,
-                    config,
-                    (None, None),
-                    &[],
-                    (SonarUse::None, false),
-                )
+                notes,
+                ..odometry
             };
         }
     }
@@ -428,6 +445,7 @@ fn solve(
             mounting: None,
             noise: None,
             covariance: None,
+            notes: vec!["the run has no odometry: nothing to solve".into()],
         };
     };
     let visual = keyframes::turns_used(obs, config);
@@ -485,13 +503,17 @@ fn solve(
     // Odometry alone corrects nothing: a solve would return its start and an odometry
     // calibration it cannot observe.
     let nothing = graph.sightings.is_empty() && visual.is_empty() && sonar_matches.is_empty();
+    let mut notes = Vec::new();
     if nothing {
-        tracing::warn!(
-            "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns{}): it keeps the online estimate and estimates no odometry calibration",
-            match sonar {
-                SonarUse::ScanMatch(..) => ", no place where the ranges matched their own older readings",
-                _ => "",
-            }
+        note(
+            &mut notes,
+            format!(
+                "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns{}): it keeps the online estimate and estimates no odometry calibration",
+                match sonar {
+                    SonarUse::ScanMatch(..) => ", no place where the ranges matched their own older readings",
+                    _ => "",
+                }
+            ),
         );
     }
     let solution = (!nothing)
@@ -534,9 +556,12 @@ fn solve(
                     .is_some_and(|c| (end_cost - c).abs() <= 1e-6 * end_cost.max(1e-12));
                 (OfflineKept::Solution, values, end_cost, end, settled)
             } else {
-                tracing::warn!(
-                    "the offline pass keeps the online estimate: its solution explains {end_consistent} of {} sightings, the online estimate {start_consistent} (graph cost {start_cost:.1} -> {end_cost:.1})",
-                    graph.sightings.len()
+                note(
+                    &mut notes,
+                    format!(
+                        "the offline pass keeps the online estimate: its solution explains {end_consistent} of {} sightings, the online estimate {start_consistent} (graph cost {start_cost:.1} -> {end_cost:.1})",
+                        graph.sightings.len()
+                    ),
                 );
                 // The start is returned: its sightings are the ones to report.
                 let init = graph.init.clone();
@@ -552,7 +577,10 @@ fn solve(
             (OfflineKept::Nothing, init, start_cost, start, false)
         }
         None => {
-            tracing::warn!("the offline solver failed (NaN cost): the online estimate is kept");
+            note(
+                &mut notes,
+                "the offline solver failed (NaN cost): the online estimate is kept".into(),
+            );
             let init = graph.init.clone();
             let end = SightingCheck {
                 consistent: 0,
@@ -622,6 +650,7 @@ fn solve(
         mounting,
         noise,
         covariance,
+        notes,
         trajectory: interpolate::corrected(obs.odometry, &keyframes.frames, &solved),
         landmarks,
         keyframes: keyframes.frames.len(),
