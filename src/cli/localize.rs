@@ -1,6 +1,7 @@
 use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::fusion::Start;
+use stereotag::metrics::Located;
 use stereotag::workflow::localize::{localize, LocalizeOutput, LocalizeRequest};
 
 /// Arguments of `stereotag localize`.
@@ -186,8 +187,8 @@ fn print_summary(output: &LocalizeOutput) {
     // After an unknown start: how well it did once a sighting placed it, and whether the sigma
     // it reported covered its error before that too.
     let nees = match (result.located_t_s, scores.located) {
-        (Some(_), Some((from_t_s, ate))) => {
-            if let Some(ate) = ate {
+        (Some(_), Some(Located { from_t_s, ate_m })) => {
+            if let Some(ate) = ate_m {
                 tracing::info!("from t = {from_t_s:.1} s, once located: ATE {ate:.3} m");
             }
             format!(

@@ -76,8 +76,18 @@ pub struct LocalizationScores {
     pub nees_from_start: f64,
     /// The largest error over the worst-direction sigma, from the first instant.
     pub worst_error_over_sigma: f64,
-    /// When the filter first knew where it was, seconds, and its ATE from then on.
-    pub located: Option<(f64, Option<f64>)>,
+    /// When the filter first knew where it was, and its ATE from then on (`None`: never).
+    pub located: Option<Located>,
+}
+
+/// A localisation from the time its filter first knew where the robot was
+/// ([`LocalizationScores::located`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Located {
+    /// That time, seconds.
+    pub from_t_s: f64,
+    /// The ATE from then on, metres (`None`: no overlap with the truth).
+    pub ate_m: Option<f64>,
 }
 
 /// Scores a localisation against the truth. `odometry` is the odometry the filter ran on
@@ -90,11 +100,9 @@ pub fn score_localization(
     truth: &[StampedPose],
 ) -> LocalizationScores {
     let c = sigma_consistency(result, truth);
-    let located = result.located.iter().position(|&l| l).map(|first| {
-        (
-            result.trajectory[first].t_s,
-            ate_m(&result.trajectory[first..], truth),
-        )
+    let located = result.located.iter().position(|&l| l).map(|first| Located {
+        from_t_s: result.trajectory[first].t_s,
+        ate_m: ate_m(&result.trajectory[first..], truth),
     });
     LocalizationScores {
         ate_odometry_m: ate_m(run_odometry, truth),
@@ -124,9 +132,9 @@ impl LocalizationScores {
             "error_over_sigma.max".into(),
             self.worst_error_over_sigma.into(),
         );
-        if let Some((from_t_s, ate)) = self.located {
+        if let Some(Located { from_t_s, ate_m }) = self.located {
             metrics.insert("located.from_t_s".into(), from_t_s.into());
-            metrics.insert("ate_m.located".into(), ate.into());
+            metrics.insert("ate_m.located".into(), ate_m.into());
         }
     }
 }

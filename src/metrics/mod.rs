@@ -8,7 +8,7 @@ pub mod trajectory;
 
 pub use localize::{
     error_growth, localization_metrics, position_nees, score_localization, GrowthBin,
-    LocalizationCounts, LocalizationScores, GROWTH_BANDS_M,
+    LocalizationCounts, LocalizationScores, Located, GROWTH_BANDS_M,
 };
 pub use survey::{
     score_sonar_map, score_survey, survey_metrics, LandmarkErrors, SonarScores, SurveyScores,
