@@ -523,7 +523,7 @@ fn a_later_run_localises_against_the_survey() {
     // Localised with the walls or with the tags alone, recorded or not.
     let localize_run = |run: &Path, out: &str, walls: bool, record: bool| -> Value {
         let loc = dir.path().join(out);
-        stereotag::workflow::localize::localize(
+        let output = stereotag::workflow::localize::localize(
             &stereotag::workflow::localize::LocalizeRequest {
                 survey: &survey,
                 run_dir: run,
@@ -544,6 +544,15 @@ fn a_later_run_localises_against_the_survey() {
             &Silent,
         )
         .expect("the run is localised");
+        // What `localize` prints and its recording opens with: what it fused and how well.
+        let said = |what: &str| output.summary.iter().any(|l| l.contains(what));
+        assert!(
+            said("ATE: odometry") && said("position NEES"),
+            "{:?}",
+            output.summary
+        );
+        assert_eq!(said("sonar ranges fused against"), walls);
+        assert!(output.warnings.is_empty(), "{:?}", output.warnings);
         read_report(&loc)
     };
     let report = localize_run(&run, "loc", true, true);

@@ -1,7 +1,6 @@
 use super::{Bars, UsageError};
 use std::path::PathBuf;
 use stereotag::fusion::Start;
-use stereotag::metrics::Located;
 use stereotag::workflow::localize::{localize, LocalizeOutput, LocalizeRequest};
 
 /// Arguments of `stereotag localize`.
@@ -108,63 +107,11 @@ impl Localize {
     }
 }
 
-/// Prints what was fused, each relocalisation, and the error against the distance since the
-/// last sighting.
+/// Prints what was fused, when the robot was located, how well (the workflow printed its
+/// warnings as it ran), and the error against the distance since the last sighting.
 fn print_summary(output: &LocalizeOutput) {
-    let (result, walls) = (&output.result, &output.walls);
-    tracing::info!(
-        "{} sightings of {} surveyed tags fused ({} gated out, {} of unknown tags)",
-        result.accepted.len(),
-        output.landmarks.len(),
-        result.rejected.len(),
-        result.unknown.len()
-    );
-    if let Some(t) = result.located_t_s {
-        // The first sample from then on: the pose the sighting gave, with its sigma.
-        let sigma = result
-            .trajectory
-            .iter()
-            .zip(&result.sigma_m)
-            .find(|(p, _)| p.t_s >= t)
-            .map_or(f64::NAN, |(_, s)| *s);
-        tracing::info!(
-            "located at t = {t:.1} s by the first sighting of a surveyed tag (position sigma then {sigma:.2} m{})",
-            if sigma > 1.0 {
-                ": a far tag places the robot on an arc around it; the next tags or the walls say where"
-            } else {
-                ""
-            }
-        );
-    }
-    for t in &result.relocalised_t_s {
-        tracing::warn!(
-            "lost at t = {t:.1} s: {} sightings in a row were gated out and agreed among \
-             themselves; started again from them",
-            stereotag::fusion::RELOCALISE_AFTER
-        );
-    }
-    if !result.wall_fixed_t_s.is_empty() {
-        tracing::info!(
-            "the pose was taken from the walls {} times (first at t = {:.1} s): the filter was too unsure of it to match ranges one at a time",
-            result.wall_fixed_t_s.len(),
-            result.wall_fixed_t_s[0]
-        );
-    }
-    if !walls.is_empty() {
-        let at_shortest = output.counts.ranges_at_shortest;
-        tracing::info!(
-            "{} sonar ranges fused against {} surveyed walls ({} gated out{})",
-            result.ranges_fused(),
-            walls.len(),
-            result.ranges_gated_out(),
-            if at_shortest > 0 {
-                format!(
-                    "; {at_shortest} echoes at the sonar's shortest range not taken as distances"
-                )
-            } else {
-                String::new()
-            }
-        );
+    for line in &output.summary {
+        tracing::info!("{line}");
     }
     tracing::info!("error against distance since the last sighting:");
     for b in &output.growth {
@@ -178,28 +125,4 @@ fn print_summary(output: &LocalizeOutput) {
                 .map_or(String::new(), |e| format!(", RMS error {e:.3} m"))
         );
     }
-    let Some(scores) = output.scores else {
-        return;
-    };
-    if let (Some(a), Some(b)) = (scores.ate_odometry_m, scores.ate_localized_m) {
-        tracing::info!("ATE: odometry {a:.3} m, localised {b:.3} m");
-    }
-    // After an unknown start: how well it did once a sighting placed it, and whether the sigma
-    // it reported covered its error before that too.
-    let nees = match (result.located_t_s, scores.located) {
-        (Some(_), Some(Located { from_t_s, ate_m })) => {
-            if let Some(ate) = ate_m {
-                tracing::info!("from t = {from_t_s:.1} s, once located: ATE {ate:.3} m");
-            }
-            format!(
-                "{:.2} once located, {:.2} from the start",
-                scores.nees_located, scores.nees_from_start
-            )
-        }
-        _ => format!("{:.2}", scores.nees_located),
-    };
-    tracing::info!(
-        "position NEES {nees} (near 1: the sigma reported is honest; well above it: overconfident); largest error {:.1} sigmas",
-        scores.worst_error_over_sigma
-    );
 }

@@ -91,6 +91,11 @@ impl View {
             )
     }
 
+    /// A plot whose value axis spans `lo` to `hi`.
+    pub(super) fn value_range(self, lo: f64, hi: f64) -> Self {
+        self.with_setting("ScalarAxis", &bpa::ScalarAxis::new().with_range([lo, hi]))
+    }
+
     /// A 2D view framed on the rectangle from `min` to `max` (pixels).
     pub(super) fn framed(self, min: [f32; 2], max: [f32; 2]) -> Self {
         let bounds = bpa::VisualBounds2D::new(rerun::datatypes::Range2D {

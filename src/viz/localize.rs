@@ -37,11 +37,15 @@ fn layout(scene: &LocalizeScene<'_>) -> Layout {
         }
         None => view,
     };
+    let plot = View::time_series("Position error and sigma", "/metrics")
+        .with_contents(["+ /metrics/position_error_m/**", "+ /metrics/sigma_m"])
+        .whole_run("time");
+    let plot = match error_plot_top(scene) {
+        Some(top) => plot.value_range(0.0, top),
+        None => plot,
+    };
     let errors = tabs([
-        View::time_series("Position error and sigma", "/metrics")
-            .with_contents(["+ /metrics/position_error_m/**", "+ /metrics/sigma_m"])
-            .whole_run("time")
-            .into(),
+        plot.into(),
         View::time_series("Distance since a sighting", "/metrics/since_sighting_m")
             .whole_run("time")
             .into(),
@@ -212,43 +216,91 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
             ),
         ],
     )?;
+    for p in plotted(scene) {
+        rec.set_duration_secs("time", p.t_s);
+        if let Some(sigma) = p.sigma_m {
+            rec.log("metrics/sigma_m", &rerun::Scalars::single(sigma))?;
+        }
+        rec.log(
+            "metrics/since_sighting_m",
+            &rerun::Scalars::single(p.since_sighting_m),
+        )?;
+        if let Some(e) = p.localized_error_m {
+            rec.log(
+                "metrics/position_error_m/localized",
+                &rerun::Scalars::single(e),
+            )?;
+        }
+        if let Some(e) = p.odometry_error_m {
+            rec.log(
+                "metrics/position_error_m/odometry",
+                &rerun::Scalars::single(e),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// One plotted sample of the localisation ([`plotted`]).
+struct Plotted {
+    t_s: f64,
+    /// The filter's sigma, once located.
+    sigma_m: Option<f64>,
+    since_sighting_m: f64,
+    /// The errors against the truth: the localised pose's once located, the odometry's.
+    localized_error_m: Option<f64>,
+    odometry_error_m: Option<f64>,
+}
+
+/// The samples plotted, one every [`POSE_SAMPLE_S`]. Before an unknown start is located the pose
+/// is a guess with a building-sized sigma: neither is plotted, so that the scale shows the rest.
+fn plotted(scene: &LocalizeScene<'_>) -> Vec<Plotted> {
     let r = scene.result;
     let truth = scene.run.ground_truth.as_deref();
     let tracked = scene.calibrated_odometry.unwrap_or(&scene.run.odometry);
     let mut next = f64::NEG_INFINITY;
+    let mut out = Vec::new();
     for (i, p) in r.trajectory.iter().enumerate() {
         if p.t_s < next {
             continue;
         }
         next = p.t_s + POSE_SAMPLE_S;
-        rec.set_duration_secs("time", p.t_s);
-        // Before an unknown start is located the pose is a guess with a building-sized sigma:
-        // neither is plotted, so that the scale shows the rest.
         let located = r.located.get(i).copied().unwrap_or(true);
-        if located {
-            rec.log("metrics/sigma_m", &rerun::Scalars::single(r.sigma_m[i]))?;
-        }
-        rec.log(
-            "metrics/since_sighting_m",
-            &rerun::Scalars::single(r.since_sighting_m[i]),
-        )?;
-        let Some(gt) = truth.and_then(|t| pose_at(t, p.t_s)) else {
-            continue;
-        };
-        if located {
-            rec.log(
-                "metrics/position_error_m/localized",
-                &rerun::Scalars::single((p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
-            )?;
-        }
-        if let Some(o) = pose_at(tracked, p.t_s) {
-            rec.log(
-                "metrics/position_error_m/odometry",
-                &rerun::Scalars::single((o.x - gt.x).hypot(o.y - gt.y)),
-            )?;
-        }
+        let gt = truth.and_then(|t| pose_at(t, p.t_s));
+        out.push(Plotted {
+            t_s: p.t_s,
+            sigma_m: located.then(|| r.sigma_m[i]),
+            since_sighting_m: r.since_sighting_m[i],
+            localized_error_m: gt
+                .filter(|_| located)
+                .map(|gt| (p.pose.x - gt.x).hypot(p.pose.y - gt.y)),
+            odometry_error_m: gt
+                .zip(pose_at(tracked, p.t_s))
+                .map(|(gt, o)| (o.x - gt.x).hypot(o.y - gt.y)),
+        });
     }
-    Ok(())
+    out
+}
+
+/// The top of the error plot: the largest error plotted, or without the truth twice the 95th
+/// percentile of the sigma, so that a moment of a wide sigma (a far tag's first sighting places
+/// the robot on an arc metres long) does not flatten the rest of the run.
+fn error_plot_top(scene: &LocalizeScene<'_>) -> Option<f64> {
+    let samples = plotted(scene);
+    let errors = samples
+        .iter()
+        .flat_map(|p| [p.localized_error_m, p.odometry_error_m])
+        .flatten()
+        .fold(None, |m: Option<f64>, e| Some(m.map_or(e, |m| m.max(e))));
+    let top = errors.or_else(|| {
+        let mut sigmas: Vec<f64> = samples.iter().filter_map(|p| p.sigma_m).collect();
+        sigmas.sort_by(f64::total_cmp);
+        sigmas
+            .get((0.95 * sigmas.len() as f64) as usize)
+            .or(sigmas.last())
+            .map(|s| 2.0 * s)
+    })?;
+    (top.is_finite() && top > 0.0).then_some(1.05 * top)
 }
 
 /// The figures and the error's growth with the distance since a sighting.
@@ -278,7 +330,26 @@ fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
             "; an orange dot where the pose was taken from the walls"
         }
     );
-    md.insert_str(md.find("| value").unwrap_or(0), &colours);
+    let mut glance = String::from("## At a glance\n\n");
+    for line in scene.summary {
+        // A sentence each, as on stderr.
+        let mut line = line.clone();
+        if let Some(first) = line.get(..1) {
+            line.replace_range(..1, &first.to_uppercase());
+        }
+        glance.push_str(&format!("{line}.\n\n"));
+    }
+    if !scene.warnings.is_empty() {
+        glance.push_str("## Warnings\n\n");
+        for w in scene.warnings {
+            glance.push_str(&format!("- {w}\n"));
+        }
+        glance.push('\n');
+    }
+    md.insert_str(
+        md.find("| value").unwrap_or(0),
+        &format!("{glance}{colours}"),
+    );
     md.push_str("\n## Error by distance since the last sighting\n\n| from m | to m | samples | sigma m | RMS error m |\n|---|---|---|---|---|\n");
     for b in scene.growth {
         md.push_str(&format!(

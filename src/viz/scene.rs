@@ -54,6 +54,10 @@ pub struct LocalizeScene<'a> {
     pub growth: &'a [GrowthBin],
     /// The report's figures.
     pub metrics: &'a BTreeMap<String, f64>,
+    /// What it did and how well, a sentence each (`workflow::localize::summary`).
+    pub summary: &'a [String],
+    /// The warnings printed as it ran.
+    pub warnings: &'a [String],
 }
 
 /// What a calibration recording shows.

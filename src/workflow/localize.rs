@@ -4,7 +4,7 @@
 
 use super::sightings::{detect_run, DetectOptions, RunSightings};
 use super::survey::load_run_rig;
-use super::{load_run, load_world_of_run, Error, Result};
+use super::{load_run, load_world_of_run, Error, Result, Warnings};
 use crate::dataset::RunDataset;
 use crate::fusion::{
     self, FuseConfig, Landmark, LocalizeResult, OdometryCalibration, OdometryNoiseScale,
@@ -13,7 +13,7 @@ use crate::geometry::{Pose2, StampedPose};
 use crate::io::{self, OutputDir};
 use crate::metrics::{
     error_growth, localization_metrics, score_localization, GrowthBin, LocalizationCounts,
-    LocalizationScores,
+    LocalizationScores, Located,
 };
 use crate::progress::Progress;
 use crate::sonar::walls::WallSegment;
@@ -69,6 +69,12 @@ pub struct LocalizeOutput {
     pub metrics: serde_json::Map<String, serde_json::Value>,
     /// What it had to work with (also in `metrics`).
     pub counts: LocalizationCounts,
+    /// What it did and how well, a sentence each ([`summary`]): printed by `localize` and the
+    /// opening of its recording's report.
+    pub summary: Vec<String>,
+    /// The warnings it printed: a survey without walls, a run without stereo pairs, each time
+    /// the filter found itself lost.
+    pub warnings: Vec<String>,
 }
 
 /// The survey's walls, unless told not to use them or the survey has none, and the covariance
@@ -76,16 +82,17 @@ pub struct LocalizeOutput {
 fn surveyed_walls(
     survey: &Path,
     no_walls: bool,
+    warnings: &mut Warnings,
 ) -> Result<(Vec<WallSegment>, Option<nalgebra::DMatrix<f64>>)> {
     let path = survey.join("walls_corrected.csv");
     if no_walls {
         return Ok((Vec::new(), None));
     }
     if !path.exists() {
-        tracing::warn!(
+        warnings.warn(format!(
             "{} not found (a survey of an older version): tracking with the tags alone",
             path.display()
-        );
+        ));
         return Ok((Vec::new(), None));
     }
     let walls = io::load_walls_csv(&path)?;
@@ -155,6 +162,8 @@ pub struct SurveyedMap {
     pub noise_scale: Option<OdometryNoiseScale>,
     /// Where the survey's run's odometry frame lies in the survey's frame (an anchored survey).
     pub frame_from_odometry: Option<Pose2>,
+    /// What reading it warned of, as printed: a survey without walls.
+    pub warnings: Vec<String>,
 }
 
 impl SurveyedMap {
@@ -162,8 +171,10 @@ impl SurveyedMap {
     /// its walls), naming the file and line of anything bad.
     pub fn load(survey: &Path, using: SurveyUse) -> Result<Self> {
         let file = io::load_landmarks(&survey.join("landmarks.json"))?;
-        let (walls, walls_covariance) = surveyed_walls(survey, using.no_walls)?;
+        let mut warnings = Warnings::default();
+        let (walls, walls_covariance) = surveyed_walls(survey, using.no_walls, &mut warnings)?;
         Ok(Self {
+            warnings: warnings.0,
             walls,
             walls_covariance,
             calibration: file.odometry_calibration.filter(|_| !using.raw_odometry),
@@ -324,6 +335,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         Recording::Localization,
         &dir.path("localize.rrd"),
     )?;
+    let mut warnings = Warnings(surveyed.warnings.clone());
     let no_sizes_given = request.detect.tag_sizes == Default::default();
     let options = DetectOptions {
         families: if request.detect.families.is_empty() {
@@ -351,7 +363,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             progress,
         )?,
         None => {
-            tracing::warn!("{}", super::survey::NO_STEREO_PAIRS);
+            warnings.warn(super::survey::NO_STEREO_PAIRS.into());
             RunSightings::default()
         }
     };
@@ -363,6 +375,13 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         visual: &seen.visual,
     };
     let result = fusion::track(filter, &obs, &run.sonar);
+    for t in &result.relocalised_t_s {
+        warnings.warn(format!(
+            "lost at t = {t:.1} s: {} sightings in a row were gated out and agreed among \
+             themselves; started again from them",
+            fusion::RELOCALISE_AFTER
+        ));
+    }
     let SurveyedMap {
         landmarks, walls, ..
     } = surveyed;
@@ -392,6 +411,12 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
     let calibrated = calibration.is_some();
     let scores =
         truth.map(|t| score_localization(&result, &run.odometry, &odometry, calibrated, t));
+    let summary = summary(
+        &result,
+        (landmarks.len(), walls.len()),
+        &counts,
+        scores.as_ref(),
+    );
     let mut metrics = localization_metrics(&result, calibrated, scores.as_ref(), counts);
     if let Some(scale) = surveyed.noise_scale {
         metrics.insert(
@@ -420,6 +445,8 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             result: &result,
             growth: &growth,
             metrics: &numbers,
+            summary: &summary,
+            warnings: &warnings.0,
         };
         rec.log_localization(&scene)
             .map_err(|e| Error::from(e).during("recording the localisation"))?;
@@ -435,5 +462,93 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         scores,
         metrics,
         counts,
+        summary,
+        warnings: warnings.0,
     })
+}
+
+/// What a localisation did and how well, a sentence each: the sightings fused, when an unknown
+/// start was found, the poses taken from the walls, the ranges fused (`surveyed`: the landmarks
+/// and walls tracked against), and with the truth the ATE and whether the sigma reported was
+/// honest (NEES).
+pub fn summary(
+    result: &LocalizeResult,
+    (landmarks, walls): (usize, usize),
+    counts: &LocalizationCounts,
+    scores: Option<&LocalizationScores>,
+) -> Vec<String> {
+    let mut lines = vec![format!(
+        "{} sightings of {landmarks} surveyed tags fused ({} gated out, {} of unknown tags)",
+        result.accepted.len(),
+        result.rejected.len(),
+        result.unknown.len()
+    )];
+    if let Some(t) = result.located_t_s {
+        // The first sample from then on: the pose the sighting gave, with its sigma.
+        let sigma = result
+            .trajectory
+            .iter()
+            .zip(&result.sigma_m)
+            .find(|(p, _)| p.t_s >= t)
+            .map_or(f64::NAN, |(_, s)| *s);
+        lines.push(format!(
+            "located at t = {t:.1} s by the first sighting of a surveyed tag (position sigma then {sigma:.2} m{})",
+            if sigma > 1.0 {
+                ": a far tag places the robot on an arc around it; the next tags or the walls say where"
+            } else {
+                ""
+            }
+        ));
+    }
+    if let Some(first) = result.wall_fixed_t_s.first() {
+        let times = match result.wall_fixed_t_s.len() {
+            1 => "once".to_string(),
+            n => format!("{n} times"),
+        };
+        lines.push(format!(
+            "the pose was taken from the walls {times} (first at t = {first:.1} s): the filter was too unsure of it to match ranges one at a time",
+        ));
+    }
+    if walls > 0 {
+        let at_shortest = counts.ranges_at_shortest;
+        lines.push(format!(
+            "{} sonar ranges fused against {walls} surveyed walls ({} gated out{})",
+            result.ranges_fused(),
+            result.ranges_gated_out(),
+            if at_shortest > 0 {
+                format!(
+                    "; {at_shortest} echoes at the sonar's shortest range not taken as distances"
+                )
+            } else {
+                String::new()
+            }
+        ));
+    }
+    let Some(scores) = scores else {
+        return lines;
+    };
+    if let (Some(a), Some(b)) = (scores.ate_odometry_m, scores.ate_localized_m) {
+        lines.push(format!("ATE: odometry {a:.3} m, localised {b:.3} m"));
+    }
+    // After an unknown start: how well it did once a sighting placed it, and whether the sigma
+    // it reported covered its error before that too.
+    let nees = match (result.located_t_s, scores.located) {
+        (Some(_), Some(Located { from_t_s, ate_m })) => {
+            if let Some(ate) = ate_m {
+                lines.push(format!(
+                    "from t = {from_t_s:.1} s, once located: ATE {ate:.3} m"
+                ));
+            }
+            format!(
+                "{:.2} once located, {:.2} from the start",
+                scores.nees_located, scores.nees_from_start
+            )
+        }
+        _ => format!("{:.2}", scores.nees_located),
+    };
+    lines.push(format!(
+        "position NEES {nees} (near 1: the sigma reported is honest; well above it: overconfident); largest error {:.1} sigmas",
+        scores.worst_error_over_sigma
+    ));
+    lines
 }

@@ -247,6 +247,18 @@ pub fn load_world_of_run(
         .map(|w| w.world))
 }
 
+/// The warnings a workflow prints as it runs, kept for its recording and its caller.
+#[derive(Debug, Default)]
+pub(crate) struct Warnings(pub(crate) Vec<String>);
+
+impl Warnings {
+    /// Prints `text` as a warning and keeps it.
+    pub(crate) fn warn(&mut self, text: String) {
+        tracing::warn!("{text}");
+        self.0.push(text);
+    }
+}
+
 /// `to` relative to the directory `from_dir` (both as given, made absolute first).
 pub(crate) fn relative_path(to: &Path, from_dir: &Path) -> PathBuf {
     let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());

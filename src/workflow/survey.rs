@@ -4,7 +4,7 @@
 
 use super::sightings::known_tag_size;
 use super::sightings::{detect_run, DetectOptions, KeptPair, RunSightings};
-use super::{load_run, load_world_of_run, Error, Result};
+use super::{load_run, load_world_of_run, Error, Result, Warnings};
 use crate::camera::StereoRig;
 use crate::dataset::RunDataset;
 use crate::fusion::{self, OdometryCalibration, Survey};
@@ -183,18 +183,6 @@ fn size_landmarks(
             }
             None => {}
         }
-    }
-}
-
-/// The warnings a survey prints, kept for its recording and its caller.
-#[derive(Debug, Default)]
-struct Warnings(Vec<String>);
-
-impl Warnings {
-    /// Prints `text` as a warning and keeps it.
-    fn warn(&mut self, text: String) {
-        tracing::warn!("{text}");
-        self.0.push(text);
     }
 }
 
