@@ -421,6 +421,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
     if let Some([before, after]) = survey.offline.sonar_agreement {
         m.insert("offline.sonar_agreement_odometry".into(), before);
         m.insert("offline.sonar_agreement_corrected".into(), after);
+        m.insert(
+            "offline.sonar_wheel_distance".into(),
+            f64::from(u8::from(survey.offline.sonar_wheel_distance)),
+        );
     }
     if let Some(c) = survey.offline.odometry_calibration {
         m.insert(

@@ -32,6 +32,23 @@ pub(super) const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
 /// office's and museum's sample runs, heading drift -0.0059 to -0.0082 for -0.0067 rad/m).
 const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
 
+/// Prior sigma of the distance scale's error when the wheels' own distance is taken as right
+/// ([`CalibrationPrior::WheelDistance`]): 0.01%, the scale held.
+const WHEEL_DISTANCE_SIGMA: f64 = 1e-4;
+
+/// What the odometry calibration's prior says before the graph is solved.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum CalibrationPrior<'a> {
+    /// No error, within a few percent ([`CALIBRATION_PRIOR_SIGMA`]).
+    Wheels,
+    /// The same, but with the wheels' distance taken as right: the distance scale held at no
+    /// error ([`WHEEL_DISTANCE_SIGMA`]).
+    WheelDistance,
+    /// An earlier survey's calibration, within what one survey's estimate scatters by
+    /// ([`CALIBRATION_FROM_SURVEY_SIGMA`]).
+    Survey(&'a OdometryCalibration),
+}
+
 /// Whether the wheels' errors `c` lie within two sigmas of [`CALIBRATION_PRIOR_SIGMA`]: the prior
 /// does not hold such a calibration back, so the odometry it corrects keeps no systematic error
 /// beyond what the calibrated turn noise covers (wheels off by more, 12% say, are corrected only
@@ -197,8 +214,7 @@ impl Graph {
 }
 
 /// The graph of a run over its keyframes, started from `online`, anchored at the odometry's
-/// first pose, with the odometry calibration's prior centred on `prior` when given (an earlier
-/// survey's) or on no error. With `calibrated_arcs` (a calibration is known and
+/// first pose, with the odometry calibration's prior `prior`. With `calibrated_arcs` (a calibration is known and
 /// [`within_prior`]), turns along arcs that no visual turn measures are weighed with the
 /// calibrated turn noise ([`add_odometry`]).
 pub(super) fn build(
@@ -207,7 +223,7 @@ pub(super) fn build(
     visual: &[&VisualTurn],
     online: &OnlineResult,
     config: &FuseConfig,
-    (first, prior, calibrated_arcs): (Pose2, Option<&OdometryCalibration>, bool),
+    (first, prior, calibrated_arcs): (Pose2, CalibrationPrior<'_>, bool),
     anchors: &[Anchor],
 ) -> Graph {
     let mut graph = Graph {
@@ -376,13 +392,9 @@ pub(super) fn add_matched_poses(
 }
 
 /// The odometry calibration's variable and its prior.
-fn add_calibration_prior(
-    graph: &mut Graph,
-    prior: Option<&OdometryCalibration>,
-    config: &FuseConfig,
-) {
+fn add_calibration_prior(graph: &mut Graph, prior: CalibrationPrior<'_>, config: &FuseConfig) {
     let (mean, sigma) = match prior {
-        Some(c) => (
+        CalibrationPrior::Survey(c) => (
             vec![
                 c.turn_scale_error,
                 c.heading_drift_rad_per_m,
@@ -390,7 +402,11 @@ fn add_calibration_prior(
             ],
             CALIBRATION_FROM_SURVEY_SIGMA,
         ),
-        None => (vec![0.0; 3], CALIBRATION_PRIOR_SIGMA),
+        CalibrationPrior::Wheels => (vec![0.0; 3], CALIBRATION_PRIOR_SIGMA),
+        CalibrationPrior::WheelDistance => {
+            let [turn, drift, _] = CALIBRATION_PRIOR_SIGMA;
+            (vec![0.0; 3], [turn, drift, WHEEL_DISTANCE_SIGMA])
+        }
     };
     graph
         .init
