@@ -607,11 +607,17 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
             format!(
                 "No tags and no visual turns: the sonar corrected the odometry (its latest \
                  ranges matched its older readings at {} of {} keyframes; its echoes agree with \
-                 one another {:.0}% along the odometry, {:.0}% along the correction).\n\n",
+                 one another {:.0}% along the odometry, {:.0}% along the correction{}).\n\n",
                 offline.sonar_matches,
                 offline.keyframes,
                 100.0 * before,
-                100.0 * after
+                100.0 * after,
+                if offline.sonar_wheel_distance {
+                    ", which takes the wheels' distance as right: the echoes agreed better so \
+                     than with the distance scale estimated"
+                } else {
+                    ""
+                }
             )
         });
     }
