@@ -280,8 +280,9 @@ pub fn run_offline_sonar(
     // The wheels' distance scale estimated with the rest of the calibration, or taken as right:
     // the matches hold the robot across the walls far better than along them, and the scale
     // they found scattered from -2.9% to +2.6% about the simulated wheels' 0 (office and museum,
-    // seeds 1-5). Either way can be the better one (docs/RESULTS.md): the correction along which
-    // the run's echoes agree better with one another is taken.
+    // seeds 1-5). Either way can be the better one: the correction along which the run's echoes
+    // agree better with one another is taken (over forty simulated runs, nine better than the
+    // scale estimated alone, three worse; docs/RESULTS.md).
     let (estimated, wheels) = rayon::join(
         || sonar_passes(obs, online, config, (sonar, grid), false),
         || sonar_passes(obs, online, config, (sonar, grid), true),
