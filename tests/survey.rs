@@ -157,6 +157,15 @@ fn simulate(world: &Path, out: &Path, settings: SimSettings, no_stereo: bool) {
     .expect("the simulation runs");
 }
 
+/// `survey` of `run` into `out` with the defaults, silent.
+fn survey_run(run: &Path, out: &Path) -> stereotag::workflow::survey::SurveyOutput {
+    stereotag::workflow::survey::survey(
+        &stereotag::workflow::survey::SurveyRequest::new(run, out),
+        &Silent,
+    )
+    .expect("the run is surveyed")
+}
+
 /// The sonar map of `run` into `out`, with its recording (`map.rrd`).
 fn map(run: &Path, out: &Path, poses: PoseSource) {
     stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
@@ -826,11 +835,7 @@ fn a_sonar_only_survey_takes_the_wheels_distance_when_the_echoes_agree_better_wi
     };
     simulate(Path::new("samples/office/world.yaml"), &run, seed_5, true);
     let out = dir.path().join("survey");
-    stereotag::workflow::survey::survey(
-        &stereotag::workflow::survey::SurveyRequest::new(&run, &out),
-        &Silent,
-    )
-    .unwrap();
+    survey_run(&run, &out);
     let report = read_report(&out);
     let m = |key: &str| metric(&report, key);
     eprintln!("office seed 5, sonar only: {}", report["metrics"]);
@@ -875,11 +880,7 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
     // The sonar matched with its own older readings corrects the odometry (issue 31, item 3:
     // offline ATE at most a third of the odometry's; 0.14 on this seed).
     let corrected = dir.path().join("corrected");
-    let output = stereotag::workflow::survey::survey(
-        &stereotag::workflow::survey::SurveyRequest::new(&run, &corrected),
-        &Silent,
-    )
-    .unwrap();
+    let output = survey_run(&run, &corrected);
     let m = &read_report(&corrected)["metrics"];
     eprintln!("sonar-only survey, the sonar correcting: {m}");
     let (odometry, offline) = (
@@ -1359,11 +1360,7 @@ fn a_tag_moved_after_the_first_loop_is_caught_as_moved() {
     }
     assert!(rendered > 100, "{rendered} pictures rendered again");
     let out = dir.path().join("survey");
-    stereotag::workflow::survey::survey(
-        &stereotag::workflow::survey::SurveyRequest::new(&run, &out),
-        &Silent,
-    )
-    .unwrap();
+    survey_run(&run, &out);
     let report = read_report(&out);
     let conflicts = report["conflicts"].as_array().unwrap();
     eprintln!(
