@@ -468,9 +468,9 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
 }
 
 /// What a localisation did and how well, a sentence each: the sightings fused, when an unknown
-/// start was found, the poses taken from the walls, the ranges fused (`surveyed`: the landmarks
-/// and walls tracked against), and with the truth the ATE and whether the sigma reported was
-/// honest (NEES).
+/// start was found, the poses taken from the walls, the ranges fused (against `walls` surveyed
+/// walls; `landmarks` the surveyed tags), and with the truth the ATE and whether the sigma
+/// reported was honest (NEES).
 pub fn summary(
     result: &LocalizeResult,
     (landmarks, walls): (usize, usize),
