@@ -83,10 +83,13 @@ pub struct OfflineResult {
     pub notes: Vec<String>,
 }
 
-/// Prints `text` as a warning and keeps it in `notes` ([`OfflineResult::notes`]).
-fn note(notes: &mut Vec<String>, text: String) {
-    tracing::warn!("{text}");
-    notes.push(text);
+/// Prints `result`'s notes as warnings ([`OfflineResult::notes`]), once, as a pass returns it
+/// (not each time a try is solved: the sonar's correction solves two side by side).
+fn announced(result: OfflineResult) -> OfflineResult {
+    for n in &result.notes {
+        tracing::warn!("{n}");
+    }
+    result
 }
 
 /// The camera's planar mounting error the offline pass found: where the sightings must be moved
@@ -250,7 +253,7 @@ fn without_sonar(
     measure_noise: bool,
 ) -> OfflineResult {
     let sonar = (SonarUse::None, measure_noise);
-    solve(obs, online, config, (prior, None), anchors, sonar)
+    announced(solve(obs, online, config, (prior, None), anchors, sonar))
 }
 
 /// [`run_offline`] as the online pass re-solves the run so far: the same, without measuring the
@@ -320,15 +323,11 @@ pub fn run_offline_sonar(
             100.0 * after
         );
         if after < before + SONAR_MIN_GAIN {
-            let mut notes = Vec::new();
-            note(
-                &mut notes,
-                format!(
-                    "the sonar's correction is not kept: its ranges agree with one another hardly better along it ({:.1}%) than along the odometry ({:.1}%)",
-                    100.0 * after,
-                    100.0 * before
-                ),
-            );
+            let mut notes = vec![format!(
+                "the sonar's correction is not kept: its ranges agree with one another hardly better along it ({:.1}%) than along the odometry ({:.1}%)",
+                100.0 * after,
+                100.0 * before
+            )];
             let odometry = solve(
                 obs,
                 online,
@@ -338,14 +337,14 @@ pub fn run_offline_sonar(
                 (SonarUse::None, false),
             );
             notes.extend(odometry.notes.iter().cloned());
-            return OfflineResult {
+            return announced(OfflineResult {
                 sonar_agreement: result.sonar_agreement,
                 notes,
                 ..odometry
-            };
+            });
         }
     }
-    result
+    announced(result)
 }
 
 /// The sonar's own correction ([`run_offline_sonar`]): [`SONAR_PASSES`] passes, each from the
@@ -442,19 +441,19 @@ pub fn run_offline_walls(
     start.trajectory = solved.trajectory.clone();
     start.landmarks = solved.landmarks.clone();
     let calibration = solved.odometry_calibration.as_ref();
-    solve(
+    announced(solve(
         obs,
         &start,
         config,
         (None, calibration),
         anchors,
         (SonarUse::Walls(sonar), true),
-    )
+    ))
 }
 
 /// The offline pass from `online`: the calibration's prior centred on `prior` (else on no
 /// error) and started at `init` (else at the prior's centre); with the sonar, what it gives
-/// ([`SonarUse`]).
+/// ([`SonarUse`]). Its notes are not printed here ([`announced`]).
 fn solve(
     obs: &Observations<'_>,
     online: &OnlineResult,
@@ -550,16 +549,13 @@ fn solve(
     let nothing = graph.sightings.is_empty() && visual.is_empty() && sonar_matches.is_empty();
     let mut notes = Vec::new();
     if nothing {
-        note(
-            &mut notes,
-            format!(
-                "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns{}): it keeps the online estimate and estimates no odometry calibration",
-                match sonar {
-                    SonarUse::ScanMatch(..) => ", no place where the ranges matched their own older readings",
-                    _ => "",
-                }
-            ),
-        );
+        notes.push(format!(
+            "the offline pass has nothing to correct the odometry against (no tag sightings, no visual turns{}): it keeps the online estimate and estimates no odometry calibration",
+            match sonar {
+                SonarUse::ScanMatch(..) => ", no place where the ranges matched their own older readings",
+                _ => "",
+            }
+        ));
     }
     let solution = (!nothing)
         .then(|| {
@@ -601,13 +597,10 @@ fn solve(
                     .is_some_and(|c| (end_cost - c).abs() <= 1e-6 * end_cost.max(1e-12));
                 (OfflineKept::Solution, values, end_cost, end, settled)
             } else {
-                note(
-                    &mut notes,
-                    format!(
-                        "the offline pass keeps the online estimate: its solution explains {end_consistent} of {} sightings, the online estimate {start_consistent} (graph cost {start_cost:.1} -> {end_cost:.1})",
-                        graph.sightings.len()
-                    ),
-                );
+                notes.push(format!(
+                    "the offline pass keeps the online estimate: its solution explains {end_consistent} of {} sightings, the online estimate {start_consistent} (graph cost {start_cost:.1} -> {end_cost:.1})",
+                    graph.sightings.len()
+                ));
                 // The start is returned: its sightings are the ones to report.
                 let init = graph.init.clone();
                 let end = SightingCheck {
@@ -622,10 +615,7 @@ fn solve(
             (OfflineKept::Nothing, init, start_cost, start, false)
         }
         None => {
-            note(
-                &mut notes,
-                "the offline solver failed (NaN cost): the online estimate is kept".into(),
-            );
+            notes.push("the offline solver failed (NaN cost): the online estimate is kept".into());
             let init = graph.init.clone();
             let end = SightingCheck {
                 consistent: 0,
