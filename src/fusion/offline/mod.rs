@@ -60,9 +60,10 @@ pub struct OfflineResult {
     /// along the sonar's correction ([`run_offline_sonar`]; `None` in a pass without): the
     /// correction is kept only when it raises the share by 3 points.
     pub sonar_agreement: Option<[f64; 2]>,
-    /// Whether the sonar's correction took the wheels' distance as right (its distance scale
-    /// held), the echoes agreeing better along it than along the one that estimated the scale
-    /// ([`run_offline_sonar`]; false in a pass without).
+    /// Whether the sonar's correction (kept or not: the one [`Self::sonar_agreement`] scores)
+    /// took the wheels' distance as right (its distance scale held), the echoes agreeing better
+    /// along it than along the one that estimated the scale ([`run_offline_sonar`]; false in a
+    /// pass without).
     pub sonar_wheel_distance: bool,
     /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
@@ -339,6 +340,7 @@ pub fn run_offline_sonar(
             notes.extend(odometry.notes.iter().cloned());
             return announced(OfflineResult {
                 sonar_agreement: result.sonar_agreement,
+                sonar_wheel_distance: result.sonar_wheel_distance,
                 notes,
                 ..odometry
             });
