@@ -287,9 +287,22 @@ pub fn run_offline_sonar(
     // seeds 1-5). Either way can be the better one: the correction along which the run's echoes
     // agree better with one another is taken (over forty simulated runs, nine better than the
     // scale estimated alone, three worse; docs/RESULTS.md).
+    // Their first passes match the same ranges along the same odometry: matched once.
+    let first = obs.odometry.first().and_then(|first| {
+        let visual = keyframes::turns_used(obs, config);
+        let frames = keyframes::choose(obs, &visual, online, config, first.pose).frames;
+        scan_match::sequential(
+            &frames,
+            obs.odometry,
+            sonar.readings,
+            sonar.layout,
+            grid,
+            config,
+        )
+    });
     let (estimated, wheels) = rayon::join(
-        || sonar_passes(obs, online, config, (sonar, grid), false),
-        || sonar_passes(obs, online, config, (sonar, grid), true),
+        || sonar_passes(obs, online, config, (sonar, grid, first.as_ref()), false),
+        || sonar_passes(obs, online, config, (sonar, grid, first.as_ref()), true),
     );
     let agreement = |trajectory: &[StampedPose]| {
         scan_match::agreement(trajectory, sonar.readings, sonar.layout, grid).unwrap_or(0.0)
@@ -351,24 +364,25 @@ pub fn run_offline_sonar(
 
 /// The sonar's own correction ([`run_offline_sonar`]): [`SONAR_PASSES`] passes, each from the
 /// odometry corrected by the calibration the ones before found, with the wheels' distance scale
-/// estimated or (`wheel_distance`) held.
+/// estimated or (`wheel_distance`) held; the first pass takes `first`'s matches when given.
 fn sonar_passes(
     obs: &Observations<'_>,
     online: &OnlineResult,
     config: &FuseConfig,
-    (sonar, grid): (
+    (sonar, grid, first): (
         &crate::fusion::SonarInput<'_>,
         &crate::sonar::grid::GridConfig,
+        Option<&scan_match::ScanMatches>,
     ),
     wheel_distance: bool,
 ) -> OfflineResult {
-    let pass = |obs: &Observations<'_>| {
-        let sonar = SonarUse::ScanMatch(sonar, grid, wheel_distance);
+    let pass = |obs: &Observations<'_>, matched| {
+        let sonar = SonarUse::ScanMatch(sonar, grid, wheel_distance, matched);
         solve(obs, online, config, (None, None), &[], (sonar, false))
     };
     let mut result = OfflineResult {
         sonar_wheel_distance: wheel_distance,
-        ..pass(obs)
+        ..pass(obs, first)
     };
     // Each pass's calibration makes the next pass's predictions better, and so its matches.
     for _ in 1..SONAR_PASSES {
@@ -376,10 +390,13 @@ fn sonar_passes(
             break;
         };
         let odometry = total.apply(obs.odometry);
-        let next = pass(&Observations {
-            odometry: &odometry,
-            ..*obs
-        });
+        let next = pass(
+            &Observations {
+                odometry: &odometry,
+                ..*obs
+            },
+            None,
+        );
         let Some(more) = next.odometry_calibration else {
             break;
         };
@@ -411,11 +428,13 @@ enum SonarUse<'a> {
     /// Range factors off its walls, held fixed ([`run_offline_walls`]).
     Walls(&'a crate::fusion::SonarInput<'a>),
     /// Keyframe poses matched with its own older readings ([`run_offline_sonar`]), the wheels'
-    /// distance scale estimated or (`true`) held.
+    /// distance scale estimated or (`true`) held, the matches made here unless given (the same
+    /// observations' keyframes matched before).
     ScanMatch(
         &'a crate::fusion::SonarInput<'a>,
         &'a crate::sonar::grid::GridConfig,
         bool,
+        Option<&'a scan_match::ScanMatches>,
     ),
 }
 
@@ -501,7 +520,7 @@ fn solve(
     let calibrated_arcs = known.as_ref().is_some_and(graph::within_prior);
     let calibration_prior = match (prior, sonar) {
         (Some(c), _) => graph::CalibrationPrior::Survey(c),
-        (None, SonarUse::ScanMatch(_, _, true)) => graph::CalibrationPrior::WheelDistance,
+        (None, SonarUse::ScanMatch(_, _, true, _)) => graph::CalibrationPrior::WheelDistance,
         (None, _) => graph::CalibrationPrior::Wheels,
     };
     let mut graph = graph::build(
@@ -528,17 +547,23 @@ fn solve(
         _ => 0,
     };
     let sonar_matches = match sonar {
-        SonarUse::ScanMatch(s, grid, _) => scan_match::sequential(
-            &keyframes.frames,
-            obs.odometry,
-            s.readings,
-            s.layout,
-            grid,
-            config,
-        )
-        .map_or_else(Vec::new, |m| {
-            graph::add_matched_poses(&mut graph, &m, config)
-        }),
+        SonarUse::ScanMatch(s, grid, _, given) => {
+            let made = given.is_none().then(|| {
+                scan_match::sequential(
+                    &keyframes.frames,
+                    obs.odometry,
+                    s.readings,
+                    s.layout,
+                    grid,
+                    config,
+                )
+            });
+            given
+                .or(made.as_ref().and_then(Option::as_ref))
+                .map_or_else(Vec::new, |m| {
+                    graph::add_matched_poses(&mut graph, m, config)
+                })
+        }
         _ => Vec::new(),
     };
     let options = tiny_solver::OptimizerOptions {
