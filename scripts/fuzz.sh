@@ -18,6 +18,11 @@ if [ ${#targets[@]} -eq 0 ]; then
     targets=(run_dataset world_yaml rig_yaml target_yaml corners_csv survey_files image_detect carmen_log ros2_bag)
 fi
 export CARGO_TARGET_DIR="${CARGO_FUZZ_TARGET_DIR:-$HOME/.cache/stereotag-fuzz-target}"
+# The targets write each input to a scratch directory of their process (fuzz_targets/common.rs):
+# all of them under one directory, taken away at the end (192 were left in /tmp by CI runs).
+scratch="$(mktemp -d "${TMPDIR:-/tmp}/stereotag-fuzz.XXXXXX")"
+trap 'rm -rf "$scratch"' EXIT
+export TMPDIR="$scratch"
 nul() { printf '\0'; }
 seed() {
     local t="$1" d="fuzz/corpus/$1"
