@@ -139,6 +139,23 @@ pub struct Prediction {
     pub cell_errors_m: Vec<Option<f64>>,
 }
 
+impl Prediction {
+    /// "predicted error mean M m, worst W m", or why there is none (a map without free cells,
+    /// or none that reaches a cell seeing a tag), for a summary line.
+    pub fn error_summary(&self) -> String {
+        if self.predicted_error_mean_m.is_finite() && self.predicted_error_max_m.is_finite() {
+            format!(
+                "predicted error mean {:.3} m, worst {:.3} m",
+                self.predicted_error_mean_m, self.predicted_error_max_m
+            )
+        } else if self.free_cells == 0 {
+            "no predicted error: the map has no free cells".to_owned()
+        } else {
+            "no predicted error: no free cell reaches one that sees a tag".to_owned()
+        }
+    }
+}
+
 /// Predicts the localisation error with tags at `tags` (x, y in metres), the map's `walls`
 /// holding the robot where they are in range (none: tags only).
 pub fn predict(
@@ -560,6 +577,20 @@ mod tests {
         let p = predict(&map, &[[0.15, 0.15]], &[], &config);
         assert_eq!(p.unreachable_cells, 4 * 6);
         assert!(p.predicted_error_max_m.is_finite() && p.predicted_error_max_m < 1.0);
+    }
+
+    /// Without a tag no free cell has a predicted error, and the summary says why, not NaN.
+    #[test]
+    fn no_tag_predicts_no_error_and_says_why() {
+        let (map, _) = two_rooms();
+        let none = predict(&map, &[], &[], &PlanConfig::default());
+        assert!(none.free_cells > 0 && none.predicted_error_mean_m.is_nan());
+        assert_eq!(
+            none.error_summary(),
+            "no predicted error: no free cell reaches one that sees a tag"
+        );
+        let one = predict(&map, &[[0.15, 0.15]], &[], &PlanConfig::default());
+        assert!(one.error_summary().starts_with("predicted error mean 0."));
     }
 
     #[test]

@@ -836,6 +836,8 @@ fn calibration_target_with_a_wrong_typed_or_unknown_key_names_the_line() {
         );
         assert_eq!(code, 2, "{err}");
         assert!(err.contains(want), "{err}\nwanted: {want}");
+        // The place is said once, at the front (the parser's " at line L column C" is cut).
+        assert!(!err.contains(" at line "), "{err}");
     }
 }
 

@@ -65,15 +65,14 @@ impl PlanArgs {
                 ..
             } => {
                 tracing::info!(
-                    "{} tags from {}: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m{}",
+                    "{} tags from {}: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; {}{}",
                     tags_m.len(),
                     self.tags.as_deref().unwrap_or(std::path::Path::new("")).display(),
                     100.0 * prediction.coverage,
                     prediction.free_cells,
                     100.0 * prediction.wall_held,
                     walls,
-                    prediction.predicted_error_mean_m,
-                    prediction.predicted_error_max_m,
+                    prediction.error_summary(),
                     out_of_reach(prediction)
                 );
                 json
@@ -86,15 +85,14 @@ impl PlanArgs {
                 ..
             } => {
                 tracing::info!(
-                    "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; predicted error mean {:.3} m, worst {:.3} m{}",
+                    "{} tags proposed over {} corners: {:.0}% of {} free cells see one, {:.0}% are held by {} walls; {}{}",
                     plan.tags.len(),
                     corners,
                     100.0 * plan.prediction.coverage,
                     plan.prediction.free_cells,
                     100.0 * plan.prediction.wall_held,
                     walls,
-                    plan.prediction.predicted_error_mean_m,
-                    plan.prediction.predicted_error_max_m,
+                    plan.prediction.error_summary(),
                     out_of_reach(&plan.prediction)
                 );
                 for t in &plan.tags {

@@ -105,8 +105,8 @@ pub fn load_anchors(path: &Path, default_sigma: (f64, f64)) -> Result<Vec<Anchor
                 path,
                 e.line() as u64,
                 format!(
-                    "column {}: {e} (a WPILib AprilTag field layout)",
-                    e.column()
+                    "{} (a WPILib AprilTag field layout)",
+                    super::at_column(e.column(), &e.to_string(), e.line())
                 ),
             )
         })?;
@@ -236,6 +236,8 @@ mod tests {
             let err = load(name, text).unwrap_err();
             assert!(err.contains(name), "{err}");
             assert!(err.contains(expect), "{name} {text:?}: {err}");
+            // The line is said once, where every error says it.
+            assert!(!err.contains(" at line "), "{err}");
         }
     }
 }

@@ -263,10 +263,20 @@ pub fn parse_yaml<T: serde::de::DeserializeOwned>(path: &Path, text: &str) -> Re
         Some(loc) => IoError::line(
             path,
             loc.line() as u64,
-            format!("column {}: {e}", loc.column()),
+            at_column(loc.column(), &e.to_string(), loc.line()),
         ),
         None => IoError::content(path, e.to_string()),
     })
+}
+
+/// A parser's message for an error at `line` and `column`, after the file and line every error
+/// starts with: "column C: " and the message without the " at line L column C" serde's parsers
+/// end it with (said twice before).
+pub(crate) fn at_column(column: usize, message: &str, line: usize) -> String {
+    let message = message
+        .strip_suffix(&format!(" at line {line} column {column}"))
+        .unwrap_or(message);
+    format!("column {column}: {message}")
 }
 
 /// Serialises to YAML.

@@ -80,8 +80,10 @@ pub fn save_landmarks(path: &Path, file: &LandmarksFile) -> Result<(), IoError> 
 /// Reads `landmarks.json`, checking the numbers are finite and the covariances symmetric.
 pub fn load_landmarks(path: &Path) -> Result<LandmarksFile, IoError> {
     let text = read_text(path)?;
-    let file: LandmarksFile = serde_json::from_str(&text)
-        .map_err(|e| IoError::line(path, e.line() as u64, format!("column {}: {e}", e.column())))?;
+    let file: LandmarksFile = serde_json::from_str(&text).map_err(|e| {
+        let message = super::at_column(e.column(), &e.to_string(), e.line());
+        IoError::line(path, e.line() as u64, message)
+    })?;
     for (i, l) in file.landmarks.iter().map(|r| &r.landmark).enumerate() {
         let numbers = l
             .position_m

@@ -119,19 +119,27 @@ fn report(scene: &PlanScene<'_>) -> String {
         }
         md.push('\n');
     }
+    // No reachable free cell, no error predicted: "none", not NaN.
+    let metres = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.3} m")
+        } else {
+            "none".to_owned()
+        }
+    };
     md += &format!(
         "{} tags {}.\n\n| value | |\n|---:|---|\n\
          | {:.0}% | free cells that see a tag |\n\
-         | {:.3} m | predicted error, mean over reachable cells |\n\
-         | {:.3} m | predicted error, worst cell |\n\
+         | {} | predicted error, mean over reachable cells |\n\
+         | {} | predicted error, worst cell |\n\
          | {:.0}% | free cells a mapped wall holds |\n\
          | {} | free cells no covered cell can be reached from |\n\
          \n## Tags\n\n| tag | x m | y m |\n|---|---:|---:|\n",
         scene.tags_m.len(),
         if scene.proposed { "proposed" } else { "given" },
         100.0 * p.coverage,
-        p.predicted_error_mean_m,
-        p.predicted_error_max_m,
+        metres(p.predicted_error_mean_m),
+        metres(p.predicted_error_max_m),
         100.0 * p.wall_held,
         p.unreachable_cells,
     );

@@ -404,11 +404,10 @@ fn save_plan_picture(
         n => format!(" ({n} warnings: see plan.json)"),
     };
     let title = format!(
-        "plan.png: {} tags {what}; {:.0}% of free cells see one; predicted error mean {:.3} m, worst {:.3} m{warned}",
+        "plan.png: {} tags {what}; {:.0}% of free cells see one; {}{warned}",
         tags_m.len(),
         100.0 * prediction.coverage,
-        prediction.predicted_error_mean_m,
-        prediction.predicted_error_max_m
+        prediction.error_summary()
     );
     Ok(io::save_map_png(path, map, &title, &overlay)?)
 }

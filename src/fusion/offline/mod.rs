@@ -685,20 +685,38 @@ fn solve(
     let noise = (measure_noise && kept == OfflineKept::Solution && !graph.sightings.is_empty())
         .then(|| noise::variance_components(&graph, &values))
         .flatten();
-    if let Some(n) = &noise {
+    let measured = |n: &noise::NoiseScales| {
+        [
+            n.odometry_translation,
+            n.odometry_turning,
+            n.odometry_drift,
+            n.sightings,
+            n.turns,
+        ]
+        .iter()
+        .any(Option::is_some)
+    };
+    if noise.as_ref().is_some_and(|n| !measured(n)) {
+        tracing::info!(
+            "noise against the models not measured: the offline graph has too few redundant measurements"
+        );
+    }
+    if let Some(n) = noise.as_ref().filter(|n| measured(n)) {
         let say = |v: Option<f64>| v.map_or("not measured".to_owned(), |v| format!("{v:.2}"));
+        // Redundancy is never negative; a rounding's -0 (nothing measured) prints as 0.
+        let r = |k: usize| n.redundancy[k].max(0.0) + 0.0;
         tracing::info!(
             "noise against the models, from the offline residuals (redundancy): odometry translation {} ({:.0}), turning {} ({:.0}), drift {} ({:.0}); sightings {} ({:.0}); visual turns {} ({:.0})",
             say(n.odometry_translation),
-            n.redundancy[0],
+            r(0),
             say(n.odometry_turning),
-            n.redundancy[1],
+            r(1),
             say(n.odometry_drift),
-            n.redundancy[2],
+            r(2),
             say(n.sightings),
-            n.redundancy[3],
+            r(3),
             say(n.turns),
-            n.redundancy[4]
+            r(4)
         );
     }
     let covariance = match (&noise, sonar) {
