@@ -597,17 +597,18 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
     if let Some([before, after]) = offline.sonar_agreement {
         md.push_str(&if offline.kept == crate::fusion::OfflineKept::Nothing {
             format!(
-                "No tags and no visual turns: the sonar's own correction made its echoes agree \
-                 with one another only {:.0}% → {:.0}%, so it is not kept: the offline \
-                 trajectory is the odometry.\n\n",
+                "No tags and no visual turns: the ranges' own correction (sonar or lidar) made \
+                 them agree with one another only {:.0}% → {:.0}%, so it is not kept: the \
+                 offline trajectory is the odometry.\n\n",
                 100.0 * before,
                 100.0 * after
             )
         } else {
             format!(
-                "No tags and no visual turns: the sonar corrected the odometry (its latest \
-                 ranges matched its older readings at {} of {} keyframes; its echoes agree with \
-                 one another {:.0}% along the odometry, {:.0}% along the correction{}).\n\n",
+                "No tags and no visual turns: the ranges (sonar or lidar) corrected the \
+                 odometry (the latest matched the older readings at {} of {} keyframes; they \
+                 agree with one another {:.0}% along the odometry, {:.0}% along the \
+                 correction{}).\n\n",
                 offline.sonar_matches,
                 offline.keyframes,
                 100.0 * before,

@@ -188,7 +188,7 @@ fn size_landmarks(
 
 /// What a survey says of a run without stereo pairs.
 pub(super) const NO_STEREO_PAIRS: &str =
-    "the run has no stereo pairs (stereo.csv is empty): sonar and odometry only";
+    "the run has no stereo pairs (stereo.csv is empty): its ranges (sonar or lidar) and odometry only";
 
 /// The odometry calibration an earlier survey found, from its `landmarks.json`.
 fn calibration_of(survey_dir: &Path) -> Result<OdometryCalibration> {

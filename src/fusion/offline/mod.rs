@@ -331,14 +331,18 @@ pub fn run_offline_sonar(
     if let Some(after) = after {
         let before = agreement(obs.odometry);
         result.sonar_agreement = Some([before, after]);
+        let sensor = match sonar.layout.beam {
+            crate::sonar::BeamModel::Cone => "sonar",
+            crate::sonar::BeamModel::Ray => "lidar",
+        };
         tracing::info!(
-            "the sonar's ranges agree with one another {:.1}% along the odometry, {:.1}% along the sonar's correction",
+            "the {sensor}'s ranges agree with one another {:.1}% along the odometry, {:.1}% along the {sensor}'s correction",
             100.0 * before,
             100.0 * after
         );
         if after < before + SONAR_MIN_GAIN {
             let mut notes = vec![format!(
-                "the sonar's correction is not kept: its ranges agree with one another hardly better along it ({:.1}%) than along the odometry ({:.1}%)",
+                "the {sensor}'s correction is not kept: its ranges agree with one another hardly better along it ({:.1}%) than along the odometry ({:.1}%)",
                 100.0 * after,
                 100.0 * before
             )];
