@@ -26,6 +26,18 @@ fn map_on_truth(run: &Path, out: &Path, quiet: bool, extra: &[&str]) -> (i32, St
     stereotag(&args)
 }
 
+/// `stereotag survey --run RUN --out OUT --no-rerun`.
+fn survey(run: &Path, out: &Path) -> (i32, String) {
+    stereotag(&[
+        "survey",
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-rerun",
+    ])
+}
+
 /// `stereotag import --carmen LOG [--as-sonar LAYOUT] --out RUN`.
 fn import_carmen(log: &Path, as_sonar: Option<&str>, run: &Path) -> (i32, String) {
     let mut args = vec!["import", "--carmen", log.to_str().unwrap()];
@@ -453,14 +465,7 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
     let (run, out) = (dir.path().join("run"), dir.path().join("survey"));
     let (code, err) = import_carmen(&log, Some("frontal5"), &run);
     assert_eq!(code, 0, "{err}");
-    let (code, err) = stereotag(&[
-        "survey",
-        "--run",
-        run.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--no-rerun",
-    ]);
+    let (code, err) = survey(&run, &out);
     assert_eq!(code, 0, "{err}");
     let m = &json(&out.join("report.json"))["metrics"];
     assert!(m["walls.ranges_matched"].as_f64().unwrap() > 1000.0, "{m}");
@@ -562,20 +567,13 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
         .output()
         .expect("python3 must be on PATH");
     assert!(drift.status.success(), "{drift:?}");
-    let survey = |run: &Path, name: &str| -> (Value, String) {
+    let surveyed = |run: &Path, name: &str| -> (Value, String) {
         let out = dir.path().join(name);
-        let (code, err) = stereotag(&[
-            "survey",
-            "--run",
-            run.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--no-rerun",
-        ]);
+        let (code, err) = survey(run, &out);
         assert_eq!(code, 0, "{err}");
         (json(&out.join("report.json"))["metrics"].clone(), err)
     };
-    let (m, err) = survey(&drifted, "survey_drifted");
+    let (m, err) = surveyed(&drifted, "survey_drifted");
     let get = |m: &Value, k: &str| m[k].as_f64().unwrap_or(f64::NAN);
     assert!(get(&m, "ate_m.odometry") > 1.5, "{m}");
     assert!(get(&m, "ate_m.offline") < 0.25, "{m}\n{err}");
@@ -585,7 +583,7 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
     assert!(err.contains("the lidar's ranges agree"), "{err}");
 
     // The log's own odometry is the corrected one: nothing gained, so nothing changed.
-    let (m, err) = survey(&run, "survey");
+    let (m, err) = surveyed(&run, "survey");
     assert!(get(&m, "ate_m.odometry") < 0.05, "{m}");
     assert!(
         (get(&m, "ate_m.offline") - get(&m, "ate_m.odometry")).abs() < 1e-9,
