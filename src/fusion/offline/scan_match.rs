@@ -179,15 +179,15 @@ pub(super) fn agreement(
 ) -> Option<f64> {
     let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
     let placed: Vec<PlacedReading> = crate::sonar::place_readings(readings, layout, trajectory);
+    let echo = |p: &PlacedReading| p.range_m.filter(|&m| m < layout.max_range_m - 1e-6);
+    if layout.beam == BeamModel::Ray {
+        // The returns alone: the grid gives only its extent (no ray traced through it).
+        return Some(returns_agreement(&placed, &counting.map(), echo));
+    }
     for p in &placed {
         counting.insert(p);
     }
-    let echo = |p: &PlacedReading| p.range_m.filter(|&m| m < layout.max_range_m - 1e-6);
-    let map = counting.map();
-    if layout.beam == BeamModel::Ray {
-        return Some(returns_agreement(&placed, &map, echo));
-    }
-    let field = occupied_distances(&map);
+    let field = occupied_distances(&counting.map());
     let (mut echoes, mut agree) = (0usize, 0usize);
     for p in &placed {
         let Some(range) = echo(p) else {
@@ -319,10 +319,11 @@ fn arcs(
 }
 
 /// The pose near `predicted` at which the arcs come nearest what `field` tables (the map's
-/// occupied cells, or a laser's older returns), and its covariance: each pose of a grid around `predicted` weighed by the likelihood of the ranges'
-/// truncated residuals there, the weighted mean and spread (a corridor gives a long covariance
-/// along it); `None` when the map has seen too few of the arcs, when too few agree with the
-/// mean, or when the match leaves the position unsure in every direction.
+/// occupied cells, or a laser's older returns), and its covariance: each pose of a grid around
+/// `predicted` weighed by the likelihood of the ranges' truncated residuals there, the weighted
+/// mean and spread (a corridor gives a long covariance along it); `None` when the map has seen
+/// too few of the arcs, when too few agree with the mean, or when the match leaves the position
+/// unsure in every direction.
 fn match_arcs(
     map: &OccupancyMap,
     field: &DistanceField,
