@@ -17,7 +17,7 @@ use crate::fusion::measurement::odometry_covariance;
 use crate::fusion::wall_fix::DistanceField;
 use crate::fusion::FuseConfig;
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
-use crate::sonar::grid::{CountingGrid, GridConfig, OccupancyGrid, OccupancyMap};
+use crate::sonar::grid::{CountingGrid, GridConfig, GridGeometry, OccupancyGrid, OccupancyMap};
 use crate::sonar::{BeamModel, PlacedReading, SonarLayout, SonarReading};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -74,7 +74,8 @@ pub(super) fn sequential(
     config: &FuseConfig,
 ) -> Option<ScanMatches> {
     let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
-    let mut returns = (layout.beam == BeamModel::Ray).then(|| ReturnField::over(&counting.map()));
+    let mut returns = (layout.beam == BeamModel::Ray)
+        .then(|| ReturnField::over(&GridGeometry::from_config(grid)));
     // A reading at the transducer's shortest range is kept: the thing is at most that near, a
     // centimetre or two off the arc, well within a match's tolerance.
     let echo = |r: &SonarReading| r.range_m.is_some_and(|m| m < layout.max_range_m - 1e-6);
@@ -177,13 +178,13 @@ pub(super) fn agreement(
     layout: &SonarLayout,
     grid: &GridConfig,
 ) -> Option<f64> {
-    let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
     let placed: Vec<PlacedReading> = crate::sonar::place_readings(readings, layout, trajectory);
     let echo = |p: &PlacedReading| p.range_m.filter(|&m| m < layout.max_range_m - 1e-6);
     if layout.beam == BeamModel::Ray {
-        // The returns alone: the grid gives only its extent (no ray traced through it).
-        return Some(returns_agreement(&placed, &counting.map(), echo));
+        let extent = GridGeometry::from_config(grid);
+        return Some(returns_agreement(&placed, &extent, echo));
     }
+    let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
     for p in &placed {
         counting.insert(p);
     }
@@ -215,10 +216,10 @@ const FAR_S: f64 = 60.0;
 /// keeps) within [`INLIER_M`] of a return taken at least [`FAR_S`] before them.
 fn returns_agreement(
     placed: &[PlacedReading],
-    map: &OccupancyMap,
+    extent: &GridGeometry,
     echo: impl Fn(&PlacedReading) -> Option<f64>,
 ) -> f64 {
-    let mut older = ReturnField::over(map);
+    let mut older = ReturnField::over(extent);
     let (mut inserted, mut echoes, mut agree) = (0, 0usize, 0usize);
     for p in placed {
         let Some(range) = echo(p) else {
@@ -477,9 +478,8 @@ struct ReturnField {
 }
 
 impl ReturnField {
-    /// An empty field over the extent of `map`'s grid.
-    fn over(map: &OccupancyMap) -> Self {
-        let g = &map.geometry;
+    /// An empty field over the extent of grid `g`.
+    fn over(g: &GridGeometry) -> Self {
         let cols = (g.width as f64 * g.resolution_m / RETURN_CELL_M).ceil() as usize;
         let rows = (g.height as f64 * g.resolution_m / RETURN_CELL_M).ceil() as usize;
         let reach = (TRUNCATE_M / RETURN_CELL_M).ceil() as i64;
