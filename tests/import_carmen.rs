@@ -547,7 +547,8 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
 
 /// freiburg-079 as a lidar run with no camera: the survey corrects a drifting odometry with the
 /// laser's own scans (each keyframe's latest scan matched with the returns of a while before),
-/// and leaves the log's own odometry (4 cm off) as it is. Measured in session 66: the three
+/// and leaves the log's own odometry (4 cm off) as it is; `localize` then holds the drifted run
+/// to that survey's returns. Measured in session 66: the three
 /// drifts of `scripts/localize_split.sh` from 1.90 / 6.62 / 3.68 m to 0.14 / 0.20 / 0.17 m,
 /// the corrected maps 0.97-0.99 occupied precision against the true poses' map; before, no scan
 /// was ever matched.
@@ -590,4 +591,30 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
         "{m}"
     );
     assert!(err.contains("the lidar's correction is not kept"), "{err}");
+
+    // A later run localised in that survey: its scans matched with the survey's returns hold
+    // the drifted odometry to the map (session 67: 1.90 m -> 0.057 m; the survey itself is
+    // 0.044 m off the truth).
+    let returns = dir.path().join("survey/returns_corrected.pgm");
+    assert!(returns.exists(), "no {}", returns.display());
+    let localized = dir.path().join("localized");
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        dir.path().join("survey").to_str().unwrap(),
+        "--run",
+        drifted.to_str().unwrap(),
+        "--out",
+        localized.to_str().unwrap(),
+        "--no-rerun",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let m = json(&localized.join("report.json"))["metrics"].clone();
+    assert!(get(&m, "ate_m.odometry") > 1.5, "{m}");
+    assert!(get(&m, "ate_m.localized") < 0.1, "{m}\n{err}");
+    assert!(get(&m, "scans.fused") > 4000.0, "{m}");
+    assert!(
+        err.contains("lidar scans fused against the survey's returns"),
+        "{err}"
+    );
 }

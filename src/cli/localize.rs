@@ -29,7 +29,8 @@ pub struct Localize {
     #[arg(long)]
     raw_odometry: bool,
     /// Track with the tags alone. By default the run's sonar ranges are matched against the
-    /// survey's walls (walls_corrected.csv) between sightings.
+    /// survey's walls (walls_corrected.csv) between sightings, and a lidar's scans with the
+    /// survey's returns (returns_corrected.pgm).
     #[arg(long)]
     no_walls: bool,
     /// Where the run starts: `survey` (where the survey's run started, sure of it), `unknown`

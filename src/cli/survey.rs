@@ -15,7 +15,7 @@ pub struct SurveyArgs {
     run: PathBuf,
     /// Output directory: landmarks.json, layout.json (WPILib), map*.yaml/pgm/png (raw, online
     /// and corrected), corners*.csv, walls_corrected.csv, hough*.png, trajectory.csv,
-    /// visual_turns.csv, report.json and survey.rrd.
+    /// visual_turns.csv, report.json and survey.rrd; with a lidar, returns_corrected.yaml/pgm.
     #[arg(long)]
     out: PathBuf,
     /// World file to score against and to give planned tag positions (default: the one run.yaml

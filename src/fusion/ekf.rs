@@ -289,6 +289,26 @@ impl Ekf {
         self.p = &ikh * &self.p * ikh.transpose() + &k * rr * k.transpose();
     }
 
+    /// Updates the pose with a measurement of it, `z` with covariance `r` (a scan matched with a
+    /// map), after a χ² gate; returns whether it was fused.
+    pub(crate) fn update_pose(&mut self, z: &Pose2, r: &Matrix3<f64>, gate_chi2: f64) -> bool {
+        let n = self.x.len();
+        let mut jac = DMatrix::zeros(3, n);
+        for i in 0..3 {
+            jac[(i, i)] = 1.0;
+        }
+        let mut y = Vector3::new(z.x - self.x[0], z.y - self.x[1], z.theta - self.x[2]);
+        y[2] = wrap_angle(y[2]);
+        let s = self.p.fixed_view::<3, 3>(0, 0) + r;
+        let fits = s
+            .try_inverse()
+            .is_some_and(|s_inv| y.dot(&(s_inv * y)) < gate_chi2);
+        if fits {
+            self.update(&y, &s, &jac, r);
+        }
+        fits
+    }
+
     /// Updates the pose with one scalar measurement: innovation `y`, Jacobian `h` over the pose,
     /// noise variance `r`, after a χ² gate; returns whether it was fused.
     pub(crate) fn update_scalar(

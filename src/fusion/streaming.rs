@@ -144,6 +144,13 @@ impl StereoLocalizer {
         self.filter.estimate()
     }
 
+    /// A laser's whole scan (its readings share one time), matched with the survey's returns
+    /// when the filter has them ([`Localizer::scan`]).
+    pub fn scan(&mut self, readings: &[SonarReading]) -> PoseEstimate {
+        self.filter.scan(readings);
+        self.filter.estimate()
+    }
+
     /// A stereo pair taken at `t_s`, at the last odometry fed (feed the odometry up to the
     /// pair's time first).
     pub fn stereo_pair(

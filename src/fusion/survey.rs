@@ -11,11 +11,12 @@ use crate::fusion::{
 };
 use crate::geometry::pose_at;
 use crate::progress::timed;
-use crate::sonar::grid::{GridError, OccupancyMap};
+use crate::sonar::grid::{returns_map, GridError, GridGeometry, OccupancyMap};
 use crate::sonar::map::{
     counting_map, counting_map_along, layout_walls, map_trajectory, MappingConfig, SonarMap,
 };
 use crate::sonar::walls::WallSegment;
+use crate::sonar::BeamModel;
 use crate::visual::sightings::TagSighting;
 use crate::visual::vo::VisualTurn;
 use std::collections::BTreeMap;
@@ -47,6 +48,10 @@ pub struct Survey {
     /// `corrected.walls`, when the survey measured their placement: walls placed from the same
     /// stretch of trajectory err together.
     pub walls_covariance: Option<nalgebra::DMatrix<f64>>,
+    /// Where a laser's returns fell along the offline trajectory
+    /// ([`crate::sonar::grid::returns_map`]): what `localize` matches a later run's scans with;
+    /// `None` for a sonar.
+    pub returns: Option<OccupancyMap>,
 }
 
 /// How a survey is made.
@@ -123,6 +128,14 @@ pub fn survey(
     let walls_covariance = timed("place_walls", times, || {
         place_walls(&mut corrected.walls, run, &offline)
     });
+    let layout = &run.meta.robot.sonar;
+    let returns = (layout.beam == BeamModel::Ray).then(|| {
+        timed("map_returns", times, || {
+            let placed = run.placed_readings(&offline.trajectory);
+            let extent = GridGeometry::from_config(&mapping.grid);
+            returns_map(&placed, &extent, layout.max_range_m)
+        })
+    });
     let landmarks = offline
         .landmarks
         .iter()
@@ -146,6 +159,7 @@ pub fn survey(
         timings_s,
         frame_from_odometry: None,
         walls_covariance,
+        returns,
     })
 }
 

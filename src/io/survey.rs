@@ -383,6 +383,9 @@ pub fn save_survey(
         &s.corrected.features_offline,
     )?;
     super::save_walls_csv(&dir.join("walls_corrected.csv"), &s.corrected.walls)?;
+    if let Some(returns) = &s.returns {
+        super::save_ros_map(dir, "returns_corrected", returns)?;
+    }
     if let Some(c) = &s.walls_covariance {
         super::save_walls_covariance_csv(
             &dir.join("walls_corrected_covariance.csv"),

@@ -158,6 +158,13 @@ pub fn localization_metrics(
         "ranges.at_shortest_range".into(),
         counts.ranges_at_shortest.into(),
     );
+    if !result.scan_outcomes.is_empty() || result.scans_unmatched > 0 {
+        let fused = result.scan_outcomes.iter().filter(|o| o.1).count();
+        metrics.insert("scans.fused".into(), fused.into());
+        let gated_out = result.scan_outcomes.len() - fused;
+        metrics.insert("scans.gated_out".into(), gated_out.into());
+        metrics.insert("scans.unmatched".into(), result.scans_unmatched.into());
+    }
     metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
     metrics.insert("wall_fixes".into(), result.wall_fixed_t_s.len().into());
     metrics.insert("visual.turns".into(), counts.visual_turns.into());

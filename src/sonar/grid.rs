@@ -403,6 +403,54 @@ pub struct OccupancyMap {
     pub free_threshold: f64,
 }
 
+/// A laser's returns are mapped for matching its scans on cells this size, metres: 5 cm (the
+/// usual lidar map's; the 20 cm counting grid's cell centres lie up to 14 cm from the wall points
+/// in them, more than a scan's match tolerates).
+pub const RETURN_CELL_M: f64 = 0.05;
+
+/// A cell of [`returns_map`] is occupied when at least this many returns fell in it: one alone
+/// may be a person walking by.
+pub const MIN_RETURNS: u32 = 2;
+
+/// Where a laser's returns (`placed`, those nearer than `max_range_m`) fell, on cells of
+/// [`RETURN_CELL_M`] over the extent of `extent`: occupied where [`MIN_RETURNS`] or more did,
+/// unknown elsewhere (the rays' free space is not traced: a scan is matched with what it hits).
+/// `localize` matches a later run's scans with it (`returns_corrected.pgm`), as the survey's
+/// own correction matched each scan with the older returns; a ROS map_server file of it is what a
+/// likelihood-field localiser (AMCL's) reads.
+pub fn returns_map(
+    placed: &[PlacedReading],
+    extent: &GridGeometry,
+    max_range_m: f64,
+) -> OccupancyMap {
+    let geometry = GridGeometry {
+        width: (extent.width as f64 * extent.resolution_m / RETURN_CELL_M).ceil() as usize,
+        height: (extent.height as f64 * extent.resolution_m / RETURN_CELL_M).ceil() as usize,
+        resolution_m: RETURN_CELL_M,
+        origin_m: extent.origin_m,
+    };
+    let mut counts = vec![0u32; geometry.width * geometry.height];
+    for p in placed {
+        let Some(range) = p.range_m.filter(|&m| m < max_range_m - 1e-6) else {
+            continue;
+        };
+        let at = p.world_from_sensor;
+        let (x, y) = (at.x + range * at.theta.cos(), at.y + range * at.theta.sin());
+        if let Some((col, row)) = geometry.cell_of(x, y) {
+            counts[row * geometry.width + col] += 1;
+        }
+    }
+    OccupancyMap {
+        occupancy: counts
+            .iter()
+            .map(|&n| (n >= MIN_RETURNS).then_some(1.0))
+            .collect(),
+        geometry,
+        occupied_threshold: 0.5,
+        free_threshold: 0.2,
+    }
+}
+
 impl OccupancyMap {
     /// Whether a cell is occupied.
     pub fn is_occupied(&self, idx: usize) -> bool {
@@ -849,5 +897,35 @@ mod tests {
         let m = g.map();
         assert!(m.is_occupied(rw * geo.width + c + 2));
         assert!(m.is_free(rw * geo.width + c));
+    }
+
+    /// A cell holding two returns is occupied, one holding a single return (a person walking
+    /// by) unknown; a return beyond the range used or with no echo is left out.
+    #[test]
+    fn returns_map_holds_the_cells_returns_fell_in_twice() {
+        let extent = GridGeometry {
+            width: 10,
+            height: 10,
+            resolution_m: 0.2,
+            origin_m: [0.0, 0.0],
+        };
+        let at = |x: f64, range_m: Option<f64>| PlacedReading {
+            t_s: 0.0,
+            world_from_sensor: Pose2::new(x, 0.5, 0.0),
+            range_m,
+        };
+        let placed = [
+            at(0.0, Some(1.01)),
+            at(0.5, Some(0.52)), // the same 5 cm cell, x = 1.01 and 1.02
+            at(0.0, Some(0.31)), // alone
+            at(0.0, Some(1.5)),  // at the range used: no echo
+            at(0.0, None),
+        ];
+        let map = returns_map(&placed, &extent, 1.5);
+        assert_eq!(map.geometry.resolution_m, RETURN_CELL_M);
+        assert_eq!((map.geometry.width, map.geometry.height), (40, 40));
+        let (col, row) = map.geometry.cell_of(1.01, 0.5).unwrap();
+        assert!(map.is_occupied(row * 40 + col));
+        assert_eq!(map.known_cells(), 1);
     }
 }

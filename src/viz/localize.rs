@@ -6,6 +6,7 @@ use super::layout::{column, row, tabs, Layout, View};
 use super::palette;
 use super::{LocalizeScene, Recorder, VizError, POSE_SAMPLE_S};
 use crate::geometry::{pose_at, StampedPose};
+use crate::sonar::grid::OccupancyMap;
 use rerun::blueprint::components::PlayState;
 
 /// The default layout of a localisation: the 3D scene (surveyed tags and walls, the trajectories,
@@ -69,12 +70,16 @@ impl Recorder {
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         log_world(rec, scene.world)?;
         log_surveyed_walls(rec, scene.walls, None)?;
+        if let Some(returns) = scene.returns {
+            log_surveyed_returns(rec, returns)?;
+        }
         for l in scene.landmarks {
             log_landmark(rec, l)?;
         }
         log_trajectories(rec, scene)?;
         log_sightings(rec, scene)?;
         log_ranges(rec, scene)?;
+        log_scans(rec, scene)?;
         log_wall_fixes(rec, scene)?;
         log_errors(rec, scene)?;
         rec.reset_time();
@@ -185,6 +190,63 @@ fn log_ranges(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result
         batches.push(reading.t_s, line, color)?;
     }
     batches.flush()
+}
+
+/// The survey's laser returns a lidar's scans were matched with: a point at each cell that holds
+/// them, in the surveyed walls' colour.
+fn log_surveyed_returns(rec: &rerun::RecordingStream, map: &OccupancyMap) -> Result<(), VizError> {
+    let g = &map.geometry;
+    let points: Vec<[f32; 3]> = (0..map.occupancy.len())
+        .filter(|&i| map.is_occupied(i))
+        .map(|i| {
+            let [x, y] = g.centre(i % g.width, i / g.width);
+            [x as f32, y as f32, SONAR_Z_M]
+        })
+        .collect();
+    rec.log_static(
+        "world/returns_surveyed",
+        &rerun::Points3D::new(points)
+            .with_colors([palette::SURVEYED_WALL])
+            .with_radii([0.5 * g.resolution_m as f32]),
+    )?;
+    Ok(())
+}
+
+/// Each lidar scan matched with the survey's returns, at its time, placed with the localised
+/// pose: fused cyan, gated out red (the latest one shows, lying on the survey's returns when
+/// the pose is right).
+fn log_scans(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
+    let (r, readings) = (scene.result, &scene.run.sonar);
+    let layout = &scene.run.meta.robot.sonar;
+    for &(t, fused) in &r.scan_outcomes {
+        let Some(pose) = pose_at(&r.trajectory, t) else {
+            continue;
+        };
+        let first = readings.partition_point(|x| x.t_s < t);
+        let points: Vec<[f32; 3]> = readings[first..]
+            .iter()
+            .take_while(|x| x.t_s == t)
+            .filter_map(|x| {
+                let range = x.range_m.filter(|&m| m < layout.max_range_m - 1e-6)?;
+                let o = pose.compose(&layout.sensors.get(x.sensor)?.robot_from_sensor());
+                let end = [o.x + range * o.theta.cos(), o.y + range * o.theta.sin()];
+                Some([end[0] as f32, end[1] as f32, SONAR_Z_M])
+            })
+            .collect();
+        let color = if fused {
+            palette::RANGE_FUSED
+        } else {
+            palette::GATED_OUT
+        };
+        rec.set_duration_secs("time", t);
+        rec.log(
+            "world/lidar/scan",
+            &rerun::Points3D::new(points)
+                .with_colors([color])
+                .with_radii([0.03f32]),
+        )?;
+    }
+    Ok(())
 }
 
 /// The error against the truth (when known), the filter's sigma and the distance since the last
@@ -306,9 +368,13 @@ fn error_plot_top(scene: &LocalizeScene<'_>) -> Option<f64> {
 /// The figures and the error's growth with the distance since a sighting.
 fn log_report(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<(), VizError> {
     let mut md = metrics_markdown("stereotag localize", scene.metrics);
+    let matched = if scene.returns.is_some() {
+        "the survey's lidar returns orange, the latest scan matched with them cyan (gated out red)"
+    } else {
+        "surveyed walls orange, the sonar ranges fused cyan (gated out red)"
+    };
     let colours = format!(
-        "In the scene: odometry red{}, localized green{}; {}surveyed walls orange, the sonar \
-         ranges fused cyan (gated out red){}.\n\n",
+        "In the scene: odometry red{}, localized green{}; {}{matched}{}.\n\n",
         if scene.calibrated_odometry.is_some() {
             ", calibrated with the survey yellow"
         } else {

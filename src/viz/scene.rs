@@ -5,6 +5,7 @@ use crate::dataset::RunDataset;
 use crate::fusion::{Landmark, LocalizeResult, Survey, TagSighting};
 use crate::geometry::StampedPose;
 use crate::metrics::GrowthBin;
+use crate::sonar::grid::OccupancyMap;
 use crate::sonar::walls::WallSegment;
 use crate::world::World;
 use std::collections::BTreeMap;
@@ -46,6 +47,8 @@ pub struct LocalizeScene<'a> {
     pub landmarks: &'a [Landmark],
     /// The surveyed walls.
     pub walls: &'a [WallSegment],
+    /// Where the survey's laser returns fell, when a lidar's scans were matched with them.
+    pub returns: Option<&'a OccupancyMap>,
     /// The run's tag sightings.
     pub sightings: &'a [TagSighting],
     /// The filter's result.

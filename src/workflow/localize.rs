@@ -16,7 +16,9 @@ use crate::metrics::{
     LocalizationScores, Located,
 };
 use crate::progress::Progress;
+use crate::sonar::grid::OccupancyMap;
 use crate::sonar::walls::WallSegment;
+use crate::sonar::BeamModel;
 use crate::visual::tags::TagFamily;
 use crate::viz::{LocalizeScene, Recorder, Recording, RecordingRequest};
 use std::borrow::Cow;
@@ -125,8 +127,8 @@ fn surveyed_walls(
 pub struct SurveyUse {
     /// Track with the run's odometry as logged, not corrected with the survey's calibration.
     pub raw_odometry: bool,
-    /// Track with the tags alone, not the sonar against the survey's walls (their files are
-    /// not read).
+    /// Track with the tags alone, not the sonar against the survey's walls nor a lidar against
+    /// its returns (their files are not read).
     pub no_walls: bool,
 }
 
@@ -155,6 +157,9 @@ pub struct SurveyedMap {
     /// The covariance of the walls' placement, when the survey measured it
     /// (`walls_corrected_covariance.csv`).
     pub walls_covariance: Option<nalgebra::DMatrix<f64>>,
+    /// Where a laser's returns fell in the survey (`returns_corrected.pgm`): a lidar's scans are
+    /// matched with them instead of its ranges with the walls.
+    pub returns: Option<OccupancyMap>,
     /// The odometry's errors the survey found, unless told to track with the raw odometry.
     pub calibration: Option<OdometryCalibration>,
     /// How noisy the survey found the calibrated odometry against the model (with
@@ -168,15 +173,22 @@ pub struct SurveyedMap {
 
 impl SurveyedMap {
     /// Reads the survey in directory `survey` (`landmarks.json`, and unless `using.no_walls`
-    /// its walls), naming the file and line of anything bad.
+    /// its walls and a lidar's returns), naming the file and line of anything bad.
     pub fn load(survey: &Path, using: SurveyUse) -> Result<Self> {
         let file = io::load_landmarks(&survey.join("landmarks.json"))?;
         let mut warnings = Warnings::default();
         let (walls, walls_covariance) = surveyed_walls(survey, using.no_walls, &mut warnings)?;
+        let returns = survey.join("returns_corrected.yaml");
+        let returns = if !using.no_walls && returns.exists() {
+            Some(io::load_ros_occupancy(&returns)?)
+        } else {
+            None
+        };
         Ok(Self {
             warnings: warnings.0,
             walls,
             walls_covariance,
+            returns,
             calibration: file.odometry_calibration.filter(|_| !using.raw_odometry),
             noise_scale: file
                 .odometry_noise_scale
@@ -215,7 +227,8 @@ impl SurveyedMap {
 
     /// A streaming localiser in this map from `start`, fed the run's odometry as logged (each
     /// increment corrected with the survey's calibration, the start moved into an anchored
-    /// survey's frame) and, with the sonar `layout`, its ranges against the walls.
+    /// survey's frame) and, with the sonar `layout`, its ranges against the walls (a laser's
+    /// scans against the survey's returns, when it has them).
     pub fn localizer(
         &self,
         config: FuseConfig,
@@ -224,7 +237,12 @@ impl SurveyedMap {
     ) -> fusion::Localizer {
         let mut filter =
             fusion::Localizer::new(self.landmarks.clone(), self.filter_config(config), start);
-        if let (Some(layout), false) = (layout, self.walls.is_empty()) {
+        let returns = self.returns.as_ref();
+        if let (Some(layout), Some(returns)) =
+            (layout.filter(|l| l.beam == BeamModel::Ray), returns)
+        {
+            filter = filter.with_returns(returns, layout.clone());
+        } else if let (Some(layout), false) = (layout, self.walls.is_empty()) {
             filter = filter.with_walls(self.walls.clone(), layout.clone());
             if let Some(c) = &self.walls_covariance {
                 filter = filter.with_walls_covariance(c.clone());
@@ -326,8 +344,18 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             .collect::<Vec<_>>()
             .into();
     }
-    let layout = (!surveyed.walls.is_empty()).then_some(&run.meta.robot.sonar);
+    let layout =
+        (!surveyed.walls.is_empty() || surveyed.returns.is_some()).then_some(&run.meta.robot.sonar);
     let filter = surveyed.localizer(io::load_fuse_config(request.config)?, request.start, layout);
+    let matches_scans = filter.matches_scans();
+    let mut warnings = Warnings(surveyed.warnings.clone());
+    let lidar = run.meta.robot.sonar.beam == BeamModel::Ray && !run.sonar.is_empty();
+    if lidar && !matches_scans && !surveyed.walls.is_empty() {
+        warnings.warn(format!(
+            "{} has no returns_corrected.pgm (a survey by an older version, or of a sonar): the lidar's ranges are matched with its walls one at a time, which pulls a real lidar's run off (docs/RESULTS.md); survey again, or localize with --no-walls",
+            request.survey.display()
+        ));
+    }
     let world = load_world_of_run(request.world, request.run_dir, &run)?;
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
@@ -335,7 +363,6 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         Recording::Localization,
         &dir.path("localize.rrd"),
     )?;
-    let mut warnings = Warnings(surveyed.warnings.clone());
     let no_sizes_given = request.detect.tag_sizes == Default::default();
     let options = DetectOptions {
         families: if request.detect.families.is_empty() {
@@ -383,8 +410,16 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         ));
     }
     let SurveyedMap {
-        landmarks, walls, ..
+        landmarks,
+        walls,
+        returns,
+        ..
     } = surveyed;
+    // A lidar's scans matched with the survey's returns leave the walls unused.
+    let (walls, returns) = match matches_scans {
+        true => (Vec::new(), returns),
+        false => (walls, None),
+    };
     let truth = run.ground_truth.as_deref();
     let growth = error_growth(&result, truth);
     io::save_localization_csv(&dir.path("localization.csv"), &run.odometry, &result, truth)?;
@@ -441,6 +476,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             calibrated_odometry: calibrated.then_some(&*odometry),
             landmarks: &landmarks,
             walls: &walls,
+            returns: returns.as_ref(),
             sightings: &seen.sightings,
             result: &result,
             growth: &growth,
@@ -507,6 +543,14 @@ pub fn summary(
         };
         lines.push(format!(
             "the pose was taken from the walls {times} (first at t = {first:.1} s): the filter was too unsure of it to match ranges one at a time",
+        ));
+    }
+    if !result.scan_outcomes.is_empty() || result.scans_unmatched > 0 {
+        let fused = result.scan_outcomes.iter().filter(|o| o.1).count();
+        lines.push(format!(
+            "{fused} lidar scans fused against the survey's returns ({} gated out, {} not matched: too few returns near the survey's, or the pose left unsure)",
+            result.scan_outcomes.len() - fused,
+            result.scans_unmatched
         ));
     }
     if walls > 0 {

@@ -648,7 +648,8 @@ fn report_mounting(
 /// measured, and `walls.placement_sigma_m_median`), how its own ranges scatter about them along
 /// its corrected trajectory (`walls.range_residual_sigma_m`, `walls.ranges_off_share`,
 /// `walls.ranges_matched`, and `walls.range_sigma_assumed_m`, what `localize` takes); returns the
-/// warning when they scatter far more than `localize` assumes ([`fusion::RangeScatter::warning`]).
+/// warning when they scatter far more than `localize` assumes ([`fusion::RangeScatter::warning`]),
+/// unless `localize` will match a lidar's scans with the survey's returns instead.
 fn report_range_scatter(
     run: &RunDataset,
     result: &fusion::Survey,
@@ -686,7 +687,8 @@ fn report_range_scatter(
         "walls.range_sigma_assumed_m".into(),
         scatter.assumed_sigma_m(fuse),
     );
-    scatter.warning(fuse)
+    // A lidar's later runs are matched with the survey's returns, not with its walls.
+    scatter.warning(fuse).filter(|_| result.returns.is_none())
 }
 
 /// Each anchor's residual in the survey, on stderr and in the metrics (`anchors.*`); a warning for

@@ -9,7 +9,7 @@ mod keyframes;
 mod mounting;
 mod noise;
 pub use noise::{NoiseScales, PoseFunction, SolutionCovariance};
-mod scan_match;
+pub(crate) mod scan_match;
 
 use crate::fusion::{FuseConfig, Landmark, Observations, OnlineResult};
 use crate::geometry::{wrap_angle, Pose2, StampedPose};

@@ -127,7 +127,12 @@ pub(super) fn sequential(
                 let arcs = arcs(&window, odometry, frame.odom, layout);
                 match returns.as_ref() {
                     Some(returns) => match_arcs(&map, &returns.field, &arcs, predicted),
-                    None => match_arcs(&map, &occupied_distances(&map), &arcs, predicted),
+                    None => match_arcs(
+                        &map,
+                        &occupied_distances(&map, FIELD_SUBCELLS),
+                        &arcs,
+                        predicted,
+                    ),
                 }
             })
             .flatten();
@@ -188,7 +193,7 @@ pub(super) fn agreement(
     for p in &placed {
         counting.insert(p);
     }
-    let field = occupied_distances(&counting.map());
+    let field = occupied_distances(&counting.map(), FIELD_SUBCELLS);
     let (mut echoes, mut agree) = (0usize, 0usize);
     for p in &placed {
         let Some(range) = echo(p) else {
@@ -332,12 +337,9 @@ fn match_arcs(
     predicted: Pose2,
 ) -> Option<(Pose2, Matrix3<f64>)> {
     let g = &map.geometry;
-    let world = |pose: Pose2, (s, c): (f64, f64), (x, y): (f64, f64)| {
-        (pose.x + c * x - s * y, pose.y + s * x + c * y)
-    };
     // The arcs that fall where the grid has seen (at the predicted pose).
     let sc = predicted.theta.sin_cos();
-    let seen: Vec<&Vec<(f64, f64)>> = arcs
+    let seen: Vec<&[(f64, f64)]> = arcs
         .iter()
         .filter(|arc| {
             arc.iter().any(|&q| {
@@ -346,32 +348,94 @@ fn match_arcs(
                     .is_some_and(|(col, row)| map.occupancy[row * g.width + col].is_some())
             })
         })
+        .map(|arc| arc.as_slice())
         .collect();
+    match_seen(field, &seen, arcs.len(), predicted)
+}
+
+/// A point `(x, y)` in the frame of `pose` (its heading's sine and cosine `sc`), in the world.
+fn world(pose: Pose2, (s, c): (f64, f64), (x, y): (f64, f64)) -> (f64, f64) {
+    (pose.x + c * x - s * y, pose.y + s * x + c * y)
+}
+
+/// A laser's scan matched with a map of returns: the pose near `predicted` at which `points`
+/// (the scan's returns in the robot's frame, every k-th of them, [`WINDOW`] at most) come
+/// nearest the returns `field` tables, and its covariance, as the survey matches a scan
+/// ([`match_arcs`]); a return that lands nowhere near a tabled one at `predicted` (something
+/// the survey did not see) is left out. `None` when too few are left, too few agree, or the
+/// match leaves the position unsure.
+///
+/// A pose unsure by more than the survey's search ([`REACH_M`], [`REACH_RAD`]) is first searched
+/// for over `reach` (metres, radians), in as many steps, with every return; the match is then
+/// made around the pose found, and the covariance holds that search's spread too.
+pub(crate) fn match_returns(
+    field: &SurveyedReturns,
+    points: &[(f64, f64)],
+    predicted: Pose2,
+    reach: (f64, f64),
+) -> Option<(Pose2, Matrix3<f64>)> {
+    let k = points.len().div_ceil(WINDOW).max(1);
+    let scan: Vec<&[(f64, f64)]> = points.iter().step_by(k).map(std::slice::from_ref).collect();
+    let (centre, wide_spread) = if reach.0 > REACH_M || reach.1 > REACH_RAD {
+        let reach = (reach.0.max(REACH_M), reach.1.max(REACH_RAD));
+        let steps = (
+            reach.0 / REACH_M * COARSE_STEP.0,
+            reach.1 / REACH_RAD * COARSE_STEP.1,
+        );
+        let (mean, spread) = weighed(predicted, reach, steps, &|p| cost_at(&field.0, &scan, p));
+        (offset(predicted, &mean), spread)
+    } else {
+        (predicted, Matrix3::zeros())
+    };
+    let sc = centre.theta.sin_cos();
+    let seen: Vec<&[(f64, f64)]> = scan
+        .iter()
+        .copied()
+        .filter(|arc| {
+            let (x, y) = world(centre, sc, arc[0]);
+            field.0.at(x, y) < TRUNCATE_M
+        })
+        .collect();
+    let (pose, covariance) = match_seen(&field.0, &seen, scan.len(), centre)?;
+    Some((pose, covariance + wide_spread))
+}
+
+/// The summed truncated squares of the arcs' residuals at `pose` (each arc's nearest point to
+/// what `field` tables), and how many arcs agree there ([`INLIER_M`]).
+fn cost_at(field: &DistanceField, arcs: &[&[(f64, f64)]], pose: Pose2) -> (f64, usize) {
+    let sc = pose.theta.sin_cos();
+    let mut sum = 0.0;
+    let mut inliers = 0;
+    for arc in arcs {
+        let residual = arc
+            .iter()
+            .map(|&q| {
+                let (x, y) = world(pose, sc, q);
+                field.at(x, y)
+            })
+            .fold(f64::INFINITY, f64::min);
+        sum += residual.min(TRUNCATE_M).powi(2);
+        inliers += usize::from(residual < INLIER_M);
+    }
+    (sum, inliers)
+}
+
+/// [`match_arcs`] over the arcs `seen` of `total`.
+fn match_seen(
+    field: &DistanceField,
+    seen: &[&[(f64, f64)]],
+    total: usize,
+    predicted: Pose2,
+) -> Option<(Pose2, Matrix3<f64>)> {
     if seen.len() < MIN_SEEN {
         tracing::trace!(
             "scan match: {} of {} ranges where the grid has seen",
             seen.len(),
-            arcs.len()
+            total
         );
         return None;
     }
-    let cost = |pose: Pose2| -> (f64, usize) {
-        let sc = pose.theta.sin_cos();
-        let mut sum = 0.0;
-        let mut inliers = 0;
-        for arc in &seen {
-            let residual = arc
-                .iter()
-                .map(|&q| {
-                    let (x, y) = world(pose, sc, q);
-                    field.at(x, y)
-                })
-                .fold(f64::INFINITY, f64::min);
-            sum += residual.min(TRUNCATE_M).powi(2);
-            inliers += usize::from(residual < INLIER_M);
-        }
-        (sum, inliers)
-    };
+    let cost = |pose: Pose2| cost_at(field, seen, pose);
     // Coarse over the whole search, then fine over one coarse step around its mean.
     let (coarse_mean, coarse_spread) = weighed(predicted, (REACH_M, REACH_RAD), COARSE_STEP, &cost);
     let centre = offset(predicted, &coarse_mean);
@@ -535,20 +599,38 @@ impl ReturnField {
     }
 }
 
-/// Distance to the nearest occupied cell's centre, tabled at a quarter of the grid's cell and
-/// capped at [`TRUNCATE_M`].
-fn occupied_distances(map: &OccupancyMap) -> DistanceField {
+/// A survey's laser returns (`returns_corrected.pgm`, [`crate::sonar::grid::returns_map`]) as
+/// [`match_returns`] matches a later run's scans with them: the distance to the nearest
+/// occupied cell's centre, tabled on thirds of the map's cells (an odd split: a cell's centre
+/// lies inside a table cell, not on the edge between two, which would move every return half a
+/// table cell one way).
+#[derive(Debug, Clone)]
+pub(crate) struct SurveyedReturns(DistanceField);
+
+impl SurveyedReturns {
+    /// The returns `map` holds.
+    pub(crate) fn of_map(map: &OccupancyMap) -> Self {
+        Self(occupied_distances(map, RETURNS_SUBCELLS))
+    }
+}
+
+/// See [`SurveyedReturns`].
+const RETURNS_SUBCELLS: usize = 3;
+
+/// Distance to the nearest occupied cell's centre, tabled at `1 / subcells` of the grid's cell
+/// and capped at [`TRUNCATE_M`].
+fn occupied_distances(map: &OccupancyMap, subcells: usize) -> DistanceField {
     let g = &map.geometry;
-    let cell_m = g.resolution_m / FIELD_SUBCELLS as f64;
-    let (cols, rows) = (g.width * FIELD_SUBCELLS, g.height * FIELD_SUBCELLS);
+    let cell_m = g.resolution_m / subcells as f64;
+    let (cols, rows) = (g.width * subcells, g.height * subcells);
     let mut d = vec![TRUNCATE_M as f32; cols * rows];
     let reach = (TRUNCATE_M / cell_m).ceil() as i64;
     for idx in (0..map.occupancy.len()).filter(|&i| map.is_occupied(i)) {
         let (col, row) = (idx % g.width, idx / g.width);
         let centre = g.centre(col, row);
-        let (c0, r0) = ((col * FIELD_SUBCELLS) as i64, (row * FIELD_SUBCELLS) as i64);
-        for r in (r0 - reach).max(0)..(r0 + FIELD_SUBCELLS as i64 + reach).min(rows as i64) {
-            for c in (c0 - reach).max(0)..(c0 + FIELD_SUBCELLS as i64 + reach).min(cols as i64) {
+        let (c0, r0) = ((col * subcells) as i64, (row * subcells) as i64);
+        for r in (r0 - reach).max(0)..(r0 + subcells as i64 + reach).min(rows as i64) {
+            for c in (c0 - reach).max(0)..(c0 + subcells as i64 + reach).min(cols as i64) {
                 let x = g.origin_m[0] + (c as f64 + 0.5) * cell_m;
                 let y = g.origin_m[1] + (r as f64 + 0.5) * cell_m;
                 let cell = &mut d[r as usize * cols + c as usize];
