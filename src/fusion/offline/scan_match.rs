@@ -376,17 +376,7 @@ pub(crate) fn match_returns(
 ) -> Option<(Pose2, Matrix3<f64>)> {
     let k = points.len().div_ceil(WINDOW).max(1);
     let scan: Vec<&[(f64, f64)]> = points.iter().step_by(k).map(std::slice::from_ref).collect();
-    let (centre, wide_spread) = if reach.0 > REACH_M || reach.1 > REACH_RAD {
-        let reach = (reach.0.max(REACH_M), reach.1.max(REACH_RAD));
-        let steps = (
-            reach.0 / REACH_M * COARSE_STEP.0,
-            reach.1 / REACH_RAD * COARSE_STEP.1,
-        );
-        let (mean, spread) = weighed(predicted, reach, steps, &|p| cost_at(&field.0, &scan, p));
-        (offset(predicted, &mean), spread)
-    } else {
-        (predicted, Matrix3::zeros())
-    };
+    let (centre, wide_spread) = widened(&field.0, &scan, predicted, reach);
     let sc = centre.theta.sin_cos();
     let seen: Vec<&[(f64, f64)]> = scan
         .iter()
@@ -398,6 +388,27 @@ pub(crate) fn match_returns(
         .collect();
     let (pose, covariance) = match_seen(&field.0, &seen, scan.len(), centre)?;
     Some((pose, covariance + wide_spread))
+}
+
+/// Where to centre the search for a pose unsure by `reach` (metres, radians): `predicted` when
+/// the survey's search ([`REACH_M`], [`REACH_RAD`]) covers it, else the weighted mean of a search
+/// over `reach` in as many steps, with its spread.
+fn widened(
+    field: &DistanceField,
+    arcs: &[&[(f64, f64)]],
+    predicted: Pose2,
+    reach: (f64, f64),
+) -> (Pose2, Matrix3<f64>) {
+    if reach.0 <= REACH_M && reach.1 <= REACH_RAD {
+        return (predicted, Matrix3::zeros());
+    }
+    let reach = (reach.0.max(REACH_M), reach.1.max(REACH_RAD));
+    let steps = (
+        reach.0 / REACH_M * COARSE_STEP.0,
+        reach.1 / REACH_RAD * COARSE_STEP.1,
+    );
+    let (mean, spread) = weighed(predicted, reach, steps, &|p| cost_at(field, arcs, p));
+    (offset(predicted, &mean), spread)
 }
 
 /// The summed truncated squares of the arcs' residuals at `pose` (each arc's nearest point to
