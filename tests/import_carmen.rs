@@ -548,8 +548,9 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
 /// freiburg-079 as a lidar run with no camera: the survey corrects a drifting odometry with the
 /// laser's own scans (each keyframe's latest scan matched with the returns of a while before),
 /// and leaves the log's own odometry (4 cm off) as it is; `localize` then holds the drifted run
-/// to that survey's returns. Measured in session 66: the three
-/// drifts of `scripts/localize_split.sh` from 1.90 / 6.62 / 3.68 m to 0.14 / 0.20 / 0.17 m,
+/// to that survey's returns, from the survey's start or from anywhere. Measured in session 66:
+/// the three drifts of `scripts/localize_split.sh` from 1.90 / 6.62 / 3.68 m to 0.14 / 0.20 /
+/// 0.17 m,
 /// the corrected maps 0.97-0.99 occupied precision against the true poses' map; before, no scan
 /// was ever matched.
 #[test]
@@ -615,6 +616,29 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
     assert!(get(&m, "scans.fused") > 4000.0, "{m}");
     assert!(
         err.contains("lidar scans fused against the survey's returns"),
+        "{err}"
+    );
+
+    // Started anywhere (the drifted odometry's frame is not the survey's): found by its scans
+    // in the survey's returns (session 67: at 23.7 s, then 0.056 m).
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        dir.path().join("survey").to_str().unwrap(),
+        "--run",
+        drifted.to_str().unwrap(),
+        "--out",
+        localized.to_str().unwrap(),
+        "--start",
+        "unknown",
+        "--no-rerun",
+        "--force",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let m = json(&localized.join("report.json"))["metrics"].clone();
+    assert!(get(&m, "ate_m.located") < 0.1, "{m}\n{err}");
+    assert!(
+        err.contains("by a lidar scan found in the survey's returns"),
         "{err}"
     );
 }

@@ -34,7 +34,8 @@ pub struct Localize {
     #[arg(long)]
     no_walls: bool,
     /// Where the run starts: `survey` (where the survey's run started, sure of it), `unknown`
-    /// (anywhere: found from the first sighting of a surveyed tag, the sigma 100 m until then), or
+    /// (anywhere: found from the first sighting of a surveyed tag or, with a lidar, its latest
+    /// scans found in the survey's returns; the sigma 100 m until then), or
     /// `x,y,theta` in the survey's frame (metres, radians) with --start-sigma-m and
     /// --start-sigma-deg.
     #[arg(long, default_value = "survey")]

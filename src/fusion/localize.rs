@@ -5,7 +5,7 @@
 use crate::fusion::ekf::{compose_jacobians, Ekf};
 use crate::fusion::events::{events, Event};
 use crate::fusion::measurement::{sighting_measurement, tag_in_robot};
-use crate::fusion::offline::scan_match::{match_returns, SurveyedReturns};
+use crate::fusion::offline::scan_match::{locate_scan, match_returns, SurveyedReturns};
 use crate::fusion::wall_fix::RangeWindow;
 use crate::fusion::{FuseConfig, Landmark, Observations, OdometryCalibration};
 use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
@@ -58,6 +58,9 @@ pub struct LocalizeResult {
     /// Laser scans fed that did not match (too few returns where the survey saw, or a match that
     /// left the pose unsure).
     pub scans_unmatched: usize,
+    /// Whether an unknown start was located by a lidar scan found in the survey's returns (at
+    /// `located_t_s`), not by a tag.
+    pub located_by_scan: bool,
 }
 
 /// Gated-out sightings in a row, each putting the robot where the others do (within
@@ -121,9 +124,39 @@ const SCAN_SIGMA_FLOOR_M: f64 = 0.01;
 /// See [`SCAN_SIGMA_FLOOR_M`].
 const SCAN_SIGMA_FLOOR_RAD: f64 = 0.0044;
 
-/// A scan is searched for within three sigmas of the pose held, at most this far: 2 m and 30
-/// degrees (at least the survey's own search, 0.4 m and 10 degrees).
-const SCAN_REACH_MAX: (f64, f64) = (2.0, 0.52);
+/// The floor of [`SCAN_SIGMA_FLOOR_M`] and [`SCAN_SIGMA_FLOOR_RAD`] as a covariance.
+fn scan_floor() -> Matrix3<f64> {
+    Matrix3::from_diagonal(&Vector3::new(
+        SCAN_SIGMA_FLOOR_M.powi(2),
+        SCAN_SIGMA_FLOOR_M.powi(2),
+        SCAN_SIGMA_FLOOR_RAD.powi(2),
+    ))
+}
+
+/// While an unknown start is not located, a scan is looked for in the whole map again after
+/// this much travel or turn (metres, radians: 30 degrees): each search takes a second or so on a
+/// building's map, and a scan from the same place says the same.
+const LOCATE_EVERY: (f64, f64) = (0.5, 0.52);
+/// The scans looked for together span this much travel (metres), one kept each
+/// [`LOCATE_WINDOW_STEP`] of travel or turn (metres, radians: 15 degrees).
+const LOCATE_WINDOW_M: f64 = 4.0;
+const LOCATE_WINDOW_STEP: (f64, f64) = (0.5, 0.26);
+
+/// A scan is searched for within three sigmas of the pose held (at least the survey's own
+/// search, 0.4 m and 10 degrees), the heading at most this far: 30 degrees.
+const SCAN_REACH_MAX_RAD: f64 = 0.52;
+
+/// Above this position sigma (metres) a scan is not searched for around the pose held but in
+/// the whole map with the latest scans ([`Localizer::search_window`]): a search 1.5 m wide
+/// and more finds a wrong place that fits as well (freiburg-079's first half localised against
+/// a survey of its second: after 350 s where that survey had not been, sigma 1.5 m, matched
+/// 3.4 m off and held there, 1.87 m ATE).
+const SCAN_LOST_SIGMA_M: f64 = 0.5;
+
+/// Whether `now` is at least `step` (metres, radians) of travel or turn on from `last`.
+fn apart(last: &DeadReckoned, now: &DeadReckoned, step: (f64, f64)) -> bool {
+    now.path_m - last.path_m >= step.0 || now.turn_rad - last.turn_rad >= step.1
+}
 
 /// A wall face is used only when its normal is this far inside the beam's half-cone: 2 degrees
 /// (outside the cone the echo comes off the cone's edge, longer than the perpendicular).
@@ -494,7 +527,12 @@ pub fn track(
                 while let Some((_, r)) = ranges.next_if(|r| r.1.t_s == reading.t_s) {
                     scan.push(*r);
                 }
+                let located = filter.estimate().located;
                 match filter.scan(&scan) {
+                    Some(_) if !located => {
+                        out.located_t_s.get_or_insert(reading.t_s);
+                        out.located_by_scan = true;
+                    }
                     Some(fused) => out.scan_outcomes.push((reading.t_s, fused)),
                     None => out.scans_unmatched += usize::from(filter.estimate().located),
                 }
@@ -585,6 +623,12 @@ pub struct Localizer {
     /// The survey's laser returns a scan of the sensors of `layout` is matched with, instead of
     /// the walls ([`Localizer::with_returns`]).
     returns: Option<std::sync::Arc<SurveyedReturns>>,
+    /// Where the odometry was when a scan was last looked for in the whole map (an unknown
+    /// start not yet located).
+    located_tried: Option<DeadReckoned>,
+    /// The scans of the last [`LOCATE_WINDOW_M`] of travel while not located, with where the
+    /// odometry was at each.
+    locate_window: Vec<(DeadReckoned, Vec<(f64, f64)>)>,
     /// Corrects each odometry increment before it predicts.
     calibration: Option<OdometryCalibration>,
     /// The survey's frame from the odometry's, for a run leaving from the survey's start.
@@ -780,6 +824,8 @@ impl Localizer {
             walls_covariance: None,
             layout: None,
             returns: None,
+            located_tried: None,
+            locate_window: Vec::new(),
             calibration: None,
             odometry_frame: None,
             start,
@@ -1115,13 +1161,10 @@ impl Localizer {
     /// the pose is not known yet, or the filter has no returns. The scan is taken at the latest
     /// odometry's pose.
     pub fn scan(&mut self, readings: &[SonarReading]) -> Option<bool> {
-        let (Some(returns), Some(layout)) = (self.returns.as_ref(), self.layout.as_ref()) else {
+        let (Some(returns), Some(layout)) = (self.returns.clone(), self.layout.as_ref()) else {
             return None;
         };
         self.last?;
-        if !self.located {
-            return None;
-        }
         let points: Vec<(f64, f64)> = readings
             .iter()
             .filter_map(|r| {
@@ -1130,26 +1173,102 @@ impl Localizer {
                 Some((at.x + range * at.theta.cos(), at.y + range * at.theta.sin()))
             })
             .collect();
-        // The search spans three sigmas of the pose held.
+        self.keep_for_locating(&points);
+        if !self.located {
+            return self.locate_from_scans();
+        }
         let now = self.estimate();
+        if now.position_sigma_m() > SCAN_LOST_SIGMA_M {
+            // Too unsure to search around the pose held: the scans are looked for in the whole
+            // map, and the pose found fused when it agrees with the one held.
+            let (z, r) = self.search_window()?;
+            return Some(self.fuse_scan_pose(&z, &r));
+        }
+        // The search spans three sigmas of the pose held.
         let reach = (
-            (3.0 * now.position_sigma_m()).min(SCAN_REACH_MAX.0),
-            (3.0 * now.covariance[(2, 2)].max(0.0).sqrt()).min(SCAN_REACH_MAX.1),
+            3.0 * now.position_sigma_m(),
+            (3.0 * now.covariance[(2, 2)].max(0.0).sqrt()).min(SCAN_REACH_MAX_RAD),
         );
-        let (z, r) = match_returns(returns, &points, now.pose, reach)?;
-        let floor = Matrix3::from_diagonal(&Vector3::new(
-            SCAN_SIGMA_FLOOR_M.powi(2),
-            SCAN_SIGMA_FLOOR_M.powi(2),
-            SCAN_SIGMA_FLOOR_RAD.powi(2),
-        ));
+        let (z, r) = match_returns(&returns, &points, now.pose, reach)?;
+        Some(self.fuse_scan_pose(&z, &r))
+    }
+
+    /// Fuses the pose `z` a scan's match gave, with covariance `r` (and [`scan_floor`]), after
+    /// the gate; returns whether it was fused.
+    fn fuse_scan_pose(&mut self, z: &Pose2, r: &Matrix3<f64>) -> bool {
         let fused = self
             .ekf
-            .update_pose(&z, &(r + floor), self.config.gate_chi2);
+            .update_pose(z, &(r + scan_floor()), self.config.gate_chi2);
         if fused {
             // The pose no longer rests on the sightings alone.
             self.kept.clear();
         }
-        Some(fused)
+        fused
+    }
+
+    /// Keeps a scan (`points`, its returns in the robot's frame) for looking the latest few
+    /// metres of scans up in the whole map ([`Localizer::search_window`]): one each
+    /// [`LOCATE_WINDOW_STEP`] of travel or turn, those of the last [`LOCATE_WINDOW_M`].
+    fn keep_for_locating(&mut self, points: &[(f64, f64)]) {
+        let now = self.dead_reckoned;
+        if self
+            .locate_window
+            .last()
+            .is_none_or(|(at, _)| apart(at, &now, LOCATE_WINDOW_STEP))
+        {
+            self.locate_window.push((now, points.to_vec()));
+            self.locate_window
+                .retain(|(at, _)| now.path_m - at.path_m <= LOCATE_WINDOW_M);
+        }
+    }
+
+    /// The pose the scans kept ([`Localizer::keep_for_locating`]), placed by the odometry, give
+    /// when looked up together in the whole map ([`locate_scan`]: a corridor's twin stretches
+    /// tell apart once a door or a corner is in the window), and its covariance; tried at most
+    /// each [`LOCATE_EVERY`] of travel or turn. `None` when not due or not clear.
+    fn search_window(&mut self) -> Option<(Pose2, Matrix3<f64>)> {
+        let now = self.dead_reckoned;
+        if !self
+            .located_tried
+            .as_ref()
+            .is_none_or(|last| apart(last, &now, LOCATE_EVERY))
+        {
+            return None;
+        }
+        self.located_tried = Some(now);
+        let window: Vec<(f64, f64)> = self
+            .locate_window
+            .iter()
+            .flat_map(|(at, scan)| {
+                let here = now.pose.between(&at.pose);
+                scan.iter().map(move |&(x, y)| {
+                    let p = here.transform_point(nalgebra::Point2::new(x, y));
+                    (p.x, p.y)
+                })
+            })
+            .collect();
+        let found = locate_scan(self.returns.as_deref()?, &window)?;
+        tracing::debug!(
+            "the latest scans found in the survey's returns at ({:.2}, {:.2}, {:.1} deg)",
+            found.0.x,
+            found.0.y,
+            found.0.theta.to_degrees()
+        );
+        Some(found)
+    }
+
+    /// After an unknown start, the pose from the latest scans found in the whole map
+    /// ([`Localizer::search_window`]); `Some(true)` when it located the robot.
+    fn locate_from_scans(&mut self) -> Option<bool> {
+        if !matches!(self.start, Start::Unknown) {
+            return None;
+        }
+        let (pose, r) = self.search_window()?;
+        self.drop_turn();
+        self.kept.clear();
+        self.ekf.reset_pose_from(pose, &(r + scan_floor()), &[]);
+        self.located = true;
+        Some(true)
     }
 
     /// Whether the filter matches a laser's scans with the survey's returns
@@ -1294,6 +1413,7 @@ impl LocalizeResult {
             wall_fixed_t_s: Vec::new(),
             scan_outcomes: Vec::new(),
             scans_unmatched: 0,
+            located_by_scan: false,
         }
     }
 
@@ -2122,11 +2242,17 @@ mod tests {
         assert!(result.since_sighting_m.contains(&0.0));
     }
 
-    /// A laser's scans of an 8 m by 5 m room matched with the returns of a survey of it hold a
-    /// robot whose odometry turns half a degree a metre too many and overstates its travel by
-    /// 3%; without them it ends a quarter of a metre off.
-    #[test]
-    fn scans_matched_with_surveyed_returns_hold_a_drifting_odometry() {
+    /// A laser's survey of an 8 m by 5 m room with a 2 m partition at x = 5 m: the scans (180
+    /// beams) of a robot driven along the room's middle, its odometry turning half a degree a
+    /// metre too many and overstating its travel by 3%, and the returns map of the scans on the
+    /// true poses: the layout, the truth, the odometry, the scans and the map.
+    fn lidar_room() -> (
+        SonarLayout,
+        Vec<StampedPose>,
+        Vec<StampedPose>,
+        Vec<SonarReading>,
+        OccupancyMap,
+    ) {
         use crate::sonar::grid::{returns_map, GridGeometry};
         let layout = SonarLayout {
             name: "lidar".into(),
@@ -2142,12 +2268,14 @@ mod tests {
                 })
                 .collect(),
         };
-        // The range down a ray from inside the room to its walls.
+        // The range down a ray from inside the room to its walls or the partition.
         let cast = |p: Pose2, bearing: f64| {
             let (s, c) = (p.theta + bearing).sin_cos();
             let tx = if c > 0.0 { (8.0 - p.x) / c } else { -p.x / c };
             let ty = if s > 0.0 { (5.0 - p.y) / s } else { -p.y / s };
-            tx.min(ty)
+            let t = (5.0 - p.x) / c;
+            let partition = (t > 0.0 && (0.0..=2.0).contains(&(p.y + t * s))).then_some(t);
+            partition.unwrap_or(f64::INFINITY).min(tx.min(ty))
         };
         let stamped = |k: usize, pose: Pose2| StampedPose {
             t_s: 0.5 * k as f64,
@@ -2184,6 +2312,14 @@ mod tests {
         };
         let placed = crate::sonar::place_readings(&readings, &layout, &truth);
         let returns = returns_map(&placed, &extent, layout.max_range_m);
+        (layout, truth, odometry, readings, returns)
+    }
+
+    /// In [`lidar_room`], the scans matched with the survey's returns hold the drifting
+    /// odometry; without them it ends a quarter of a metre off.
+    #[test]
+    fn scans_matched_with_surveyed_returns_hold_a_drifting_odometry() {
+        let (layout, truth, odometry, readings, returns) = lidar_room();
         let config = FuseConfig::default();
         let filter = Localizer::new(Vec::new(), config.clone(), Start::Survey);
         let with = track(
@@ -2205,5 +2341,31 @@ mod tests {
         assert!(end_error(&with) < 0.04, "{}", end_error(&with));
         assert!(with.scan_outcomes.iter().filter(|o| o.1).count() >= 55);
         assert!(ate_m(&with.trajectory, &truth).unwrap() < 0.04);
+    }
+
+    /// In [`lidar_room`], a robot whose odometry starts at the origin, anywhere in the room
+    /// (an unknown start), is located by its scans found in the survey's returns, and held from
+    /// then on. Its first scans are not taken: turned round at the room's other end, they fit
+    /// 83 of 90 returns where the right pose fits 89 (only the partition tells the ends apart);
+    /// the window of scans tells them apart once it spans 3 m.
+    #[test]
+    fn an_unknown_start_is_located_by_a_lidar_scan() {
+        let (layout, truth, odometry, readings, returns) = lidar_room();
+        let to_origin = odometry[0].pose.inverse();
+        let odometry: Vec<StampedPose> = odometry
+            .iter()
+            .map(|p| StampedPose {
+                t_s: p.t_s,
+                pose: to_origin.compose(&p.pose),
+            })
+            .collect();
+        let filter = Localizer::new(Vec::new(), FuseConfig::default(), Start::Unknown)
+            .with_returns(&returns, layout);
+        let result = track(filter, &obs(&odometry, &[], &[]), &readings);
+        let located = result.located_t_s.expect("located");
+        assert!(located <= 15.0 && result.located_by_scan, "{located}");
+        let from = truth.iter().position(|p| p.t_s >= located).unwrap();
+        let ate = ate_m(&result.trajectory[from..], &truth[from..]).unwrap();
+        assert!(ate < 0.04, "{ate}");
     }
 }

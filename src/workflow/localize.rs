@@ -527,8 +527,13 @@ pub fn summary(
             .zip(&result.sigma_m)
             .find(|(p, _)| p.t_s >= t)
             .map_or(f64::NAN, |(_, s)| *s);
+        let by = if result.located_by_scan {
+            "a lidar scan found in the survey's returns"
+        } else {
+            "the first sighting of a surveyed tag"
+        };
         lines.push(format!(
-            "located at t = {t:.1} s by the first sighting of a surveyed tag (position sigma then {sigma:.2} m{})",
+            "located at t = {t:.1} s by {by} (position sigma then {sigma:.2} m{})",
             if sigma > 1.0 {
                 ": a far tag places the robot on an arc around it; the next tags or the walls say where"
             } else {
