@@ -599,18 +599,24 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
     let returns = dir.path().join("survey/returns_corrected.pgm");
     assert!(returns.exists(), "no {}", returns.display());
     let localized = dir.path().join("localized");
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        dir.path().join("survey").to_str().unwrap(),
-        "--run",
-        drifted.to_str().unwrap(),
-        "--out",
-        localized.to_str().unwrap(),
-        "--no-rerun",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let m = json(&localized.join("report.json"))["metrics"].clone();
+    let localize = |start: &str| -> (Value, String) {
+        let (code, err) = stereotag(&[
+            "localize",
+            "--survey",
+            dir.path().join("survey").to_str().unwrap(),
+            "--run",
+            drifted.to_str().unwrap(),
+            "--out",
+            localized.to_str().unwrap(),
+            "--start",
+            start,
+            "--no-rerun",
+            "--force",
+        ]);
+        assert_eq!(code, 0, "{err}");
+        (json(&localized.join("report.json"))["metrics"].clone(), err)
+    };
+    let (m, err) = localize("survey");
     assert!(get(&m, "ate_m.odometry") > 1.5, "{m}");
     assert!(get(&m, "ate_m.localized") < 0.1, "{m}\n{err}");
     assert!(get(&m, "scans.fused") > 4000.0, "{m}");
@@ -621,21 +627,7 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
 
     // Started anywhere (the drifted odometry's frame is not the survey's): found by its scans
     // in the survey's returns (session 67: at 23.7 s, then 0.056 m).
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        dir.path().join("survey").to_str().unwrap(),
-        "--run",
-        drifted.to_str().unwrap(),
-        "--out",
-        localized.to_str().unwrap(),
-        "--start",
-        "unknown",
-        "--no-rerun",
-        "--force",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let m = json(&localized.join("report.json"))["metrics"].clone();
+    let (m, err) = localize("unknown");
     assert!(get(&m, "ate_m.located") < 0.1, "{m}\n{err}");
     assert!(
         err.contains("by a lidar scan found in the survey's returns"),

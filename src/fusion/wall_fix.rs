@@ -93,6 +93,23 @@ const FIELD_CELL_M: f64 = 0.02;
 const FIELD_MAX_CELLS: f64 = 4.0e6;
 
 impl DistanceField {
+    /// A table of `cols` by `rows` cells of `cell_m` from `origin`, every distance `cap`.
+    pub(super) fn capped(
+        origin: (f64, f64),
+        cell_m: f64,
+        (cols, rows): (usize, usize),
+        cap: f64,
+    ) -> Self {
+        Self {
+            origin,
+            cell_m,
+            cols,
+            rows,
+            d: vec![cap as f32; cols * rows],
+            cap,
+        }
+    }
+
     fn new(walls: &[WallSegment], reach_m: f64) -> Self {
         let (mut lo, mut hi) = (
             (f64::INFINITY, f64::INFINITY),

@@ -54,7 +54,7 @@ const MAX_MATCH_SIGMA_M: f64 = 0.12;
 /// Points of an echo's arc are taken this far apart across the cone: 5 degrees.
 const ARC_STEP_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// The distance table's cells per grid cell along each axis.
-const FIELD_SUBCELLS: usize = 4;
+const FIELD_SUBCELLS: f64 = 4.0;
 
 /// What the sequential matching gave: every keyframe's pose (the odometry's prediction from the
 /// one before, updated by its match when it has one) and the matches: keyframe, pose, covariance.
@@ -129,7 +129,11 @@ pub(super) fn sequential(
                     Some(returns) => match_arcs(&map, &returns.field, &arcs, predicted),
                     None => match_arcs(
                         &map,
-                        &occupied_distances(&map, FIELD_SUBCELLS),
+                        &occupied_distances(
+                            &map,
+                            map.geometry.resolution_m / FIELD_SUBCELLS,
+                            TRUNCATE_M,
+                        ),
                         &arcs,
                         predicted,
                     ),
@@ -193,7 +197,8 @@ pub(super) fn agreement(
     for p in &placed {
         counting.insert(p);
     }
-    let field = occupied_distances(&counting.map(), FIELD_SUBCELLS);
+    let map = counting.map();
+    let field = occupied_distances(&map, map.geometry.resolution_m / FIELD_SUBCELLS, TRUNCATE_M);
     let (mut echoes, mut agree) = (0usize, 0usize);
     for p in &placed {
         let Some(range) = echo(p) else {
@@ -573,15 +578,9 @@ impl ReturnField {
             .map(|(c, r)| (c, r, ((c as f64).hypot(r as f64) * RETURN_CELL_M) as f32))
             .filter(|&(_, _, d)| f64::from(d) < TRUNCATE_M)
             .collect();
+        let origin = (g.origin_m[0], g.origin_m[1]);
         Self {
-            field: DistanceField {
-                origin: (g.origin_m[0], g.origin_m[1]),
-                cell_m: RETURN_CELL_M,
-                cols,
-                rows,
-                d: vec![TRUNCATE_M as f32; cols * rows],
-                cap: TRUNCATE_M,
-            },
+            field: DistanceField::capped(origin, RETURN_CELL_M, (cols, rows), TRUNCATE_M),
             held: vec![false; cols * rows],
             kernel,
         }
@@ -641,41 +640,20 @@ impl SurveyedReturns {
     pub(crate) fn of_map(map: &OccupancyMap) -> Self {
         let g = &map.geometry;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        let cols = (g.width as f64 * g.resolution_m / LOCATE_CELL_M).ceil() as usize;
-        let rows = (g.height as f64 * g.resolution_m / LOCATE_CELL_M).ceil() as usize;
-        let mut coarse = DistanceField {
-            origin: (g.origin_m[0], g.origin_m[1]),
-            cell_m: LOCATE_CELL_M,
-            cols,
-            rows,
-            d: vec![LOCATE_CAP_M as f32; cols * rows],
-            cap: LOCATE_CAP_M,
-        };
-        let reach = (LOCATE_CAP_M / LOCATE_CELL_M).ceil() as i64;
         for idx in (0..map.occupancy.len()).filter(|&i| map.is_occupied(i)) {
             let [x, y] = g.centre(idx % g.width, idx / g.width);
             (lo, hi) = ([lo[0].min(x), lo[1].min(y)], [hi[0].max(x), hi[1].max(y)]);
-            let c0 = ((x - g.origin_m[0]) / LOCATE_CELL_M).floor() as i64;
-            let r0 = ((y - g.origin_m[1]) / LOCATE_CELL_M).floor() as i64;
-            for r in (r0 - reach).max(0)..(r0 + reach + 1).min(rows as i64) {
-                for c in (c0 - reach).max(0)..(c0 + reach + 1).min(cols as i64) {
-                    let cx = g.origin_m[0] + (c as f64 + 0.5) * LOCATE_CELL_M;
-                    let cy = g.origin_m[1] + (r as f64 + 0.5) * LOCATE_CELL_M;
-                    let cell = &mut coarse.d[r as usize * cols + c as usize];
-                    *cell = cell.min((cx - x).hypot(cy - y) as f32);
-                }
-            }
         }
         Self {
-            fine: occupied_distances(map, RETURNS_SUBCELLS),
-            coarse,
+            fine: occupied_distances(map, g.resolution_m / RETURNS_SUBCELLS, TRUNCATE_M),
+            coarse: occupied_distances(map, LOCATE_CELL_M, LOCATE_CAP_M),
             extent: (lo, hi),
         }
     }
 }
 
 /// See [`SurveyedReturns`].
-const RETURNS_SUBCELLS: usize = 3;
+const RETURNS_SUBCELLS: f64 = 3.0;
 
 /// [`locate_scan`]'s coarse table: cells of 10 cm, distances up to 0.5 m (a pose on its search's
 /// grid, up to 0.18 m and 1.5 degrees from the true one, still scores near it).
@@ -788,33 +766,27 @@ pub(crate) fn locate_scan(
 /// [`locate_scan`] scores this many of a scan's returns at most.
 const LOCATE_POINTS: usize = 96;
 
-/// Distance to the nearest occupied cell's centre, tabled at `1 / subcells` of the grid's cell
-/// and capped at [`TRUNCATE_M`].
-fn occupied_distances(map: &OccupancyMap, subcells: usize) -> DistanceField {
+/// Distance to the nearest occupied cell's centre of `map`, tabled on cells of `cell_m` over the
+/// map's extent and capped at `cap`.
+fn occupied_distances(map: &OccupancyMap, cell_m: f64, cap: f64) -> DistanceField {
     let g = &map.geometry;
-    let cell_m = g.resolution_m / subcells as f64;
-    let (cols, rows) = (g.width * subcells, g.height * subcells);
-    let mut d = vec![TRUNCATE_M as f32; cols * rows];
-    let reach = (TRUNCATE_M / cell_m).ceil() as i64;
+    let cells = |n: usize| (n as f64 * g.resolution_m / cell_m - 1e-6).ceil() as usize;
+    let (cols, rows) = (cells(g.width), cells(g.height));
+    let origin = (g.origin_m[0], g.origin_m[1]);
+    let mut field = DistanceField::capped(origin, cell_m, (cols, rows), cap);
+    let reach = (cap / cell_m).ceil() as i64;
     for idx in (0..map.occupancy.len()).filter(|&i| map.is_occupied(i)) {
-        let (col, row) = (idx % g.width, idx / g.width);
-        let centre = g.centre(col, row);
-        let (c0, r0) = ((col * subcells) as i64, (row * subcells) as i64);
-        for r in (r0 - reach).max(0)..(r0 + subcells as i64 + reach).min(rows as i64) {
-            for c in (c0 - reach).max(0)..(c0 + subcells as i64 + reach).min(cols as i64) {
-                let x = g.origin_m[0] + (c as f64 + 0.5) * cell_m;
-                let y = g.origin_m[1] + (r as f64 + 0.5) * cell_m;
-                let cell = &mut d[r as usize * cols + c as usize];
+        let centre = g.centre(idx % g.width, idx / g.width);
+        let c0 = ((centre[0] - origin.0) / cell_m).floor() as i64;
+        let r0 = ((centre[1] - origin.1) / cell_m).floor() as i64;
+        for r in (r0 - reach).max(0)..(r0 + reach + 1).min(rows as i64) {
+            for c in (c0 - reach).max(0)..(c0 + reach + 1).min(cols as i64) {
+                let x = origin.0 + (c as f64 + 0.5) * cell_m;
+                let y = origin.1 + (r as f64 + 0.5) * cell_m;
+                let cell = &mut field.d[r as usize * cols + c as usize];
                 *cell = cell.min((x - centre[0]).hypot(y - centre[1]) as f32);
             }
         }
     }
-    DistanceField {
-        origin: (g.origin_m[0], g.origin_m[1]),
-        cell_m,
-        cols,
-        rows,
-        d,
-        cap: TRUNCATE_M,
-    }
+    field
 }
