@@ -746,7 +746,7 @@ pub(crate) fn locate_scan(
             || wrap_angle(p.theta - pose.theta).abs() > LOCATE_DISTINCT.1
     });
     tracing::debug!(
-        "scan located at ({:.2}, {:.2}, {:.1} deg): {best} of {} returns agree; the best distinct pose {}",
+        "scans looked up in the whole map: at best ({:.2}, {:.2}, {:.1} deg), {best} of {} returns agree; the best distinct pose {}",
         pose.x,
         pose.y,
         pose.theta.to_degrees(),
