@@ -1161,10 +1161,10 @@ impl Localizer {
     /// did not (too few of its returns near the survey's, too few agreeing, a pose left unsure)
     /// or the filter has no returns. The scan is taken at the latest odometry's pose.
     ///
-    /// Before an unknown start is located, and while the pose is unsure by more than
-    /// [`SCAN_LOST_SIGMA_M`], the latest scans are looked up in the whole map instead
-    /// ([`Localizer::search_window`]): `Some(true)` when that located the robot (or, once
-    /// located, its pose was fused), `None` while they leave it unclear.
+    /// Before an unknown start is located, and while the pose is unsure by more than 0.5 m, the
+    /// scans of the last 4 m are looked up in the whole map instead: `Some(true)` when that
+    /// located the robot (or, once located, its pose was fused), `None` while they leave it
+    /// unclear.
     pub fn scan(&mut self, readings: &[SonarReading]) -> Option<bool> {
         let (Some(returns), Some(layout)) = (self.returns.clone(), self.layout.as_ref()) else {
             return None;
