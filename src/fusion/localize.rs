@@ -1174,7 +1174,7 @@ impl Localizer {
             .iter()
             .filter_map(|r| {
                 let at = layout.sensors.get(r.sensor)?.robot_from_sensor();
-                let range = r.range_m.filter(|&m| m < layout.max_range_m - 1e-6)?;
+                let range = layout.echo(r.range_m)?;
                 Some((at.x + range * at.theta.cos(), at.y + range * at.theta.sin()))
             })
             .collect();
@@ -2316,7 +2316,7 @@ mod tests {
             origin_m: [-1.013, -1.013],
         };
         let placed = crate::sonar::place_readings(&readings, &layout, &truth);
-        let returns = returns_map(&placed, &extent, layout.max_range_m);
+        let returns = returns_map(&placed, &extent, &layout);
         (layout, truth, odometry, readings, returns)
     }
 

@@ -133,7 +133,7 @@ pub fn survey(
         timed("map_returns", times, || {
             let placed = run.placed_readings(&offline.trajectory);
             let extent = GridGeometry::from_config(&mapping.grid);
-            returns_map(&placed, &extent, layout.max_range_m)
+            returns_map(&placed, &extent, layout)
         })
     });
     let landmarks = offline

@@ -412,7 +412,7 @@ pub const RETURN_CELL_M: f64 = 0.05;
 /// may be a person walking by.
 pub const MIN_RETURNS: u32 = 2;
 
-/// Where a laser's returns (`placed`, those nearer than `max_range_m`) fell, on cells of
+/// Where a laser's returns (`placed`, those with an echo: [`SonarLayout::echo`]) fell, on cells of
 /// [`RETURN_CELL_M`] over the extent of `extent`: occupied where [`MIN_RETURNS`] or more did,
 /// unknown elsewhere (the rays' free space is not traced: a scan is matched with what it hits).
 /// `localize` matches a later run's scans with it (`returns_corrected.pgm`), as the survey's
@@ -421,7 +421,7 @@ pub const MIN_RETURNS: u32 = 2;
 pub fn returns_map(
     placed: &[PlacedReading],
     extent: &GridGeometry,
-    max_range_m: f64,
+    layout: &SonarLayout,
 ) -> OccupancyMap {
     let geometry = GridGeometry {
         width: (extent.width as f64 * extent.resolution_m / RETURN_CELL_M).ceil() as usize,
@@ -431,7 +431,7 @@ pub fn returns_map(
     };
     let mut counts = vec![0u32; geometry.width * geometry.height];
     for p in placed {
-        let Some(range) = p.range_m.filter(|&m| m < max_range_m - 1e-6) else {
+        let Some(range) = layout.echo(p.range_m) else {
             continue;
         };
         let at = p.world_from_sensor;
@@ -921,7 +921,11 @@ mod tests {
             at(0.0, Some(1.5)),  // at the range used: no echo
             at(0.0, None),
         ];
-        let map = returns_map(&placed, &extent, 1.5);
+        let layout = SonarLayout {
+            max_range_m: 1.5,
+            ..SonarLayout::frontal5()
+        };
+        let map = returns_map(&placed, &extent, &layout);
         assert_eq!(map.geometry.resolution_m, RETURN_CELL_M);
         assert_eq!((map.geometry.width, map.geometry.height), (40, 40));
         let (col, row) = map.geometry.cell_of(1.01, 0.5).unwrap();

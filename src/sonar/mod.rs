@@ -203,6 +203,12 @@ impl SonarLayout {
         range_m < self.max_range_m - RANGE_LIMIT_MARGIN_M && !self.at_shortest_range(range_m)
     }
 
+    /// The range of a reading when an echo came back within reach (shorter than the largest the
+    /// sensor reports); a range at the shortest is kept, unlike [`Self::measures`].
+    pub fn echo(&self, range_m: Option<f64>) -> Option<f64> {
+        range_m.filter(|&m| m < self.max_range_m - RANGE_LIMIT_MARGIN_M)
+    }
+
     /// Whether a range is at the sensor's shortest (`min_range_m`, when known): something is at
     /// most that near.
     pub fn at_shortest_range(&self, range_m: f64) -> bool {

@@ -227,7 +227,7 @@ fn log_scans(rec: &rerun::RecordingStream, scene: &LocalizeScene<'_>) -> Result<
             .iter()
             .take_while(|x| x.t_s == t)
             .filter_map(|x| {
-                let range = x.range_m.filter(|&m| m < layout.max_range_m - 1e-6)?;
+                let range = layout.echo(x.range_m)?;
                 let o = pose.compose(&layout.sensors.get(x.sensor)?.robot_from_sensor());
                 let end = [o.x + range * o.theta.cos(), o.y + range * o.theta.sin()];
                 Some([end[0] as f32, end[1] as f32, SONAR_Z_M])

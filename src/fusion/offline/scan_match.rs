@@ -78,7 +78,7 @@ pub(super) fn sequential(
         .then(|| ReturnField::over(&GridGeometry::from_config(grid)));
     // A reading at the transducer's shortest range is kept: the thing is at most that near, a
     // centimetre or two off the arc, well within a match's tolerance.
-    let echo = |r: &SonarReading| r.range_m.is_some_and(|m| m < layout.max_range_m - 1e-6);
+    let echo = |r: &SonarReading| layout.echo(r.range_m).is_some();
     // Times of the readings with an echo: the window of keyframe k is the WINDOW latest by then.
     let echo_times: Vec<f64> = readings.iter().filter(|r| echo(r)).map(|r| r.t_s).collect();
     let mut poses: Vec<Pose2> = Vec::with_capacity(frames.len());
@@ -188,7 +188,7 @@ pub(super) fn agreement(
     grid: &GridConfig,
 ) -> Option<f64> {
     let placed: Vec<PlacedReading> = crate::sonar::place_readings(readings, layout, trajectory);
-    let echo = |p: &PlacedReading| p.range_m.filter(|&m| m < layout.max_range_m - 1e-6);
+    let echo = |p: &PlacedReading| layout.echo(p.range_m);
     if layout.beam == BeamModel::Ray {
         let extent = GridGeometry::from_config(grid);
         return Some(returns_agreement(&placed, &extent, echo));
