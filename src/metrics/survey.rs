@@ -418,6 +418,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
         "offline.sonar_matches".into(),
         survey.offline.sonar_matches as f64,
     );
+    m.insert(
+        "offline.sonar_wall_directions".into(),
+        survey.offline.sonar_wall_directions as f64,
+    );
     if let Some([before, after]) = survey.offline.sonar_agreement {
         m.insert("offline.sonar_agreement_odometry".into(), before);
         m.insert("offline.sonar_agreement_corrected".into(), after);

@@ -606,14 +606,22 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
         } else {
             format!(
                 "No tags and no visual turns: the ranges (sonar or lidar) corrected the \
-                 odometry (the latest matched the older readings at {} of {} keyframes; they \
-                 agree with one another {:.0}% along the odometry, {:.0}% along the \
-                 correction{}).\n\n",
-                offline.sonar_matches,
-                offline.keyframes,
+                 odometry ({}; they agree with one another {:.0}% along the odometry, {:.0}% \
+                 along the correction{}).\n\n",
+                match offline.sonar_matches {
+                    0 => format!(
+                        "the walls' directions alone: a sonar slid along a wall at {} of {} \
+                         keyframes, and the walls run at right angles",
+                        offline.sonar_wall_directions, offline.keyframes
+                    ),
+                    m => format!(
+                        "the latest matched the older readings at {m} of {} keyframes",
+                        offline.keyframes
+                    ),
+                },
                 100.0 * before,
                 100.0 * after,
-                if offline.sonar_wheel_distance {
+                if offline.sonar_wheel_distance && offline.sonar_matches > 0 {
                     ", which takes the wheels' distance as right: the echoes agreed better so \
                      than with the distance scale estimated"
                 } else {

@@ -102,6 +102,25 @@ impl<T: sna::RealField> tiny_solver::factors::Factor<T> for PoseFactor {
     }
 }
 
+/// Whitened wall direction seen from a keyframe, against the building's wall direction `axes`
+/// (a one-dimensional variable): the wall's normal, `normal_rad` in the keyframe's frame, lies
+/// along one of the four directions `axes + k · 90°`.
+/// `r = ((θ + normal − axes) wrapped to a quarter turn) · sqrt_info`.
+pub(super) struct WallDirectionFactor {
+    pub(super) normal_rad: f64,
+    pub(super) sqrt_info: f64,
+}
+
+impl<T: sna::RealField> tiny_solver::factors::Factor<T> for WallDirectionFactor {
+    fn residual_func(&self, params: &[sna::DVector<T>]) -> sna::DVector<T> {
+        let (pose, axes) = (&params[0], &params[1]);
+        let off = pose[2].clone() + constant::<T>(self.normal_rad) - axes[0].clone();
+        let four = constant::<T>(4.0);
+        let r = angle(off * four.clone()) / four;
+        sna::DVector::from_vec(vec![r * constant::<T>(self.sqrt_info)])
+    }
+}
+
 /// Whitened prior on a vector variable (first pose; corner priors on landmark x, y).
 pub(super) struct PriorFactor {
     pub(super) measured: Vec<f64>,

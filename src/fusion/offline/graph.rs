@@ -5,7 +5,7 @@
 
 use super::factors::{
     sqrt_information, BetweenFactor, PoseFactor, PriorFactor, TagFactor, TurnFactor,
-    WallRangeFactor,
+    WallDirectionFactor, WallRangeFactor,
 };
 use super::keyframes::Keyframes;
 use super::OdometryCalibration;
@@ -389,6 +389,49 @@ pub(super) fn add_matched_poses(
         graph.add(3, &[&pose_name(k)], Box::new(factor), true, config);
     }
     matches.matched.iter().map(|m| m.0).collect()
+}
+
+/// Name of the building's wall direction variable ([`add_wall_directions`]).
+pub(super) const AXES: &str = "wall_axes";
+/// The walls' directions ([`super::wall_directions`]) as factors on their keyframes' headings,
+/// against one variable for the building's wall direction ([`AXES`]), robust; only when most lie
+/// along two directions at right angles, and then only those that do
+/// ([`super::wall_directions::along_axes`]). Returns how many were added.
+pub(super) fn add_wall_directions(
+    graph: &mut Graph,
+    directions: &[super::wall_directions::WallDirection],
+    frames: &[super::keyframes::Keyframe],
+    config: &FuseConfig,
+) -> usize {
+    // Each direction in the world by the odometry, whose heading drifts smoothly (the same in
+    // every try of the sonar's correction, whatever its starting values).
+    let world: Vec<(&super::wall_directions::WallDirection, f64)> = directions
+        .iter()
+        .filter_map(|d| Some((d, frames.get(d.keyframe)?.odom.theta + d.normal_rad)))
+        .collect();
+    let seen: Vec<(f64, f64)> = world.iter().map(|&(d, a)| (a, d.sigma_rad)).collect();
+    let Some(axes) = super::wall_directions::along_axes(&seen) else {
+        return 0;
+    };
+    graph
+        .init
+        .insert(AXES.into(), sna::DVector::from_vec(vec![axes.axes_rad]));
+    let mut added = 0;
+    for (&(d, _), _) in world.iter().zip(&axes.along).filter(|(_, &a)| a) {
+        let factor = WallDirectionFactor {
+            normal_rad: d.normal_rad,
+            sqrt_info: 1.0 / (axes.sigma_scale * d.sigma_rad),
+        };
+        graph.add(
+            1,
+            &[&pose_name(d.keyframe), AXES],
+            Box::new(factor),
+            true,
+            config,
+        );
+        added += 1;
+    }
+    added
 }
 
 /// The odometry calibration's variable and its prior.

@@ -1,0 +1,436 @@
+//! The walls' directions hold the heading where the sonar hears nothing to match: indoors, the
+//! walls mostly run along two directions at right angles. Near a keyframe, a sonar that slides
+//! along a straight wall gives ranges that lie on one line (each echo comes back along the wall's
+//! normal, from the foot of the perpendicular, when that lies in the cone); the line's normal, in
+//! the keyframe's frame, is a measurement of the keyframe's heading modulo a quarter turn once
+//! the building's wall direction is known. The graph estimates that direction with the poses
+//! ([`super::graph::add_wall_directions`]); a run whose walls do not mostly run along two
+//! directions at right angles gets none of these factors.
+
+use super::keyframes::Keyframe;
+use crate::fusion::FuseConfig;
+use crate::geometry::{pose_at, wrap_angle, Pose2, StampedPose};
+use crate::sonar::{BeamModel, SonarLayout, SonarReading};
+
+/// A wall one sonar slid along near a keyframe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct WallDirection {
+    /// The keyframe.
+    pub(super) keyframe: usize,
+    /// The direction of the wall's normal, from the sensor towards the wall, in the keyframe's
+    /// frame, radians.
+    pub(super) normal_rad: f64,
+    /// Its sigma, radians.
+    pub(super) sigma_rad: f64,
+}
+
+/// The readings fitted at a keyframe are those taken within this travel of it, metres, either
+/// way ...
+const REACH_M: f64 = 1.0;
+/// ... and while the odometry's heading is within this of the keyframe's (a turn's scale error
+/// would bend the line): 10 degrees.
+const MAX_TURN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// A line needs this many echoes of one sensor ...
+const MIN_ECHOES: usize = 8;
+/// ... whose feet on the wall spread this far along it, metres (the direction's sigma is the
+/// ranges' over the spread) ...
+const MIN_SPAN_M: f64 = 0.8;
+/// ... of which this share lies within three sigmas of the line (a person or a chair in front of
+/// the wall gives shorter ranges) ...
+const MIN_INLIER_SHARE: f64 = 0.8;
+/// ... and whose whitened residuals' RMS is at most this.
+const MAX_WHITENED_RMS: f64 = 2.0;
+/// Directions tried across the cones' common part: 0.1 degree apart, then refined.
+const SCAN_STEP_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
+/// A line whose best direction lies this near an end of the cones' common part is left out: the
+/// wall may lie outside a cone, whose echo then does not come back along the normal.
+const EDGE_MARGIN_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// The direction's sigma is at least this: a quarter of a degree (the odometry over the window).
+const SIGMA_FLOOR_RAD: f64 = 0.25 * std::f64::consts::PI / 180.0;
+
+/// A wall direction is taken as along the building's axes when, against the nearest of them, it
+/// lies within this of the median of its neighbours' ([`AXES_NEIGHBOURS`]; the directions are
+/// placed by the odometry, whose heading drifts slowly): 4 degrees; others (a slanted wall, a
+/// false line) are left out.
+const AXES_GATE_RAD: f64 = 4.0 * std::f64::consts::PI / 180.0;
+/// The neighbours a direction is judged against: this many either side, in time.
+const AXES_NEIGHBOURS: usize = 4;
+/// The walls run along two directions at right angles when this share of the directions found
+/// passes [`AXES_GATE_RAD`]; otherwise no direction is used.
+const MIN_AXES_SHARE: f64 = 0.6;
+/// A normal spread's sigma over its median absolute deviation.
+const MAD_TO_SIGMA: f64 = 1.4826;
+
+/// Where a run's walls run ([`along_axes`]).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Axes {
+    /// One of the four directions the walls' normals lie along, radians (the others a quarter
+    /// turn apart), by the first few walls.
+    pub(super) axes_rad: f64,
+    /// Which of the directions lie along them.
+    pub(super) along: Vec<bool>,
+    /// What their sigmas are to be scaled by, at least 1: the spread of their offsets against
+    /// their neighbours' over the sigmas the fits gave (a real building's walls are not all at
+    /// right angles to a tenth of a degree: freiburg-079 as sonar, a median 2 degrees off its
+    /// axes, where the simulated museum's are 0.4).
+    pub(super) sigma_scale: f64,
+}
+
+/// Whether walls seen in directions `seen` (each the normal's direction in the world by a
+/// drifting heading, in time order, and its sigma) run along two directions at right angles:
+/// [`MIN_AXES_SHARE`] of them within [`AXES_GATE_RAD`] of their neighbours' offset from the
+/// axes. `None` when they do not.
+pub(super) fn along_axes(seen: &[(f64, f64)]) -> Option<Axes> {
+    let quarter = |a: f64| wrap_angle(4.0 * a) / 4.0;
+    // The axes by the first few (the heading has drifted least), and each direction's offset
+    // from them: the heading's drift so far, and the direction's own error.
+    let (s, c) = seen
+        .iter()
+        .take(2 * AXES_NEIGHBOURS + 1)
+        .fold((0.0, 0.0), |(s, c), (a, _)| {
+            (s + (4.0 * a).sin(), c + (4.0 * a).cos())
+        });
+    let axes_rad = f64::atan2(s, c) / 4.0;
+    let offsets: Vec<f64> = seen.iter().map(|(a, _)| quarter(a - axes_rad)).collect();
+    // Each offset against its neighbours' median.
+    let off_neighbours: Vec<f64> = (0..offsets.len())
+        .map(|i| {
+            let from = i.saturating_sub(AXES_NEIGHBOURS);
+            let to = (i + AXES_NEIGHBOURS + 1).min(offsets.len());
+            let mut near: Vec<f64> = offsets[from..to].to_vec();
+            near.sort_by(f64::total_cmp);
+            offsets[i] - near[near.len() / 2]
+        })
+        .collect();
+    let along: Vec<bool> = off_neighbours
+        .iter()
+        .map(|d| d.abs() <= AXES_GATE_RAD)
+        .collect();
+    let taken = along.iter().filter(|&&a| a).count();
+    let mut whitened: Vec<f64> = seen
+        .iter()
+        .zip(&off_neighbours)
+        .zip(&along)
+        .filter(|(_, &a)| a)
+        .map(|(((_, sigma), off), _)| (off / sigma).abs())
+        .collect();
+    whitened.sort_by(f64::total_cmp);
+    let sigma_scale = whitened
+        .get(whitened.len() / 2)
+        .map_or(1.0, |m| (MAD_TO_SIGMA * m).max(1.0));
+    tracing::debug!(
+        "{taken} of {} wall directions lie along two directions at right angles, their sigmas scaled by {sigma_scale:.2}",
+        seen.len()
+    );
+    (taken > 0 && taken as f64 >= MIN_AXES_SHARE * seen.len() as f64).then_some(Axes {
+        axes_rad,
+        along,
+        sigma_scale,
+    })
+}
+
+/// The walls sonars slid along near the keyframes, one a keyframe at most (the surest), each
+/// stretch of readings used once. A laser's beams (points, not cones) give none here.
+pub(super) fn wall_directions(
+    frames: &[Keyframe],
+    odometry: &[StampedPose],
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+    config: &FuseConfig,
+) -> Vec<WallDirection> {
+    if layout.beam == BeamModel::Ray || odometry.len() < 2 {
+        return Vec::new();
+    }
+    // The distance travelled up to each odometry pose.
+    let mut path = Vec::with_capacity(odometry.len());
+    let mut travelled = 0.0;
+    for (i, p) in odometry.iter().enumerate() {
+        if i > 0 {
+            let q = odometry[i - 1].pose;
+            travelled += (p.pose.x - q.x).hypot(p.pose.y - q.y);
+        }
+        path.push(travelled);
+    }
+    let mut found = Vec::new();
+    let mut used_until = f64::NEG_INFINITY;
+    for (k, frame) in frames.iter().enumerate() {
+        let Some((from, to)) = window(odometry, &path, frame) else {
+            continue;
+        };
+        if from <= used_until {
+            continue;
+        }
+        let first = readings.partition_point(|r| r.t_s < from);
+        let last = readings.partition_point(|r| r.t_s <= to);
+        let best = (0..layout.sensors.len())
+            .filter_map(|sensor| {
+                let echoes: Vec<Echo> = readings[first..last]
+                    .iter()
+                    .filter(|r| r.sensor == sensor)
+                    .filter_map(|r| {
+                        let range = r.range_m.filter(|&m| layout.measures(m))?;
+                        let robot = pose_at(odometry, r.t_s)?;
+                        let at = frame
+                            .odom
+                            .between(&robot)
+                            .compose(&layout.sensors[sensor].robot_from_sensor());
+                        Some(Echo {
+                            sensor: at,
+                            range_m: range,
+                            weight: (config.sonar_sigma_m + config.sonar_sigma_frac * range)
+                                .powi(-2),
+                        })
+                    })
+                    .collect();
+                fit_line(&echoes, layout.cone_rad / 2.0)
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((normal_rad, sigma_rad)) = best {
+            tracing::debug!(
+                "wall direction at keyframe {k} (t {:.1} s): normal {:.2} deg, sigma {:.2} deg",
+                frame.t_s,
+                normal_rad.to_degrees(),
+                sigma_rad.to_degrees()
+            );
+            found.push(WallDirection {
+                keyframe: k,
+                normal_rad,
+                sigma_rad,
+            });
+            used_until = to;
+        }
+    }
+    found
+}
+
+/// The span of time around `frame` within [`REACH_M`] of travel and [`MAX_TURN_RAD`] of heading
+/// of it, by the odometry.
+fn window(odometry: &[StampedPose], path: &[f64], frame: &Keyframe) -> Option<(f64, f64)> {
+    let at = odometry
+        .partition_point(|p| p.t_s < frame.t_s)
+        .min(odometry.len() - 1);
+    let heading = odometry[at].pose.theta;
+    let within = |i: usize| {
+        (path[i] - path[at]).abs() <= REACH_M
+            && wrap_angle(odometry[i].pose.theta - heading).abs() <= MAX_TURN_RAD
+    };
+    if !within(at) {
+        return None;
+    }
+    let mut from = at;
+    while from > 0 && within(from - 1) {
+        from -= 1;
+    }
+    let mut to = at;
+    while to + 1 < odometry.len() && within(to + 1) {
+        to += 1;
+    }
+    Some((odometry[from].t_s, odometry[to].t_s))
+}
+
+/// One echo in the keyframe's frame: where its sensor was, the range, its weight (an inverse
+/// variance).
+#[derive(Clone, Copy)]
+struct Echo {
+    sensor: Pose2,
+    range_m: f64,
+    weight: f64,
+}
+
+/// The line that the echoes' arcs all touch at their cones' common direction: its normal's
+/// direction (sensor to wall) and that direction's sigma, or `None` when the echoes do not lie on
+/// one straight wall ([`MIN_ECHOES`], [`MIN_SPAN_M`], [`MIN_INLIER_SHARE`], [`MAX_WHITENED_RMS`],
+/// [`EDGE_MARGIN_RAD`]). A wall with normal `u` at offset `d` is touched by an echo at range `r`
+/// from a sensor at `c` when `u . c + r = d`.
+fn fit_line(echoes: &[Echo], half_cone_rad: f64) -> Option<(f64, f64)> {
+    if echoes.len() < MIN_ECHOES {
+        return None;
+    }
+    let fitted = fit_among(echoes, half_cone_rad)?;
+    // Once more without the echoes off it (a person, a chair before the wall).
+    let inliers: Vec<Echo> = echoes
+        .iter()
+        .filter(|e| residual(e, fitted.0, fitted.1).powi(2) * e.weight <= 9.0)
+        .copied()
+        .collect();
+    if inliers.len() < MIN_ECHOES || (inliers.len() as f64) < MIN_INLIER_SHARE * echoes.len() as f64
+    {
+        return None;
+    }
+    let (normal, offset) = fit_among(&inliers, half_cone_rad)?;
+    let chi2: f64 = inliers
+        .iter()
+        .map(|e| residual(e, normal, offset).powi(2) * e.weight)
+        .sum();
+    if chi2 / (inliers.len() - 2) as f64 > MAX_WHITENED_RMS.powi(2) {
+        return None;
+    }
+    // The feet along the wall: their spread, and the direction's information.
+    let along = |e: &Echo| -normal.sin() * e.sensor.x + normal.cos() * e.sensor.y;
+    let (lo, hi) = inliers
+        .iter()
+        .map(along)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+    if hi - lo < MIN_SPAN_M {
+        return None;
+    }
+    let weights: f64 = inliers.iter().map(|e| e.weight).sum();
+    let mean = inliers.iter().map(|e| e.weight * along(e)).sum::<f64>() / weights;
+    let information: f64 = inliers
+        .iter()
+        .map(|e| e.weight * (along(e) - mean).powi(2))
+        .sum();
+    let sigma = information.recip().sqrt().max(SIGMA_FLOOR_RAD);
+    Some((wrap_angle(normal), sigma))
+}
+
+/// How far an echo's arc falls from the wall with normal at `normal` and offset `offset`.
+fn residual(e: &Echo, normal: f64, offset: f64) -> f64 {
+    normal.cos() * e.sensor.x + normal.sin() * e.sensor.y + e.range_m - offset
+}
+
+/// The weighted least-squares line over the directions every echo's cone holds (strictly inside
+/// by [`EDGE_MARGIN_RAD`]): its normal's direction and offset.
+fn fit_among(echoes: &[Echo], half_cone_rad: f64) -> Option<(f64, f64)> {
+    // The cones' common directions, relative to the first echo's bearing.
+    let base = echoes.first()?.sensor.theta;
+    let (mut lo, mut hi) = (-half_cone_rad, half_cone_rad);
+    for e in echoes {
+        let b = wrap_angle(e.sensor.theta - base);
+        lo = lo.max(b - half_cone_rad);
+        hi = hi.min(b + half_cone_rad);
+    }
+    if hi - lo <= 2.0 * EDGE_MARGIN_RAD {
+        return None;
+    }
+    let weights: f64 = echoes.iter().map(|e| e.weight).sum();
+    let cost = |phi: f64| {
+        let normal = base + phi;
+        let (s, c) = normal.sin_cos();
+        let offset = echoes
+            .iter()
+            .map(|e| e.weight * (c * e.sensor.x + s * e.sensor.y + e.range_m))
+            .sum::<f64>()
+            / weights;
+        let sum = echoes
+            .iter()
+            .map(|e| e.weight * residual(e, normal, offset).powi(2))
+            .sum::<f64>();
+        (sum, offset)
+    };
+    let steps = ((hi - lo) / SCAN_STEP_RAD).ceil() as usize;
+    let (best, _) = (0..=steps)
+        .map(|i| lo + (hi - lo) * i as f64 / steps as f64)
+        .map(|phi| (phi, cost(phi).0))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    // A parabola through the best step and its neighbours.
+    let h = (hi - lo) / steps as f64;
+    let (c0, c1, c2) = (cost(best - h).0, cost(best).0, cost(best + h).0);
+    let curvature = c0 - 2.0 * c1 + c2;
+    let refined = if curvature > 0.0 {
+        best + 0.5 * h * (c0 - c2) / curvature
+    } else {
+        best
+    };
+    if refined < lo + EDGE_MARGIN_RAD || refined > hi - EDGE_MARGIN_RAD {
+        return None;
+    }
+    Some((base + refined, cost(refined).1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Echoes of a side sonar sliding 2 m along a wall that runs 4 degrees off the robot's path,
+    /// with a centimetre of noise and a person in front of the wall once.
+    fn along_a_wall(slant_rad: f64) -> Vec<Echo> {
+        let mut noise = 0.37f64;
+        (0..20)
+            .map(|i| {
+                let x = -1.0 + 0.1 * i as f64;
+                // The wall: y = 0.6 + x tan(slant); the sensor looks left (bearing 90 degrees).
+                let distance = (0.6 + x * slant_rad.tan()) * slant_rad.cos();
+                noise = (noise * 7.3 + 0.11).fract();
+                let person = if i == 7 { -0.4 } else { 0.0 };
+                Echo {
+                    sensor: Pose2::new(x, 0.0, std::f64::consts::FRAC_PI_2),
+                    range_m: distance + 0.02 * (noise - 0.5) + person,
+                    weight: 0.015f64.powi(-2),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_wall_slid_along_gives_its_normal() {
+        let slant = 4f64.to_radians();
+        let (normal, sigma) = fit_line(&along_a_wall(slant), 15f64.to_radians()).unwrap();
+        // The normal points from the sensor to the wall: 90 degrees plus the slant.
+        let error = wrap_angle(normal - (std::f64::consts::FRAC_PI_2 + slant));
+        assert!(error.abs() < 3.0 * sigma, "{error} against {sigma}");
+        assert!(sigma < 1f64.to_radians(), "{sigma}");
+    }
+
+    /// Walls along axes 20 degrees off the start's, seen by a heading that drifts a tenth of a
+    /// degree a wall, each a fifth of a degree off (a fixed pseudo-random spread), and a wall
+    /// slanted 30 degrees every tenth.
+    fn seen_along_axes() -> Vec<(f64, f64)> {
+        let mut noise = 0.61f64;
+        (0..60)
+            .map(|i| {
+                noise = (noise * 5.7 + 0.31).fract();
+                let wall = if i % 10 == 9 {
+                    30.0
+                } else {
+                    (i % 4) as f64 * 90.0
+                };
+                let deg = 20.0 + wall + 0.1 * i as f64 + 0.4 * (noise - 0.5);
+                (wrap_angle(deg.to_radians()), 0.3f64.to_radians())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn walls_at_right_angles_are_found_along_a_drifting_heading() {
+        let axes = along_axes(&seen_along_axes()).expect("the walls run at right angles");
+        // The first few walls say where the axes are, before the heading drifted far.
+        let off = wrap_angle(4.0 * (axes.axes_rad - 20f64.to_radians())) / 4.0;
+        assert!(off.abs() < 1f64.to_radians(), "{}", off.to_degrees());
+        // Every slanted wall is left out, every other taken; the fits' sigmas hold.
+        for (i, along) in axes.along.iter().enumerate() {
+            assert_eq!(*along, i % 10 != 9, "wall {i}");
+        }
+        assert_eq!(axes.sigma_scale, 1.0);
+    }
+
+    #[test]
+    fn walls_in_every_direction_are_not_along_axes() {
+        let seen: Vec<(f64, f64)> = (0..60)
+            .map(|i| (wrap_angle((i as f64 * 37.0).to_radians()), 0.005))
+            .collect();
+        assert_eq!(along_axes(&seen), None);
+        assert_eq!(along_axes(&[]), None);
+    }
+
+    #[test]
+    fn directions_scattered_wider_than_their_fits_say_get_wider_sigmas() {
+        // The same walls, their fits claiming a fiftieth of a degree.
+        let seen: Vec<(f64, f64)> = seen_along_axes()
+            .into_iter()
+            .map(|(a, _)| (a, 0.02f64.to_radians()))
+            .collect();
+        let axes = along_axes(&seen).expect("along axes");
+        assert!(axes.sigma_scale > 2.0, "{}", axes.sigma_scale);
+    }
+
+    #[test]
+    fn a_wall_outside_the_cone_or_a_short_stretch_gives_nothing() {
+        // Slanted 20 degrees: its normal lies outside a 30-degree cone about the bearing.
+        assert!(fit_line(&along_a_wall(20f64.to_radians()), 15f64.to_radians()).is_none());
+        let short: Vec<Echo> = along_a_wall(0.0).into_iter().take(8).collect();
+        assert!(fit_line(&short, 15f64.to_radians()).is_none());
+    }
+}
