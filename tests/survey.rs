@@ -853,9 +853,9 @@ fn a_sonar_only_survey_takes_the_wheels_distance_when_the_echoes_agree_better_wi
 
 /// The simulated museum's hall is wider than the sonar's reach: where the robot crosses it, the
 /// heading drifts with nothing to match, and the matches after it pull the run onto a bent map.
-/// On seed 2 the walls' directions alone correct it better, the echoes agreeing best along that
-/// correction (issue 31, item 3: odometry 3.0 m, matches 0.81 m with a map 0.27 precise, the
-/// directions 0.26 m with a map 0.89 precise against the ground-truth map's 0.95).
+/// The walls' directions correct the headings the matches are predicted along (issue 31, item
+/// 3; seed 1: odometry 4.09 m; matches alone 0.34 m with a map 0.71 precise; now 0.21 m, 0.89,
+/// against the ground-truth map's 0.95).
 #[test]
 fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     let dir = tempfile::tempdir().unwrap();
@@ -864,7 +864,7 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
         Path::new("samples/museum/world.yaml"),
         &run,
         SimSettings {
-            seed: Some(2),
+            seed: Some(1),
             ..SimSettings::default()
         },
         true,
@@ -873,8 +873,8 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     survey_run(&run, &out);
     let report = read_report(&out);
     let m = &report["metrics"];
-    eprintln!("museum seed 2, sonar only: {m}");
-    assert_eq!(metric(&report, "offline.sonar_matches"), 0.0, "{m}");
+    eprintln!("museum seed 1, sonar only: {m}");
+    assert!(metric(&report, "offline.sonar_matches") >= 100.0, "{m}");
     assert!(
         metric(&report, "offline.sonar_wall_directions") >= 40.0,
         "{m}"
@@ -884,7 +884,7 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
         metric(&report, "ate_m.offline"),
     );
     assert!(
-        offline <= odometry / 3.0 && offline < 0.35,
+        offline <= odometry / 3.0 && offline < 0.3,
         "ATE {offline} for {odometry}"
     );
     let (corrected, truth) = (

@@ -615,8 +615,14 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
                         offline.sonar_wall_directions, offline.keyframes
                     ),
                     m => format!(
-                        "the latest matched the older readings at {m} of {} keyframes",
-                        offline.keyframes
+                        "the latest matched the older readings at {m} of {} keyframes{}",
+                        offline.keyframes,
+                        match offline.sonar_wall_directions {
+                            0 => String::new(),
+                            d => format!(
+                                ", predicted along headings {d} walls' directions corrected"
+                            ),
+                        }
                     ),
                 },
                 100.0 * before,

@@ -58,10 +58,14 @@ pub struct OfflineResult {
     /// ([`run_offline_sonar`]; 0 in a pass without).
     pub sonar_matches: usize,
     /// Keyframes whose heading is held by the direction of a wall a sonar slid along, the walls
-    /// running along two directions at right angles: the sonar's correction by the walls'
-    /// directions alone ([`run_offline_sonar`], taken when the echoes agree best along it; then
-    /// [`Self::sonar_matches`] is 0). 0 in a pass without, and when the walls do not.
+    /// running along two directions at right angles ([`run_offline_sonar`]): in the graph of the
+    /// correction by the walls' directions alone (then [`Self::sonar_matches`] is 0), or in the
+    /// matching, whose predictions they corrected. 0 in a pass without, and when the walls do
+    /// not.
     pub sonar_wall_directions: usize,
+    /// The direction of the building's walls the sonar's directions found, radians (one of four a
+    /// quarter turn apart), when a correction by them was kept.
+    pub wall_axes_rad: Option<f64>,
     /// The share of the run's echoes that agree with the others placed along the odometry and
     /// along the sonar's correction ([`run_offline_sonar`]; `None` in a pass without): the
     /// correction is kept only when it raises the share by 3 points.
@@ -279,11 +283,12 @@ pub(crate) fn resolve_online(
 /// sightings, no visual turns): the sonar's latest ranges at each keyframe are matched with the
 /// counting grid (on `grid`) of its older readings, placed along the trajectory corrected so far,
 /// and the matched keyframes hold the graph near where they matched (robust priors); the
-/// odometry and its calibration carry the correction between them. A sonar run is also
+/// odometry and its calibration carry the correction between them. A sonar run is first
 /// corrected by the directions of the walls its sonars slid along alone, when the walls run at
-/// right angles (`wall_directions`); of the tries, the one along which the echoes agree best
-/// is taken. With no match, nothing is corrected ([`OfflineKept::Nothing`]), as in
-/// [`run_offline`].
+/// right angles (`wall_directions`); when that correction makes the echoes agree, the headings
+/// the matches are predicted along are corrected by the walls too. Of the tries, the one along
+/// which the echoes agree best is taken. With no match, nothing is corrected
+/// ([`OfflineKept::Nothing`]), as in [`run_offline`].
 pub fn run_offline_sonar(
     obs: &Observations<'_>,
     online: &OnlineResult,
@@ -297,7 +302,35 @@ pub fn run_offline_sonar(
     // seeds 1-5). Either way can be the better one: the correction along which the run's echoes
     // agree better with one another is taken (over forty simulated runs, nine better than the
     // scale estimated alone, three worse; docs/RESULTS.md).
-    // Their first passes match the same ranges along the same odometry: matched once.
+    // First the walls' directions alone (a laser's beams give none here, see
+    // `wall_directions`). When the echoes agree clearly better along their correction than along
+    // the odometry, the building's axes it found correct the headings the matches are predicted
+    // along: a match's grid is placed along the trajectory corrected so far, and where the sonar
+    // heard nothing for a while (the simulated museum's hall) the odometry's heading has drifted
+    // and the matches pull the run onto a bent map.
+    let directions = (sonar.layout.beam == crate::sonar::BeamModel::Cone).then(|| {
+        sonar_passes(
+            obs,
+            online,
+            config,
+            (sonar, grid, None, None),
+            SonarHold::Directions,
+        )
+    });
+    let agreement = |trajectory: &[StampedPose]| {
+        scan_match::agreement(trajectory, sonar.readings, sonar.layout, grid).unwrap_or(0.0)
+    };
+    let odometry_agreement = agreement(obs.odometry);
+    let directions_agreement = directions
+        .as_ref()
+        .filter(|d| d.kept == OfflineKept::Solution)
+        .map(|d| agreement(&d.trajectory));
+    let axes = directions
+        .as_ref()
+        .and_then(|d| d.wall_axes_rad)
+        .filter(|_| directions_agreement.is_some_and(|a| a >= odometry_agreement + SONAR_MIN_GAIN));
+    // The two matched tries' first passes match the same ranges along the same odometry:
+    // matched once.
     let first = obs.odometry.first().and_then(|first| {
         let visual = keyframes::turns_used(obs, config);
         let frames = keyframes::choose(obs, &visual, online, config, first.pose).frames;
@@ -308,29 +341,35 @@ pub fn run_offline_sonar(
             sonar.layout,
             grid,
             config,
+            &axes.map_or_else(Vec::new, |a| {
+                wall_directions::heading_corrections(
+                    &frames,
+                    obs.odometry,
+                    sonar.readings,
+                    sonar.layout,
+                    config,
+                    a,
+                )
+            }),
         )
     });
-    let passes = |hold| sonar_passes(obs, online, config, (sonar, grid, first.as_ref()), hold);
-    let ((estimated, wheels), directions) = rayon::join(
-        || {
-            rayon::join(
-                || passes(SonarHold::Matches),
-                || passes(SonarHold::MatchesWheelDistance),
-            )
-        },
-        // A laser's beams give no wall directions here (see `wall_directions`).
-        || match sonar.layout.beam {
-            crate::sonar::BeamModel::Cone => Some(passes(SonarHold::Directions)),
-            crate::sonar::BeamModel::Ray => None,
-        },
-    );
-    let agreement = |trajectory: &[StampedPose]| {
-        scan_match::agreement(trajectory, sonar.readings, sonar.layout, grid).unwrap_or(0.0)
+    let passes = |hold| {
+        sonar_passes(
+            obs,
+            online,
+            config,
+            (sonar, grid, first.as_ref(), axes),
+            hold,
+        )
     };
+    let (estimated, wheels) = rayon::join(
+        || passes(SonarHold::Matches),
+        || passes(SonarHold::MatchesWheelDistance),
+    );
     let score =
         |r: &OfflineResult| (r.kept == OfflineKept::Solution).then(|| agreement(&r.trajectory));
     let mut tries = vec![(score(&estimated), estimated), (score(&wheels), wheels)];
-    tries.extend(directions.map(|d| (score(&d), d)));
+    tries.extend(directions.map(|d| (directions_agreement, d)));
     // The first of the best (the estimated scale's on a tie).
     let best = (0..tries.len()).fold(0, |best, i| match (tries[i].0, tries[best].0) {
         (Some(a), Some(b)) if a > b => i,
@@ -362,14 +401,18 @@ pub fn run_offline_sonar(
             result.keyframes
         ),
         matches => tracing::info!(
-            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {matches} of {} keyframes",
-            result.keyframes
+            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {matches} of {} keyframes{}",
+            result.keyframes,
+            match result.sonar_wall_directions {
+                0 => String::new(),
+                d => format!(", predicted along headings {d} walls' directions corrected"),
+            }
         ),
     }
     // Kept only when the run's ranges agree with one another clearly better along it than along
     // the odometry: matches off a biased grid can bend an already good odometry.
     if let Some(after) = after {
-        let before = agreement(obs.odometry);
+        let before = odometry_agreement;
         result.sonar_agreement = Some([before, after]);
         let sensor = match sonar.layout.beam {
             crate::sonar::BeamModel::Cone => "sonar",
@@ -413,16 +456,17 @@ fn sonar_passes(
     obs: &Observations<'_>,
     online: &OnlineResult,
     config: &FuseConfig,
-    (sonar, grid, first): (
+    (sonar, grid, first, axes): (
         &crate::fusion::SonarInput<'_>,
         &crate::sonar::grid::GridConfig,
         Option<&scan_match::ScanMatches>,
+        Option<f64>,
     ),
     hold: SonarHold,
 ) -> OfflineResult {
     let wheel_distance = hold != SonarHold::Matches;
     let pass = |obs: &Observations<'_>, matched| {
-        let sonar = SonarUse::ScanMatch(sonar, grid, hold, matched);
+        let sonar = SonarUse::ScanMatch(sonar, grid, hold, matched, axes);
         solve(obs, online, config, (None, None), &[], (sonar, false))
     };
     let mut result = OfflineResult {
@@ -480,6 +524,7 @@ enum SonarUse<'a> {
         &'a crate::sonar::grid::GridConfig,
         SonarHold,
         Option<&'a scan_match::ScanMatches>,
+        Option<f64>,
     ),
 }
 
@@ -494,10 +539,8 @@ enum SonarHold {
     /// walls far better than along them: the scale they found scattered from -2.9% to +2.6%
     /// about the simulated wheels' 0).
     MatchesWheelDistance,
-    /// By the walls' directions alone, the wheels' distance held. A match's grid is placed along
-    /// the odometry corrected so far, whose heading drifts where the sonar hears nothing (the
-    /// simulated museum's hall): the matches then pull the run onto a bent map, where the
-    /// directions alone keep it straight.
+    /// By the walls' directions alone, the wheels' distance held: tried first; its axes then
+    /// correct the headings the matches are predicted along.
     Directions,
 }
 
@@ -563,6 +606,7 @@ fn solve(
             wall_ranges: 0,
             sonar_matches: 0,
             sonar_wall_directions: 0,
+            wall_axes_rad: None,
             sonar_agreement: None,
             sonar_wheel_distance: false,
             odometry_calibration: None,
@@ -584,7 +628,7 @@ fn solve(
     let calibrated_arcs = known.as_ref().is_some_and(graph::within_prior);
     let calibration_prior = match (prior, sonar) {
         (Some(c), _) => graph::CalibrationPrior::Survey(c),
-        (None, SonarUse::ScanMatch(_, _, hold, _)) if hold != SonarHold::Matches => {
+        (None, SonarUse::ScanMatch(_, _, hold, ..)) if hold != SonarHold::Matches => {
             graph::CalibrationPrior::WheelDistance
         }
         (None, _) => graph::CalibrationPrior::Wheels,
@@ -612,9 +656,20 @@ fn solve(
         SonarUse::Walls(w) => graph::add_wall_ranges(&mut graph, obs, &keyframes, w, config),
         _ => 0,
     };
+    let mut headings_held = 0;
     let sonar_matches = match sonar {
-        SonarUse::ScanMatch(s, grid, hold, given) if hold != SonarHold::Directions => {
+        SonarUse::ScanMatch(s, grid, hold, given, axes) if hold != SonarHold::Directions => {
             let made = given.is_none().then(|| {
+                let headings = axes.map_or_else(Vec::new, |a| {
+                    wall_directions::heading_corrections(
+                        &keyframes.frames,
+                        obs.odometry,
+                        s.readings,
+                        s.layout,
+                        config,
+                        a,
+                    )
+                });
                 scan_match::sequential(
                     &keyframes.frames,
                     obs.odometry,
@@ -622,18 +677,20 @@ fn solve(
                     s.layout,
                     grid,
                     config,
+                    &headings,
                 )
             });
             given
                 .or(made.as_ref().and_then(Option::as_ref))
                 .map_or_else(Vec::new, |m| {
+                    headings_held = m.headings_held;
                     graph::add_matched_poses(&mut graph, m, config)
                 })
         }
         _ => Vec::new(),
     };
-    let sonar_wall_directions = match sonar {
-        SonarUse::ScanMatch(s, _, SonarHold::Directions, _) => {
+    let direction_factors = match sonar {
+        SonarUse::ScanMatch(s, _, SonarHold::Directions, ..) => {
             let found = wall_directions::wall_directions(
                 &keyframes.frames,
                 obs.odometry,
@@ -645,6 +702,8 @@ fn solve(
         }
         _ => 0,
     };
+    // The directions held the graph's headings, or the headings the matches were made along.
+    let sonar_wall_directions = direction_factors.max(headings_held);
     let options = tiny_solver::OptimizerOptions {
         max_iteration: config.max_iterations,
         ..Default::default()
@@ -655,7 +714,7 @@ fn solve(
     let nothing = graph.sightings.is_empty()
         && visual.is_empty()
         && sonar_matches.is_empty()
-        && sonar_wall_directions == 0;
+        && direction_factors == 0;
     let mut notes = Vec::new();
     if nothing {
         notes.push(format!(
@@ -831,6 +890,10 @@ fn solve(
         wall_ranges,
         sonar_matches: sonar_matches.len(),
         sonar_wall_directions,
+        wall_axes_rad: values
+            .get(graph::AXES)
+            .filter(|_| kept == OfflineKept::Solution)
+            .map(|v| v[0]),
         sonar_agreement: None,
         sonar_wheel_distance: false,
         odometry_calibration: values

@@ -61,6 +61,8 @@ const FIELD_SUBCELLS: f64 = 4.0;
 pub(super) struct ScanMatches {
     pub(super) poses: Vec<Pose2>,
     pub(super) matched: Vec<(usize, Pose2, Matrix3<f64>)>,
+    /// Keyframes whose predicted heading a wall's direction corrected.
+    pub(super) headings_held: usize,
 }
 
 /// Matches each keyframe's latest ranges with the grid of the older ones, in time order (see
@@ -72,6 +74,7 @@ pub(super) fn sequential(
     layout: &SonarLayout,
     grid: &GridConfig,
     config: &FuseConfig,
+    headings: &[Option<(f64, f64)>],
 ) -> Option<ScanMatches> {
     let mut counting = CountingGrid::for_layout(grid.clone(), layout).ok()?;
     let mut returns = (layout.beam == BeamModel::Ray)
@@ -85,8 +88,9 @@ pub(super) fn sequential(
     let mut matched = Vec::new();
     let mut inserted = 0; // readings already in the grid
     let mut covariance = Matrix3::zeros();
+    let mut headings_held = 0;
     for (k, frame) in frames.iter().enumerate() {
-        let predicted = match k {
+        let mut predicted = match k {
             0 => frame.odom,
             _ => {
                 let delta = frames[k - 1].odom.between(&frame.odom);
@@ -94,6 +98,22 @@ pub(super) fn sequential(
                 poses[k - 1].compose(&delta)
             }
         };
+        // The heading the walls' directions give (relative to their axes), a Kalman update.
+        if let Some(&Some((innovation, sigma))) = headings.get(k).filter(|_| k > 0) {
+            let innovation = innovation - wrap_angle(predicted.theta - frame.odom.theta);
+            let s = covariance[(2, 2)] + sigma * sigma;
+            if innovation * innovation / s < 9.0 {
+                headings_held += 1;
+                let gain = covariance.column(2) / s;
+                predicted = Pose2::new(
+                    predicted.x + gain[0] * innovation,
+                    predicted.y + gain[1] * innovation,
+                    wrap_angle(predicted.theta + gain[2] * innovation),
+                );
+                covariance -= gain * covariance.row(2);
+                covariance = 0.5 * (covariance + covariance.transpose());
+            }
+        }
         let last = echo_times.partition_point(|&t| t <= frame.t_s);
         let window_start = echo_times[last.saturating_sub(WINDOW)..last]
             .first()
@@ -173,7 +193,11 @@ pub(super) fn sequential(
             _ => poses.push(predicted),
         }
     }
-    Some(ScanMatches { poses, matched })
+    Some(ScanMatches {
+        poses,
+        matched,
+        headings_held,
+    })
 }
 
 /// How well a run's ranges agree with one another placed along `trajectory`: the share of the

@@ -129,6 +129,35 @@ pub(super) fn along_axes(seen: &[(f64, f64)]) -> Option<Axes> {
     })
 }
 
+/// The heading correction the walls' directions give each keyframe's odometry heading, and its
+/// sigma, the building's axes at `axes_rad` (as a correction by the directions found them):
+/// `None` where no wall was slid along or its direction is not along the axes.
+pub(super) fn heading_corrections(
+    frames: &[Keyframe],
+    odometry: &[StampedPose],
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+    config: &FuseConfig,
+    axes_rad: f64,
+) -> Vec<Option<(f64, f64)>> {
+    let mut out = vec![None; frames.len()];
+    let found = wall_directions(frames, odometry, readings, layout, config);
+    let seen: Vec<(f64, f64)> = found
+        .iter()
+        .map(|d| (frames[d.keyframe].odom.theta + d.normal_rad, d.sigma_rad))
+        .collect();
+    let Some(axes) = along_axes(&seen) else {
+        return out;
+    };
+    for ((d, (world, _)), along) in found.iter().zip(&seen).zip(&axes.along) {
+        if *along {
+            let off = wrap_angle(4.0 * (world - axes_rad)) / 4.0;
+            out[d.keyframe] = Some((-off, axes.sigma_scale * d.sigma_rad));
+        }
+    }
+    out
+}
+
 /// The walls sonars slid along near the keyframes, one a keyframe at most (the surest), each
 /// stretch of readings used once. A laser's beams (points, not cones) give none here.
 pub(super) fn wall_directions(
