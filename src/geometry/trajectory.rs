@@ -52,6 +52,20 @@ pub fn path_length_m(trajectory: &[StampedPose]) -> f64 {
         .sum()
 }
 
+/// The distance travelled along a trajectory up to each of its poses, metres (0 at the first).
+pub fn distance_travelled(trajectory: &[StampedPose]) -> Vec<f64> {
+    let mut total = 0.0;
+    let mut out = Vec::with_capacity(trajectory.len());
+    for (i, p) in trajectory.iter().enumerate() {
+        if i > 0 {
+            let q = trajectory[i - 1].pose;
+            total += (p.pose.x - q.x).hypot(p.pose.y - q.y);
+        }
+        out.push(total);
+    }
+    out
+}
+
 /// An odometry step is a jump when it is longer than this, metres ...
 pub const JUMP_MIN_M: f64 = 1.0;
 /// ... and faster than this, metres per second (a home robot drives at most 1-2 m/s).

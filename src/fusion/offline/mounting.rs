@@ -154,16 +154,7 @@ fn between(odometry: &[StampedPose], a: f64, b: f64, config: &FuseConfig) -> Bet
 /// Each tag's sightings cut into stretches of [`MOUNTING_STRETCH_M`] of odometry, with the
 /// odometry pose of each; only stretches of two sightings or more.
 fn stretches(odometry: &[StampedPose], sightings: &[TagSighting]) -> Vec<Vec<(usize, Pose2)>> {
-    // Distance travelled along the odometry at each of its poses.
-    let mut travelled = Vec::with_capacity(odometry.len());
-    let mut total = 0.0;
-    for (i, p) in odometry.iter().enumerate() {
-        if i > 0 {
-            let q = odometry[i - 1].pose;
-            total += (p.pose.x - q.x).hypot(p.pose.y - q.y);
-        }
-        travelled.push(total);
-    }
+    let travelled = crate::geometry::distance_travelled(odometry);
     let distance_at = |t: f64| {
         let i = odometry
             .partition_point(|p| p.t_s < t)

@@ -170,16 +170,7 @@ pub(super) fn wall_directions(
     if layout.beam == BeamModel::Ray || odometry.len() < 2 {
         return Vec::new();
     }
-    // The distance travelled up to each odometry pose.
-    let mut path = Vec::with_capacity(odometry.len());
-    let mut travelled = 0.0;
-    for (i, p) in odometry.iter().enumerate() {
-        if i > 0 {
-            let q = odometry[i - 1].pose;
-            travelled += (p.pose.x - q.x).hypot(p.pose.y - q.y);
-        }
-        path.push(travelled);
-    }
+    let path = crate::geometry::distance_travelled(odometry);
     let mut found = Vec::new();
     let mut used_until = f64::NEG_INFINITY;
     for (k, frame) in frames.iter().enumerate() {
