@@ -395,7 +395,7 @@ pub fn run_offline_sonar(
     }
     let (after, mut result) = tries.swap_remove(best);
     match result.sonar_matches {
-        0 => tracing::info!(
+        0 if result.sonar_wall_directions > 0 => tracing::info!(
             "no tag sightings and no visual turns: the headings of {} of {} keyframes held by the direction of a wall a sonar slid along",
             result.sonar_wall_directions,
             result.keyframes
@@ -532,8 +532,9 @@ enum SonarUse<'a> {
 /// which the one the echoes agree with best is taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum SonarHold {
-    /// Where the latest ranges matched the older readings ([`scan_match`]) and by the walls'
-    /// directions ([`wall_directions`]), the wheels' distance scale estimated.
+    /// Where the latest ranges matched the older readings ([`scan_match`]), the matches
+    /// predicted along headings the walls' directions corrected when the directions' try found
+    /// the building's axes ([`wall_directions`]); the wheels' distance scale estimated.
     Matches,
     /// The same with the wheels' distance scale held (the matches hold the robot across the
     /// walls far better than along them: the scale they found scattered from -2.9% to +2.6%

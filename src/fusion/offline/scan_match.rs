@@ -10,6 +10,11 @@
 //! comes to an occupied cell of the grid so far, or, for a laser, how near its return comes to
 //! an older return ([`ReturnField`]); a range whose arc lies wholly in cells the grid has not
 //! seen says nothing and is left out of that match.
+//!
+//! Where a sonar slid along a wall and the building's walls run at right angles, the heading the
+//! wall gives updates the keyframe's prediction first ([`super::wall_directions`]): the grid is
+//! then placed along headings the walls hold, not along the odometry's drift across a stretch
+//! where nothing was heard.
 
 use super::keyframes::Keyframe;
 use crate::fusion::ekf::compose_jacobians;
@@ -66,7 +71,10 @@ pub(super) struct ScanMatches {
 }
 
 /// Matches each keyframe's latest ranges with the grid of the older ones, in time order (see
-/// the module's documentation); `None` when the grid cannot be made from `grid`.
+/// the module's documentation); `None` when the grid cannot be made from `grid`. `headings`
+/// gives keyframes a heading from the walls' directions (the correction to the keyframe's
+/// odometry heading, and its sigma; empty for none): the prediction's heading is updated with
+/// it, gated at three sigmas, before the match.
 pub(super) fn sequential(
     frames: &[Keyframe],
     odometry: &[StampedPose],

@@ -206,7 +206,7 @@ pub(super) fn wall_directions(
             })
             .min_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((normal_rad, sigma_rad)) = best {
-            tracing::debug!(
+            tracing::trace!(
                 "wall direction at keyframe {k} (t {:.1} s): normal {:.2} deg, sigma {:.2} deg",
                 frame.t_s,
                 normal_rad.to_degrees(),
