@@ -1480,13 +1480,7 @@ pub fn hold_tail_to_walls(
     let tail = &odometry[start..];
     let tail = calibration.map_or_else(|| tail.to_vec(), |c| c.apply(tail));
     let anchor = offline[start].pose.compose(&tail[0].pose.inverse());
-    let tail: Vec<StampedPose> = tail
-        .iter()
-        .map(|p| StampedPose {
-            t_s: p.t_s,
-            pose: anchor.compose(&p.pose),
-        })
-        .collect();
+    let tail = crate::geometry::transformed(anchor, &tail);
     let readings: Vec<SonarReading> = sonar
         .readings
         .iter()
@@ -1617,13 +1611,7 @@ mod tests {
         let config = FuseConfig::default();
         // The same run with its odometry (and so its believed start) 3.5 m off.
         let off = Pose2::new(3.5, 0.0, 0.0);
-        let shifted: Vec<StampedPose> = odom
-            .iter()
-            .map(|p| StampedPose {
-                t_s: p.t_s,
-                pose: off.compose(&p.pose),
-            })
-            .collect();
+        let shifted = crate::geometry::transformed(off, &odom);
         let run = |start| {
             localize_from(
                 &obs(&shifted, &sightings, &[]),
@@ -2357,13 +2345,7 @@ mod tests {
     fn an_unknown_start_is_located_by_a_lidar_scan() {
         let (layout, truth, odometry, readings, returns) = lidar_room();
         let to_origin = odometry[0].pose.inverse();
-        let odometry: Vec<StampedPose> = odometry
-            .iter()
-            .map(|p| StampedPose {
-                t_s: p.t_s,
-                pose: to_origin.compose(&p.pose),
-            })
-            .collect();
+        let odometry = crate::geometry::transformed(to_origin, &odometry);
         let filter = Localizer::new(Vec::new(), FuseConfig::default(), Start::Unknown)
             .with_returns(&returns, layout);
         let result = track(filter, &obs(&odometry, &[], &[]), &readings);

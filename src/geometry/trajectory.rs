@@ -52,6 +52,17 @@ pub fn path_length_m(trajectory: &[StampedPose]) -> f64 {
         .sum()
 }
 
+/// A trajectory taken into another frame: each pose `frame ∘ pose`, at its time.
+pub fn transformed(frame: Pose2, trajectory: &[StampedPose]) -> Vec<StampedPose> {
+    trajectory
+        .iter()
+        .map(|p| StampedPose {
+            t_s: p.t_s,
+            pose: frame.compose(&p.pose),
+        })
+        .collect()
+}
+
 /// The distance travelled along a trajectory up to each of its poses, metres (0 at the first).
 pub fn distance_travelled(trajectory: &[StampedPose]) -> Vec<f64> {
     let mut total = 0.0;

@@ -308,15 +308,7 @@ fn landmark_errors_of(survey: &Survey, run: &RunDataset, world: &World) -> Landm
         return out;
     };
     out.median_aligned_m = median_sorted(&landmark_errors(survey, world, align));
-    let aligned: Vec<StampedPose> = survey
-        .offline
-        .trajectory
-        .iter()
-        .map(|p| StampedPose {
-            t_s: p.t_s,
-            pose: align.compose(&p.pose),
-        })
-        .collect();
+    let aligned = crate::geometry::transformed(align, &survey.offline.trajectory);
     out.ate_offline_aligned_m = ate_m(&aligned, truth);
     out
 }

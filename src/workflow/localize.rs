@@ -335,14 +335,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             frame.y,
             frame.theta.to_degrees()
         );
-        odometry = odometry
-            .iter()
-            .map(|p| StampedPose {
-                t_s: p.t_s,
-                pose: frame.compose(&p.pose),
-            })
-            .collect::<Vec<_>>()
-            .into();
+        odometry = crate::geometry::transformed(frame, &odometry).into();
     }
     let layout =
         (!surveyed.walls.is_empty() || surveyed.returns.is_some()).then_some(&run.meta.robot.sonar);

@@ -57,13 +57,7 @@ pub(crate) fn anchored(
                 .to_owned(),
         ),
     };
-    let poses = odometry
-        .iter()
-        .map(|p| StampedPose {
-            t_s: p.t_s,
-            pose: world_from_odom.compose(&p.pose),
-        })
-        .collect();
+    let poses = crate::geometry::transformed(world_from_odom, odometry);
     (poses, frame)
 }
 
