@@ -403,13 +403,7 @@ pub(super) fn add_wall_directions(
     frames: &[super::keyframes::Keyframe],
     config: &FuseConfig,
 ) -> usize {
-    // Each direction in the world by the odometry, whose heading drifts smoothly (the same in
-    // every try of the sonar's correction, whatever its starting values).
-    let world: Vec<(&super::wall_directions::WallDirection, f64)> = directions
-        .iter()
-        .filter_map(|d| Some((d, frames.get(d.keyframe)?.odom.theta + d.normal_rad)))
-        .collect();
-    let seen: Vec<(f64, f64)> = world.iter().map(|&(d, a)| (a, d.sigma_rad)).collect();
+    let seen = super::wall_directions::by_odometry(directions, frames);
     let Some(axes) = super::wall_directions::along_axes(&seen) else {
         return 0;
     };
@@ -417,7 +411,7 @@ pub(super) fn add_wall_directions(
         .init
         .insert(AXES.into(), sna::DVector::from_vec(vec![axes.axes_rad]));
     let mut added = 0;
-    for (&(d, _), _) in world.iter().zip(&axes.along).filter(|(_, &a)| a) {
+    for (d, _) in directions.iter().zip(&axes.along).filter(|(_, &a)| a) {
         let factor = WallDirectionFactor {
             normal_rad: d.normal_rad,
             sqrt_info: 1.0 / (axes.sigma_scale * d.sigma_rad),

@@ -129,6 +129,16 @@ pub(super) fn along_axes(seen: &[(f64, f64)]) -> Option<Axes> {
     })
 }
 
+/// Each of `found` (on `frames`) in the world by the odometry, whose heading drifts smoothly (the
+/// same in every try of the sonar's correction, whatever its starting values), and its sigma:
+/// what [`along_axes`] judges.
+pub(super) fn by_odometry(found: &[WallDirection], frames: &[Keyframe]) -> Vec<(f64, f64)> {
+    found
+        .iter()
+        .map(|d| (frames[d.keyframe].odom.theta + d.normal_rad, d.sigma_rad))
+        .collect()
+}
+
 /// The heading correction the walls' directions give each keyframe's odometry heading, and its
 /// sigma, the building's axes at `axes_rad` (as a correction by the directions found them):
 /// `None` where no wall was slid along or its direction is not along the axes.
@@ -142,10 +152,7 @@ pub(super) fn heading_corrections(
 ) -> Vec<Option<(f64, f64)>> {
     let mut out = vec![None; frames.len()];
     let found = wall_directions(frames, odometry, readings, layout, config);
-    let seen: Vec<(f64, f64)> = found
-        .iter()
-        .map(|d| (frames[d.keyframe].odom.theta + d.normal_rad, d.sigma_rad))
-        .collect();
+    let seen = by_odometry(&found, frames);
     let Some(axes) = along_axes(&seen) else {
         return out;
     };
