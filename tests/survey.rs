@@ -820,25 +820,27 @@ fn predicted_and_measured(map_dir: &Path, plan_dir: &Path, loc_dir: &Path) -> (f
     ((p2 / n as f64).sqrt(), (m2 / n as f64).sqrt())
 }
 
-/// Issue 31, item 3 on the run the rule was made for: the office's seed 5 without pictures,
-/// whose sonar-only graph estimated the wheels' distance scale 2.6% long (the simulated wheels':
-/// 0). With the scale held at the wheels', the run's echoes agree better with one another, so
-/// that correction is taken: offline ATE 0.158 m for the odometry's 1.110 m (0.235 m before), the
-/// corrected map's occupied precision 0.825 against the ground-truth poses' 0.852 (0.700 before).
+/// Issue 31, item 3: the office's seed 6 without pictures, whose sonar-only graph estimates the
+/// wheels' distance scale 2.4% short (the simulated wheels': 0). With the scale held at the
+/// wheels', the run's echoes agree better with one another (72.2% against 70.4%), so that
+/// correction is taken: offline ATE 0.151 m for the odometry's 0.734 m, the corrected map's
+/// occupied precision 0.801 against the ground-truth poses' 0.820. (The rule was made on seed 5,
+/// which estimated 2.6% long; along the walls' turn scale its estimated scale, 2.4% long, makes
+/// the echoes agree better, and is taken: 0.162 m, 0.790 against 0.852.)
 #[test]
 fn a_sonar_only_survey_takes_the_wheels_distance_when_the_echoes_agree_better_with_it() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let seed_5 = SimSettings {
-        seed: Some(5),
+    let seed_6 = SimSettings {
+        seed: Some(6),
         ..SimSettings::default()
     };
-    simulate(Path::new("samples/office/world.yaml"), &run, seed_5, true);
+    simulate(Path::new("samples/office/world.yaml"), &run, seed_6, true);
     let out = dir.path().join("survey");
     survey_run(&run, &out);
     let report = read_report(&out);
     let m = |key: &str| metric(&report, key);
-    eprintln!("office seed 5, sonar only: {}", report["metrics"]);
+    eprintln!("office seed 6, sonar only: {}", report["metrics"]);
     assert_eq!(m("offline.sonar_wheel_distance"), 1.0);
     assert!(m("offline.odometry_distance_scale_error").abs() < 1e-3);
     assert!(m("offline.sonar_agreement_corrected") >= m("offline.sonar_agreement_odometry") + 0.03);
@@ -853,9 +855,11 @@ fn a_sonar_only_survey_takes_the_wheels_distance_when_the_echoes_agree_better_wi
 
 /// The simulated museum's hall is wider than the sonar's reach: where the robot crosses it, the
 /// heading drifts with nothing to match, and the matches after it pull the run onto a bent map.
-/// The walls' directions correct the headings the matches are predicted along (issue 31, item
-/// 3; seed 1: odometry 4.09 m; matches alone 0.34 m with a map 0.71 precise; now 0.21 m, 0.89,
-/// against the ground-truth map's 0.95).
+/// The walls' directions correct the headings the matches are predicted along, and give the
+/// odometry's turn scale the matches are made with (issue 31, item 3; seed 2: odometry 3.01 m;
+/// matches alone 0.81 m; along the walls' headings 0.19 m with a map 0.77 precise and a turn scale
+/// of 0.005 for the simulated wheels' 0.010; with the walls' turn scale held 0.19 m, 0.89, against
+/// the ground-truth map's 0.95).
 #[test]
 fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     let dir = tempfile::tempdir().unwrap();
@@ -864,7 +868,7 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
         Path::new("samples/museum/world.yaml"),
         &run,
         SimSettings {
-            seed: Some(1),
+            seed: Some(2),
             ..SimSettings::default()
         },
         true,
@@ -873,12 +877,16 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     survey_run(&run, &out);
     let report = read_report(&out);
     let m = &report["metrics"];
-    eprintln!("museum seed 1, sonar only: {m}");
+    eprintln!("museum seed 2, sonar only: {m}");
     assert!(metric(&report, "offline.sonar_matches") >= 100.0, "{m}");
     assert!(
         metric(&report, "offline.sonar_wall_directions") >= 40.0,
         "{m}"
     );
+    assert_eq!(metric(&report, "offline.sonar_turns_from_walls"), 1.0);
+    // The simulated wheels' base is 1% off: their turns come out 1% short.
+    let turn_scale = metric(&report, "offline.odometry_turn_scale_error");
+    assert!((0.005..=0.015).contains(&turn_scale), "{turn_scale}");
     let (odometry, offline) = (
         metric(&report, "ate_m.odometry"),
         metric(&report, "ate_m.offline"),

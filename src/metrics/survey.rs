@@ -421,6 +421,10 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
             "offline.sonar_wheel_distance".into(),
             f64::from(u8::from(survey.offline.sonar_wheel_distance)),
         );
+        m.insert(
+            "offline.sonar_turns_from_walls".into(),
+            f64::from(u8::from(survey.offline.sonar_turns_from_walls)),
+        );
     }
     if let Some(c) = survey.offline.odometry_calibration {
         m.insert(

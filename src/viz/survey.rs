@@ -615,13 +615,18 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
                         offline.sonar_wall_directions, offline.keyframes
                     ),
                     m => format!(
-                        "the latest matched the older readings at {m} of {} keyframes{}",
+                        "the latest matched the older readings at {m} of {} keyframes{}{}",
                         offline.keyframes,
                         match offline.sonar_wall_directions {
                             0 => String::new(),
                             d => format!(
                                 ", predicted along headings {d} walls' directions corrected"
                             ),
+                        },
+                        if offline.sonar_turns_from_walls {
+                            ", along the turn scale and heading drift the walls' directions gave"
+                        } else {
+                            ""
                         }
                     ),
                 },

@@ -76,6 +76,10 @@ pub struct OfflineResult {
     /// pass without). True also for a correction by the walls' directions alone
     /// ([`Self::sonar_wall_directions`] without matches), which holds the wheels' distance.
     pub sonar_wheel_distance: bool,
+    /// Whether the sonar's matches were made along the odometry corrected by the turn scale and
+    /// heading drift of the walls' directions' try, which the graph then held
+    /// ([`run_offline_sonar`]; false in a pass without).
+    pub sonar_turns_from_walls: bool,
     /// The odometry calibration found, when estimated and the solver converged.
     pub odometry_calibration: Option<OdometryCalibration>,
     /// The camera's planar mounting error, when estimated
@@ -313,8 +317,14 @@ pub fn run_offline_sonar(
             obs,
             online,
             config,
-            (sonar, grid, None, None),
-            SonarHold::Directions,
+            SonarTry {
+                sonar,
+                grid,
+                hold: SonarHold::Directions,
+                first: None,
+                axes: None,
+                turns_held: false,
+            },
         )
     });
     let agreement = |trajectory: &[StampedPose]| {
@@ -329,14 +339,29 @@ pub fn run_offline_sonar(
         .as_ref()
         .and_then(|d| d.wall_axes_rad)
         .filter(|_| directions_agreement.is_some_and(|a| a >= odometry_agreement + SONAR_MIN_GAIN));
+    // The directions hold every heading of the run against the building's axes, silent
+    // stretches included, so their turn scale and heading drift are the run's: the matched tries
+    // start from the odometry they correct, and hold them. The matches alone give back about the
+    // turn scale their predictions were made with, the odometry's where the sonar heard nothing
+    // (docs/RESULTS.md, "The walls' turns").
+    let turns = directions
+        .as_ref()
+        .filter(|d| d.kept == OfflineKept::Solution && d.wall_axes_rad.is_some())
+        .and_then(|d| d.odometry_calibration)
+        .filter(graph::within_prior);
+    let turned = turns.map(|c| c.apply(obs.odometry));
+    let matched = Observations {
+        odometry: turned.as_deref().unwrap_or(obs.odometry),
+        ..*obs
+    };
     // The two matched tries' first passes match the same ranges along the same odometry:
     // matched once.
-    let first = obs.odometry.first().and_then(|first| {
-        let visual = keyframes::turns_used(obs, config);
-        let frames = keyframes::choose(obs, &visual, online, config, first.pose).frames;
+    let first = matched.odometry.first().and_then(|first| {
+        let visual = keyframes::turns_used(&matched, config);
+        let frames = keyframes::choose(&matched, &visual, online, config, first.pose).frames;
         scan_match::sequential(
             &frames,
-            obs.odometry,
+            matched.odometry,
             sonar.readings,
             sonar.layout,
             grid,
@@ -344,7 +369,7 @@ pub fn run_offline_sonar(
             &axes.map_or_else(Vec::new, |a| {
                 wall_directions::heading_corrections(
                     &frames,
-                    obs.odometry,
+                    matched.odometry,
                     sonar.readings,
                     sonar.layout,
                     config,
@@ -354,13 +379,27 @@ pub fn run_offline_sonar(
         )
     });
     let passes = |hold| {
-        sonar_passes(
-            obs,
+        let result = sonar_passes(
+            &matched,
             online,
             config,
-            (sonar, grid, first.as_ref(), axes),
-            hold,
-        )
+            SonarTry {
+                sonar,
+                grid,
+                hold,
+                first: first.as_ref(),
+                axes,
+                turns_held: turns.is_some(),
+            },
+        );
+        match turns {
+            Some(turns) => OfflineResult {
+                odometry_calibration: result.odometry_calibration.map(|c| turns.then(&c)),
+                sonar_turns_from_walls: true,
+                ..result
+            },
+            None => result,
+        }
     };
     let (estimated, wheels) = rayon::join(
         || passes(SonarHold::Matches),
@@ -401,11 +440,19 @@ pub fn run_offline_sonar(
             result.keyframes
         ),
         matches => tracing::info!(
-            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {matches} of {} keyframes{}",
+            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {matches} of {} keyframes{}{}",
             result.keyframes,
             match result.sonar_wall_directions {
                 0 => String::new(),
                 d => format!(", predicted along headings {d} walls' directions corrected"),
+            },
+            match (result.sonar_turns_from_walls, turns) {
+                (true, Some(t)) => format!(
+                    ", along the odometry's turns corrected by the walls' directions (turn scale {:+.2}%, heading drift {:+.2} mrad/m, held)",
+                    100.0 * t.turn_scale_error,
+                    1e3 * t.heading_drift_rad_per_m
+                ),
+                _ => String::new(),
             }
         ),
     }
@@ -441,6 +488,7 @@ pub fn run_offline_sonar(
             return announced(OfflineResult {
                 sonar_agreement: result.sonar_agreement,
                 sonar_wheel_distance: result.sonar_wheel_distance,
+                sonar_turns_from_walls: result.sonar_turns_from_walls,
                 notes,
                 ..odometry
             });
@@ -450,28 +498,22 @@ pub fn run_offline_sonar(
 }
 
 /// The sonar's own correction ([`run_offline_sonar`]): [`SONAR_PASSES`] passes, each from the
-/// odometry corrected by the calibration the ones before found, the keyframes held as `hold`
-/// says; the first pass takes `first`'s matches when given.
+/// odometry corrected by the calibration the ones before found, the keyframes held as the try
+/// says; the first pass takes the try's `first` matches when given.
 fn sonar_passes(
     obs: &Observations<'_>,
     online: &OnlineResult,
     config: &FuseConfig,
-    (sonar, grid, first, axes): (
-        &crate::fusion::SonarInput<'_>,
-        &crate::sonar::grid::GridConfig,
-        Option<&scan_match::ScanMatches>,
-        Option<f64>,
-    ),
-    hold: SonarHold,
+    sonar_try: SonarTry<'_>,
 ) -> OfflineResult {
-    let wheel_distance = hold != SonarHold::Matches;
-    let pass = |obs: &Observations<'_>, matched| {
-        let sonar = SonarUse::ScanMatch(sonar, grid, hold, matched, axes);
+    let wheel_distance = sonar_try.hold != SonarHold::Matches;
+    let pass = |obs: &Observations<'_>, first| {
+        let sonar = SonarUse::ScanMatch(SonarTry { first, ..sonar_try });
         solve(obs, online, config, (None, None), &[], (sonar, false))
     };
     let mut result = OfflineResult {
         sonar_wheel_distance: wheel_distance,
-        ..pass(obs, first)
+        ..pass(obs, sonar_try.first)
     };
     // Each pass's calibration makes the next pass's predictions better, and so its matches.
     for _ in 1..SONAR_PASSES {
@@ -517,15 +559,25 @@ enum SonarUse<'a> {
     /// Range factors off its walls, held fixed ([`run_offline_walls`]).
     Walls(&'a crate::fusion::SonarInput<'a>),
     /// Keyframe poses matched with its own older readings and headings held by the walls'
-    /// directions ([`run_offline_sonar`]), as the [`SonarHold`] says, the matches made here unless
-    /// given (the same observations' keyframes matched before).
-    ScanMatch(
-        &'a crate::fusion::SonarInput<'a>,
-        &'a crate::sonar::grid::GridConfig,
-        SonarHold,
-        Option<&'a scan_match::ScanMatches>,
-        Option<f64>,
-    ),
+    /// directions ([`run_offline_sonar`]), as the try says.
+    ScanMatch(SonarTry<'a>),
+}
+
+/// One try of the sonar's own correction ([`run_offline_sonar`]).
+#[derive(Clone, Copy)]
+struct SonarTry<'a> {
+    sonar: &'a crate::fusion::SonarInput<'a>,
+    grid: &'a crate::sonar::grid::GridConfig,
+    /// How the keyframes are held.
+    hold: SonarHold,
+    /// The first pass's matches, made before along the same odometry; made by the pass when
+    /// `None`.
+    first: Option<&'a scan_match::ScanMatches>,
+    /// The building's axes the matches' predicted headings are corrected to, when found.
+    axes: Option<f64>,
+    /// The odometry was corrected by the walls' directions' turn scale and heading drift: the
+    /// graph holds them ([`graph::CalibrationPrior::Held`]).
+    turns_held: bool,
 }
 
 /// How the sonar's own correction ([`run_offline_sonar`]) holds the keyframes: three tries, of
@@ -610,6 +662,7 @@ fn solve(
             wall_axes_rad: None,
             sonar_agreement: None,
             sonar_wheel_distance: false,
+            sonar_turns_from_walls: false,
             odometry_calibration: None,
             mounting: None,
             noise: None,
@@ -629,9 +682,10 @@ fn solve(
     let calibrated_arcs = known.as_ref().is_some_and(graph::within_prior);
     let calibration_prior = match (prior, sonar) {
         (Some(c), _) => graph::CalibrationPrior::Survey(c),
-        (None, SonarUse::ScanMatch(_, _, hold, ..)) if hold != SonarHold::Matches => {
-            graph::CalibrationPrior::WheelDistance
-        }
+        (None, SonarUse::ScanMatch(t)) => graph::CalibrationPrior::Held {
+            distance: t.hold != SonarHold::Matches,
+            turns: t.turns_held,
+        },
         (None, _) => graph::CalibrationPrior::Wheels,
     };
     let mut graph = graph::build(
@@ -659,14 +713,14 @@ fn solve(
     };
     let mut headings_held = 0;
     let sonar_matches = match sonar {
-        SonarUse::ScanMatch(s, grid, hold, given, axes) if hold != SonarHold::Directions => {
-            let made = given.is_none().then(|| {
-                let headings = axes.map_or_else(Vec::new, |a| {
+        SonarUse::ScanMatch(t) if t.hold != SonarHold::Directions => {
+            let made = t.first.is_none().then(|| {
+                let headings = t.axes.map_or_else(Vec::new, |a| {
                     wall_directions::heading_corrections(
                         &keyframes.frames,
                         obs.odometry,
-                        s.readings,
-                        s.layout,
+                        t.sonar.readings,
+                        t.sonar.layout,
                         config,
                         a,
                     )
@@ -674,14 +728,14 @@ fn solve(
                 scan_match::sequential(
                     &keyframes.frames,
                     obs.odometry,
-                    s.readings,
-                    s.layout,
-                    grid,
+                    t.sonar.readings,
+                    t.sonar.layout,
+                    t.grid,
                     config,
                     &headings,
                 )
             });
-            given
+            t.first
                 .or(made.as_ref().and_then(Option::as_ref))
                 .map_or_else(Vec::new, |m| {
                     headings_held = m.headings_held;
@@ -691,12 +745,12 @@ fn solve(
         _ => Vec::new(),
     };
     let direction_factors = match sonar {
-        SonarUse::ScanMatch(s, _, SonarHold::Directions, ..) => {
+        SonarUse::ScanMatch(t) if t.hold == SonarHold::Directions => {
             let found = wall_directions::wall_directions(
                 &keyframes.frames,
                 obs.odometry,
-                s.readings,
-                s.layout,
+                t.sonar.readings,
+                t.sonar.layout,
                 config,
             );
             graph::add_wall_directions(&mut graph, &found, &keyframes.frames, config)
@@ -897,6 +951,7 @@ fn solve(
             .map(|v| v[0]),
         sonar_agreement: None,
         sonar_wheel_distance: false,
+        sonar_turns_from_walls: false,
         odometry_calibration: values
             .get(graph::CALIBRATION)
             .filter(|_| kept == OfflineKept::Solution && config.calibrate_odometry)
