@@ -36,12 +36,12 @@ const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
 /// ([`CalibrationPrior::Held`]): 0.01%, the scale held.
 const WHEEL_DISTANCE_SIGMA: f64 = 1e-4;
 /// Prior sigmas of the turn scale's error and the heading drift when the odometry was already
-/// corrected by the walls' directions' turn scale and drift ([`CalibrationPrior::Held`]): 0.1%
-/// and 0.4 mrad/m, a fifth of what one survey's tag-held estimate scatters by. The directions
-/// hold every heading of a sonar-only run against the building's axes, silent stretches
-/// included; the matches, predicted along the odometry where the sonar heard nothing, give back
-/// about the turn scale they were predicted with (0.002-0.006 for the simulated wheels' 0.010 on
-/// the museum, seeds 1-5, against 0.007-0.010 from the directions; docs/RESULTS.md).
+/// corrected by the walls' directions' turn scale and drift ([`CalibrationPrior::Held`]): 0.1% and
+/// 0.4 mrad/m, a quarter and a fifth of what one survey's estimate scatters by. The directions hold
+/// every heading of a sonar-only run against the building's axes, silent stretches included; the
+/// matches, predicted along the odometry where the sonar heard nothing, give back about the turn
+/// scale they were predicted with (0.002-0.006 for the simulated wheels' 0.010 on the museum, seeds
+/// 1-5, against 0.0075-0.0112 from the directions; docs/RESULTS.md, "The walls' turns").
 const TURNS_HELD_SIGMA: [f64; 2] = [0.001, 0.0004];
 
 /// What the odometry calibration's prior says before the graph is solved.
