@@ -829,28 +829,45 @@ fn predicted_and_measured(map_dir: &Path, plan_dir: &Path, loc_dir: &Path) -> (f
 /// the echoes agree better, and is taken: 0.162 m, 0.790 against 0.852.)
 #[test]
 fn a_sonar_only_survey_takes_the_wheels_distance_when_the_echoes_agree_better_with_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
-    let seed_6 = SimSettings {
-        seed: Some(6),
-        ..SimSettings::default()
-    };
-    simulate(Path::new("samples/office/world.yaml"), &run, seed_6, true);
-    let out = dir.path().join("survey");
-    survey_run(&run, &out);
-    let report = read_report(&out);
+    let report = sonar_only_report("samples/office/world.yaml", 6);
     let m = |key: &str| metric(&report, key);
-    eprintln!("office seed 6, sonar only: {}", report["metrics"]);
     assert_eq!(m("offline.sonar_wheel_distance"), 1.0);
     assert!(m("offline.odometry_distance_scale_error").abs() < 1e-3);
     assert!(m("offline.sonar_agreement_corrected") >= m("offline.sonar_agreement_odometry") + 0.03);
-    assert!(m("ate_m.offline") <= m("ate_m.odometry") / 3.0);
-    assert!(m("ate_m.offline") <= 0.2, "{}", m("ate_m.offline"));
+    assert_holds_the_map(&report, 0.2);
+}
+
+/// `world` simulated without pictures at `seed`, surveyed: its report.
+fn sonar_only_report(world: &str, seed: u64) -> Value {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let settings = SimSettings {
+        seed: Some(seed),
+        ..SimSettings::default()
+    };
+    simulate(Path::new(world), &run, settings, true);
+    let out = dir.path().join("survey");
+    survey_run(&run, &out);
+    let report = read_report(&out);
+    eprintln!("{world} seed {seed}, sonar only: {}", report["metrics"]);
+    report
+}
+
+/// Issue 31, item 3's figures on a survey's `report`: the offline ATE within a third of the
+/// odometry's and under `max_ate_m`, the corrected map's occupied precision within 0.1 of the
+/// ground-truth-pose map's.
+fn assert_holds_the_map(report: &Value, max_ate_m: f64) {
+    let m = |key: &str| metric(report, key);
+    let (odometry, offline) = (m("ate_m.odometry"), m("ate_m.offline"));
+    assert!(
+        offline <= odometry / 3.0 && offline < max_ate_m,
+        "ATE {offline} for {odometry}"
+    );
     let (corrected, truth) = (
         m("map_corrected.occupied_precision"),
         m("map_ground_truth.occupied_precision"),
     );
-    assert!(corrected >= truth - 0.1, "{corrected} vs {truth}");
+    assert!(corrected >= truth - 0.1, "map {corrected} against {truth}");
 }
 
 /// The simulated museum's hall is wider than the sonar's reach: where the robot crosses it, the
@@ -862,22 +879,8 @@ fn a_sonar_only_survey_takes_the_wheels_distance_when_the_echoes_agree_better_wi
 /// the ground-truth map's 0.95).
 #[test]
 fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
-    let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
-    simulate(
-        Path::new("samples/museum/world.yaml"),
-        &run,
-        SimSettings {
-            seed: Some(2),
-            ..SimSettings::default()
-        },
-        true,
-    );
-    let out = dir.path().join("survey");
-    survey_run(&run, &out);
-    let report = read_report(&out);
+    let report = sonar_only_report("samples/museum/world.yaml", 2);
     let m = &report["metrics"];
-    eprintln!("museum seed 2, sonar only: {m}");
     assert!(metric(&report, "offline.sonar_matches") >= 100.0, "{m}");
     assert!(
         metric(&report, "offline.sonar_wall_directions") >= 40.0,
@@ -887,19 +890,7 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     // The simulated wheels' base is 1% off: their turns come out 1% short.
     let turn_scale = metric(&report, "offline.odometry_turn_scale_error");
     assert!((0.005..=0.015).contains(&turn_scale), "{turn_scale}");
-    let (odometry, offline) = (
-        metric(&report, "ate_m.odometry"),
-        metric(&report, "ate_m.offline"),
-    );
-    assert!(
-        offline <= odometry / 3.0 && offline < 0.3,
-        "ATE {offline} for {odometry}"
-    );
-    let (corrected, truth) = (
-        metric(&report, "map_corrected.occupied_precision"),
-        metric(&report, "map_ground_truth.occupied_precision"),
-    );
-    assert!(corrected >= truth - 0.1, "map {corrected} against {truth}");
+    assert_holds_the_map(&report, 0.3);
 }
 
 /// A sonar-only run with ground truth but no world file (issue 31, items 3 and 4): the survey
