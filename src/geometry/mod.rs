@@ -7,8 +7,8 @@ pub mod homography;
 mod trajectory;
 
 pub use trajectory::{
-    distance_travelled, odometry_jumps, path_length_m, pose_at, transformed, OdometryJump,
-    StampedPose, JUMP_MIN_M, JUMP_SPEED_MPS,
+    distance_travelled, odometry_jumps, path_length_m, pose_at, pose_within, transformed,
+    OdometryJump, StampedPose, JUMP_MIN_M, JUMP_SPEED_MPS,
 };
 
 use nalgebra::{Point2, Vector2};

@@ -32,6 +32,18 @@ pub fn pose_at(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
     Some(a.pose.lerp(&b.pose, f))
 }
 
+/// The pose at `t_s` as [`pose_at`] gives it, but only within the trajectory's span: `None`
+/// before its first pose or after its last. What a ground truth says, which may start after a
+/// log's odometry (aces' corrected poses begin 20.9 s in) or end before it: held at its end
+/// poses, it would score the estimate against poses nobody measured.
+pub fn pose_within(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
+    let (first, last) = (trajectory.first()?, trajectory.last()?);
+    if t_s < first.t_s || t_s > last.t_s {
+        return None;
+    }
+    pose_at(trajectory, t_s)
+}
+
 /// An odometry step longer than a robot could drive in its time: a reset or a glitch in a log.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OdometryJump {

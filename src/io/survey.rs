@@ -4,7 +4,7 @@
 use super::{read_text, write_file, IoError};
 use crate::dataset::RunDataset;
 use crate::fusion::{Landmark, OdometryCalibration, Survey};
-use crate::geometry::{pose_at, StampedPose};
+use crate::geometry::{pose_within, StampedPose};
 use crate::world::World;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -297,7 +297,7 @@ pub fn save_trajectory_csv(path: &Path, t: &Trajectories<'_>) -> Result<(), IoEr
             pose(Some(o.pose)),
             pose(t.online.get(i).map(|p| p.pose)),
             pose(t.offline.get(i).map(|p| p.pose)),
-            pose(t.ground_truth.and_then(|g| pose_at(g, o.t_s))),
+            pose(t.ground_truth.and_then(|g| pose_within(g, o.t_s))),
         );
     }
     write_file(path, s.as_bytes())
@@ -322,7 +322,7 @@ pub fn save_tum(path: &Path, poses: &[StampedPose]) -> Result<(), IoError> {
 /// time, and the reports' ATE takes the truth at the estimate's times.
 pub fn truth_at(truth: &[StampedPose], at: &[StampedPose]) -> Vec<StampedPose> {
     at.iter()
-        .filter_map(|p| pose_at(truth, p.t_s).map(|pose| StampedPose { t_s: p.t_s, pose }))
+        .filter_map(|p| pose_within(truth, p.t_s).map(|pose| StampedPose { t_s: p.t_s, pose }))
         .collect()
 }
 
@@ -340,8 +340,8 @@ pub fn save_visual_turns_csv(
 ) -> Result<(), IoError> {
     let turn_of = |trajectory: &[crate::geometry::StampedPose],
                    v: &crate::visual::vo::VisualTurn| match (
-        pose_at(trajectory, v.from_t_s),
-        pose_at(trajectory, v.to_t_s),
+        pose_within(trajectory, v.from_t_s),
+        pose_within(trajectory, v.to_t_s),
     ) {
         (Some(a), Some(b)) => format!("{:.6}", crate::geometry::wrap_angle(b.theta - a.theta)),
         _ => String::new(),
@@ -500,7 +500,7 @@ pub fn save_localization_csv(
     let mut csv = format!("{LOCALIZATION_HEADER}\n");
     for (i, (o, p)) in odometry.iter().zip(&result.trajectory).enumerate() {
         let gt = truth
-            .and_then(|t| pose_at(t, o.t_s))
+            .and_then(|t| pose_within(t, o.t_s))
             .map_or(",,".to_string(), |g| {
                 format!("{:.5},{:.5},{:.6}", g.x, g.y, g.theta)
             });

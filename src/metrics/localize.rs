@@ -1,7 +1,7 @@
 //! How a localised run's error grows with the distance travelled since the last sighting.
 
 use crate::fusion::LocalizeResult;
-use crate::geometry::{pose_at, StampedPose};
+use crate::geometry::{pose_within, StampedPose};
 use crate::metrics::ate_m;
 use serde::Serialize;
 
@@ -45,7 +45,7 @@ pub fn error_growth(result: &LocalizeResult, truth: Option<&[StampedPose]>) -> V
         bin.mean_sigma_m += result.sigma_m.get(i).copied().unwrap_or(0.0);
         if let (Some(sum), Some(gt)) = (
             bin.rms_error_m.as_mut(),
-            truth.and_then(|t| pose_at(t, p.t_s)),
+            truth.and_then(|t| pose_within(t, p.t_s)),
         ) {
             *sum += (p.pose.x - gt.x).powi(2) + (p.pose.y - gt.y).powi(2);
         }
@@ -205,7 +205,7 @@ fn sigma_consistency(result: &LocalizeResult, truth: &[StampedPose]) -> Consiste
     let (mut all, mut n_all, mut located, mut n_located, mut worst) =
         (0.0, 0usize, 0.0, 0usize, 0.0f64);
     for (i, p) in result.trajectory.iter().enumerate() {
-        let Some(gt) = pose_at(truth, p.t_s) else {
+        let Some(gt) = pose_within(truth, p.t_s) else {
             continue;
         };
         let (ex, ey) = (p.pose.x - gt.x, p.pose.y - gt.y);

@@ -321,8 +321,8 @@ fn visual_turn_errors(
     let errors: Vec<(f64, f64)> = visual
         .iter()
         .filter_map(|v| {
-            let a = crate::geometry::pose_at(truth, v.from_t_s)?;
-            let b = crate::geometry::pose_at(truth, v.to_t_s)?;
+            let a = crate::geometry::pose_within(truth, v.from_t_s)?;
+            let b = crate::geometry::pose_within(truth, v.to_t_s)?;
             let e = crate::geometry::wrap_angle(v.turn_rad - (b.theta - a.theta));
             Some((e, v.sigma_rad))
         })

@@ -5,7 +5,7 @@ use super::draw::*;
 use super::layout::{column, row, tabs, Layout, View};
 use super::palette;
 use super::{LocalizeScene, Recorder, VizError, POSE_SAMPLE_S};
-use crate::geometry::{pose_at, StampedPose};
+use crate::geometry::{pose_at, pose_within, StampedPose};
 use crate::sonar::grid::OccupancyMap;
 use rerun::blueprint::components::PlayState;
 
@@ -328,7 +328,7 @@ fn plotted(scene: &LocalizeScene<'_>) -> Vec<Plotted> {
         }
         next = p.t_s + POSE_SAMPLE_S;
         let located = r.located.get(i).copied().unwrap_or(true);
-        let gt = truth.and_then(|t| pose_at(t, p.t_s));
+        let gt = truth.and_then(|t| pose_within(t, p.t_s));
         out.push(Plotted {
             t_s: p.t_s,
             sigma_m: located.then(|| r.sigma_m[i]),

@@ -7,7 +7,7 @@ use super::palette;
 use super::sonar::{log_features, log_growing_grid, log_hough};
 use super::{Recorder, SurveyScene, VizError, POSE_SAMPLE_S};
 use crate::fusion::{Nis, TagSighting};
-use crate::geometry::{pose_at, StampedPose};
+use crate::geometry::{pose_at, pose_within, StampedPose};
 use crate::sonar::grid::OccupancyMap;
 use nalgebra::Matrix3;
 use rerun::blueprint::components::PlayState;
@@ -480,7 +480,7 @@ fn log_errors(rec: &rerun::RecordingStream, scene: &SurveyScene<'_>) -> Result<(
         if let Some(sigma) = s.online.sigma_m.get(i) {
             rec.log("metrics/online_sigma_m", &rerun::Scalars::single(*sigma))?;
         }
-        let Some(gt) = truth.and_then(|t| pose_at(t, p.t_s)) else {
+        let Some(gt) = truth.and_then(|t| pose_within(t, p.t_s)) else {
             continue;
         };
         let err = |q: Option<&StampedPose>| q.map(|q| (q.pose.x - gt.x).hypot(q.pose.y - gt.y));
@@ -563,7 +563,7 @@ fn error_over_sigma(scene: &SurveyScene<'_>) -> Option<f64> {
         .zip(&online.sigma_m)
         .filter(|(_, s)| **s > 0.0)
         .filter_map(|(p, s)| {
-            let gt = pose_at(truth, p.t_s)?;
+            let gt = pose_within(truth, p.t_s)?;
             Some((p.pose.x - gt.x).hypot(p.pose.y - gt.y) / s)
         })
         .collect();
