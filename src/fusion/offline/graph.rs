@@ -33,10 +33,10 @@ pub(super) const CALIBRATION_PRIOR_SIGMA: [f64; 3] = [0.05, 0.02, 0.02];
 const CALIBRATION_FROM_SURVEY_SIGMA: [f64; 3] = [0.004, 0.002, 0.004];
 
 /// Prior sigma of the distance scale's error when the wheels' own distance is taken as right
-/// ([`CalibrationPrior::Held`]): 0.01%, the scale held.
+/// ([`CalibrationPrior::Wheels`]): 0.01%, the scale held.
 const WHEEL_DISTANCE_SIGMA: f64 = 1e-4;
 /// Prior sigmas of the turn scale's error and the heading drift when the odometry was already
-/// corrected by the walls' directions' turn scale and drift ([`CalibrationPrior::Held`]): 0.1% and
+/// corrected by the walls' directions' turn scale and drift ([`CalibrationPrior::Wheels`]): 0.1% and
 /// 0.4 mrad/m, a quarter and a fifth of what one survey's estimate scatters by. The directions hold
 /// every heading of a sonar-only run against the building's axes, silent stretches included; the
 /// matches, predicted along the odometry where the sonar heard nothing, give back about the turn
@@ -47,17 +47,15 @@ const TURNS_HELD_SIGMA: [f64; 2] = [0.001, 0.0004];
 /// What the odometry calibration's prior says before the graph is solved.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum CalibrationPrior<'a> {
-    /// No error, within a few percent ([`CALIBRATION_PRIOR_SIGMA`]).
-    Wheels,
-    /// The same, with parts of it held at no error: the distance scale when the wheels'
-    /// distance is taken as right (`distance`, [`WHEEL_DISTANCE_SIGMA`]), the turn scale and
-    /// heading drift when the odometry was corrected by the walls' directions' (`turns`,
-    /// [`TURNS_HELD_SIGMA`]).
-    Held {
+    /// No error, within a few percent ([`CALIBRATION_PRIOR_SIGMA`]), with parts of it held at
+    /// no error: the distance scale when the wheels' distance is taken as right
+    /// (`hold_distance`, [`WHEEL_DISTANCE_SIGMA`]), the turn scale and heading drift when the
+    /// odometry was corrected by the walls' directions' (`hold_turns`, [`TURNS_HELD_SIGMA`]).
+    Wheels {
         /// The distance scale held.
-        distance: bool,
+        hold_distance: bool,
         /// The turn scale and heading drift held.
-        turns: bool,
+        hold_turns: bool,
     },
     /// An earlier survey's calibration, within what one survey's estimate scatters by
     /// ([`CALIBRATION_FROM_SURVEY_SIGMA`]).
@@ -454,15 +452,17 @@ fn add_calibration_prior(graph: &mut Graph, prior: CalibrationPrior<'_>, config:
             ],
             CALIBRATION_FROM_SURVEY_SIGMA,
         ),
-        CalibrationPrior::Wheels => (vec![0.0; 3], CALIBRATION_PRIOR_SIGMA),
-        CalibrationPrior::Held { distance, turns } => {
+        CalibrationPrior::Wheels {
+            hold_distance,
+            hold_turns,
+        } => {
             let [turn, drift, scale] = CALIBRATION_PRIOR_SIGMA;
-            let [turn, drift] = if turns {
+            let [turn, drift] = if hold_turns {
                 TURNS_HELD_SIGMA
             } else {
                 [turn, drift]
             };
-            let scale = if distance {
+            let scale = if hold_distance {
                 WHEEL_DISTANCE_SIGMA
             } else {
                 scale

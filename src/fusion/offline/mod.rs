@@ -331,6 +331,7 @@ pub fn run_offline_sonar(
         scan_match::agreement(trajectory, sonar.readings, sonar.layout, grid).unwrap_or(0.0)
     };
     let odometry_agreement = agreement(obs.odometry);
+    // A try's axes and calibration are given only when its solution is kept.
     let directions_agreement = directions
         .as_ref()
         .filter(|d| d.kept == OfflineKept::Solution)
@@ -346,7 +347,7 @@ pub fn run_offline_sonar(
     // (docs/RESULTS.md, "The walls' turns").
     let turns = directions
         .as_ref()
-        .filter(|d| d.kept == OfflineKept::Solution && d.wall_axes_rad.is_some())
+        .filter(|d| d.wall_axes_rad.is_some())
         .and_then(|d| d.odometry_calibration)
         .filter(graph::within_prior);
     let turned = turns.map(|c| c.apply(obs.odometry));
@@ -576,7 +577,7 @@ struct SonarTry<'a> {
     /// The building's axes the matches' predicted headings are corrected to, when found.
     axes: Option<f64>,
     /// The odometry was corrected by the walls' directions' turn scale and heading drift: the
-    /// graph holds them ([`graph::CalibrationPrior::Held`]).
+    /// graph holds them ([`graph::CalibrationPrior::Wheels`]).
     turns_held: bool,
 }
 
@@ -682,11 +683,14 @@ fn solve(
     let calibrated_arcs = known.as_ref().is_some_and(graph::within_prior);
     let calibration_prior = match (prior, sonar) {
         (Some(c), _) => graph::CalibrationPrior::Survey(c),
-        (None, SonarUse::ScanMatch(t)) => graph::CalibrationPrior::Held {
-            distance: t.hold != SonarHold::Matches,
-            turns: t.turns_held,
+        (None, SonarUse::ScanMatch(t)) => graph::CalibrationPrior::Wheels {
+            hold_distance: t.hold != SonarHold::Matches,
+            hold_turns: t.turns_held,
         },
-        (None, _) => graph::CalibrationPrior::Wheels,
+        (None, _) => graph::CalibrationPrior::Wheels {
+            hold_distance: false,
+            hold_turns: false,
+        },
     };
     let mut graph = graph::build(
         obs,
@@ -1193,7 +1197,11 @@ mod tests {
             let online = run_online(&obs, &[], &config, None);
             let visual = keyframes::turns_used(&obs, &config);
             let frames = keyframes::choose(&obs, &visual, &online, &config, odom[0].pose);
-            let start = (odom[0].pose, graph::CalibrationPrior::Wheels, true);
+            let wheels = graph::CalibrationPrior::Wheels {
+                hold_distance: false,
+                hold_turns: false,
+            };
+            let start = (odom[0].pose, wheels, true);
             let graph = graph::build(&obs, &frames, &visual, &online, &config, start, &[]);
             // Each interval's path, turn and heading sigma.
             graph
