@@ -891,6 +891,12 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     let turn_scale = metric(&report, "offline.odometry_turn_scale_error");
     assert!((0.005..=0.015).contains(&turn_scale), "{turn_scale}");
     assert_holds_the_map(&report, 0.3);
+    // Its look-around, 2.5 m from the nearest wall, is silent (29 s, a full turn): the survey
+    // says so, with the heading the wheels may lose there (4.4 degrees by the noise model).
+    let silent = metric(&report, "offline.sonar_silent_start_s");
+    assert!((20.0..=45.0).contains(&silent), "{silent}");
+    let sigma = metric(&report, "offline.sonar_silent_start_heading_sigma_deg");
+    assert!((3.0..=6.0).contains(&sigma), "{sigma}");
 }
 
 /// A sonar-only run with ground truth but no world file (issue 31, items 3 and 4): the survey

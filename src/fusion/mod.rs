@@ -60,7 +60,7 @@ pub use observations::Observations;
 pub use offline::{
     estimate_mounting, run_offline, run_offline_anchored, run_offline_sonar, run_offline_walls,
     MountingEstimate, NoiseScales, OdometryCalibration, OfflineKept, OfflineResult, PoseFunction,
-    SolutionCovariance, MOUNTING_STRETCH_M,
+    SilentStart, SolutionCovariance, MOUNTING_STRETCH_M,
 };
 pub use online::{run_online, Nis, OnlineResolve, OnlineResult};
 pub use streaming::{PairError, PairUpdate, StereoLocalizer};

@@ -208,6 +208,14 @@ pub(super) fn sequential(
     })
 }
 
+/// Time of the run's first echo, seconds; `None` if it has none.
+pub(super) fn first_echo_s(readings: &[SonarReading], layout: &SonarLayout) -> Option<f64> {
+    readings
+        .iter()
+        .find(|r| layout.echo(r.range_m).is_some())
+        .map(|r| r.t_s)
+}
+
 /// How well a run's ranges agree with one another placed along `trajectory`: the share of the
 /// readings with an echo whose arc comes within [`INLIER_M`] of an occupied cell of the counting
 /// grid (on `grid`) of all of them (a laser's: of a return a minute older,
