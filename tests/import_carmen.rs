@@ -162,7 +162,11 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
             let (code, err) = map_on_truth(&run, &map, false, &["--force"]);
             assert_eq!(code, 0, "{log}: {err}");
             assert!(err.contains("mapping.grid.min_evidence"), "{log}: {err}");
-            let m = &json(&map.join("report.json"))["metrics"];
+            // report.json keeps the words printed.
+            let report = json(&map.join("report.json"));
+            let warnings = report["warnings"].to_string();
+            assert!(warnings.contains("mapping.grid.min_evidence"), "{warnings}");
+            let m = &report["metrics"];
             let (known, below) = (
                 m["hidden.cells_known"].as_f64().unwrap(),
                 m["hidden.cells_below_floor"].as_f64().unwrap(),
@@ -467,7 +471,8 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
     assert_eq!(code, 0, "{err}");
     let (code, err) = survey(&run, &out);
     assert_eq!(code, 0, "{err}");
-    let m = &json(&out.join("report.json"))["metrics"];
+    let report = json(&out.join("report.json"));
+    let m = &report["metrics"];
     assert!(m["walls.ranges_matched"].as_f64().unwrap() > 1000.0, "{m}");
     assert!(m["walls.ranges_off_share"].as_f64().unwrap() > 0.1, "{m}");
     // The warning follows one rule from these figures (the recording's opening gives the same
@@ -480,6 +485,9 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
     ));
     assert!(err.contains("scatter about its walls"), "{err}");
     assert!(err.contains("localize --no-walls"), "{err}");
+    // report.json keeps the words printed.
+    let warnings = report["warnings"].to_string();
+    assert!(warnings.contains("scatter about its walls"), "{warnings}");
 
     // The same run localised from a start given 0.36 m and 6 degrees off, with a 0.5 m sigma,
     // and no tag to correct it: the walls find the pose (measured in session 63: two fixes, then
@@ -527,7 +535,11 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
             .filter(|v| (30.0..=200.0).contains(&v[t]))
             .map(|v| (v[x] - v[gx]).hypot(v[y] - v[gy]))
             .collect();
-        (errors, json(&loc.join("report.json"))["metrics"].clone())
+        let report = json(&loc.join("report.json"));
+        // The run has no pictures, and its report says so as stderr did.
+        let warnings = report["warnings"].to_string();
+        assert!(warnings.contains("no stereo pairs"), "{warnings}");
+        (errors, report["metrics"].clone())
     };
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);

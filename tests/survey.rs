@@ -897,6 +897,11 @@ fn the_walls_directions_hold_a_sonar_run_across_an_empty_hall() {
     assert!((20.0..=45.0).contains(&silent), "{silent}");
     let sigma = metric(&report, "offline.sonar_silent_start_heading_sigma_deg");
     assert!((3.0..=6.0).contains(&sigma), "{sigma}");
+    let warnings = report["warnings"].to_string();
+    assert!(
+        warnings.contains("heard nothing for the first"),
+        "{warnings}"
+    );
 }
 
 /// A sonar-only run with ground truth but no world file (issue 31, items 3 and 4): the survey
@@ -957,6 +962,11 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
         output.warnings
     );
     assert!(output.survey.offline.notes.is_empty());
+    // report.json keeps the same words.
+    assert_eq!(
+        read_report(&corrected)["warnings"],
+        serde_json::json!(output.warnings)
+    );
     // Why it is kept: the echoes agree with one another better along it (0.61 -> 0.81).
     let agree = |key: &str| m[key].as_f64().unwrap();
     assert!(

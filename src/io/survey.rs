@@ -364,7 +364,8 @@ pub fn save_visual_turns_csv(
 
 /// Writes every survey output into `dir` (DESIGN.md's survey outputs: the maps and their
 /// pictures, corners, walls, visual turns, `landmarks.json`, `layout.json`, `trajectory.csv` and
-/// `report.json` with the metrics, timings, conflicts and the planned-versus-surveyed table).
+/// `report.json` with the metrics, timings, conflicts, the planned-versus-surveyed table and the
+/// `warnings` printed).
 pub fn save_survey(
     dir: &Path,
     run: &RunDataset,
@@ -372,6 +373,7 @@ pub fn save_survey(
     s: &Survey,
     metrics: &BTreeMap<String, f64>,
     timings: &BTreeMap<String, f64>,
+    warnings: &[String],
 ) -> Result<(), IoError> {
     save_survey_pictures(dir, run, s)?;
     super::save_ros_map(dir, "map", &s.raw.counting)?;
@@ -481,6 +483,7 @@ pub fn save_survey(
         "timings_s": timings,
         "conflicts": s.online.conflicts,
         "planned_vs_surveyed": displacement,
+        "warnings": warnings,
     });
     super::save_json(&dir.join("report.json"), &report)?;
     Ok(())

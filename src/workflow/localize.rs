@@ -456,7 +456,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
     }
     io::save_json(
         &dir.path("report.json"),
-        &serde_json::json!({ "metrics": metrics, "error_growth": growth }),
+        &serde_json::json!({ "metrics": metrics, "error_growth": growth, "warnings": warnings.0 }),
     )?;
     if let Some(rec) = recorder {
         let numbers: BTreeMap<String, f64> = metrics

@@ -241,6 +241,7 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         "poses": output.poses.as_str(),
         "metrics": finite,
         "timings_s": map.timings_s,
+        "warnings": output.warnings(),
     });
     io::save_json(&dir.join("report.json"), &report)?;
     Ok(())

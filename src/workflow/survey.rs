@@ -473,7 +473,15 @@ pub fn survey_into(
             .map_err(|e| Error::from(e).during("recording the survey"))?;
     }
     timings.insert("total".into(), started.elapsed().as_secs_f64());
-    io::save_survey(&dir.path(""), run, world, &result, &metrics, &timings)?;
+    io::save_survey(
+        &dir.path(""),
+        run,
+        world,
+        &result,
+        &metrics,
+        &timings,
+        &warnings.0,
+    )?;
     if let Some(rec) = recorder {
         rec.finish()
             .map_err(|e| Error::from(e).during("finishing the recording"))?;
