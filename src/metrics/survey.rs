@@ -426,12 +426,12 @@ pub fn survey_metrics(survey: &Survey, sightings: usize) -> BTreeMap<String, f64
             f64::from(u8::from(survey.offline.sonar_turns_from_walls)),
         );
     }
-    if let Some(u) = survey.offline.sonar_silent_start {
-        m.insert("offline.sonar_silent_start_s".into(), u.duration_s);
-        m.insert("offline.sonar_silent_start_m".into(), u.path_m);
+    if let Some(s) = survey.offline.sonar_silent_start {
+        m.insert("offline.sonar_silent_start_s".into(), s.duration_s);
+        m.insert("offline.sonar_silent_start_m".into(), s.path_m);
         m.insert(
             "offline.sonar_silent_start_heading_sigma_deg".into(),
-            u.heading_sigma_rad.to_degrees(),
+            s.heading_sigma_rad.to_degrees(),
         );
     }
     if let Some(c) = survey.offline.odometry_calibration {

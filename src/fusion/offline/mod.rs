@@ -559,9 +559,10 @@ pub fn run_offline_sonar(
             });
         }
     }
-    if let Some(w) = (result.sonar_silent_start)
+    if let Some(w) = result
+        .sonar_silent_start
         .filter(|_| result.kept == OfflineKept::Solution)
-        .and_then(|u| u.warning(sensor))
+        .and_then(|s| s.warning(sensor))
     {
         result.notes.push(w);
     }
