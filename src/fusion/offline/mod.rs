@@ -138,7 +138,8 @@ impl SilentStart {
         let variance =
             crate::fusion::measurement::odometry_covariance(path_m, turn_rad, config)[(2, 2)];
         Self {
-            duration_s: until_s - odometry.first().map_or(until_s, |p| p.t_s),
+            // An echo before the odometry's first pose: no silent start.
+            duration_s: (until_s - odometry.first().map_or(until_s, |p| p.t_s)).max(0.0),
             path_m,
             turn_rad,
             heading_sigma_rad: variance.sqrt(),
@@ -1328,6 +1329,13 @@ mod tests {
         let short = SilentStart::of(&odometry[36..], 10.0 + 38.0, &config);
         assert!((short.path_m - 0.2).abs() < 1e-9 && short.turn_rad == 0.0);
         assert!(short.warning("sonar").is_none());
+        // An echo before the odometry begins.
+        let none = SilentStart::of(&odometry, 5.0, &config);
+        assert_eq!(
+            (none.duration_s, none.path_m, none.turn_rad),
+            (0.0, 0.0, 0.0)
+        );
+        assert!(none.warning("sonar").is_none());
     }
 
     /// Where nothing else measures a turn and the tags observe a calibration that its prior does
