@@ -242,6 +242,15 @@ fn rows_a_little_out_of_order_are_reordered_with_one_warning() {
         "{err}"
     );
     assert_eq!(err.matches("out of time order").count(), 1, "{err}");
+    // report.json keeps the warning, once, with the map's own.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let warnings = report["warnings"].to_string();
+    assert_eq!(
+        warnings.matches("out of time order").count(),
+        1,
+        "{warnings}"
+    );
     // Re-ordered, the rows are read in time order.
     let run = stereotag::io::load_run(&tmp.path().join("run")).unwrap();
     let times: Vec<f64> = run.sonar.iter().map(|r| r.t_s).collect();

@@ -74,8 +74,9 @@ pub struct LocalizeOutput {
     /// What it did and how well, a sentence each ([`summary`]): printed by `localize` and the
     /// opening of its recording's report.
     pub summary: Vec<String>,
-    /// The warnings it printed: a survey without walls, a run without stereo pairs, each time
-    /// the filter found itself lost.
+    /// The warnings it printed: what reading the run warned of (rows re-ordered, an odometry
+    /// jump, a world named but missing), a survey without walls, a run without stereo pairs,
+    /// each time the filter found itself lost.
     pub warnings: Vec<String>,
 }
 
@@ -324,7 +325,9 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             no_walls: request.no_walls,
         },
     )?;
-    let run = load_run(request.run_dir)?;
+    // What reading the run warned of goes into report.json with the rest.
+    let (run, read) = super::capturing_warnings(|| load_run(request.run_dir));
+    let run = run?;
     let calibration = surveyed.calibration.as_ref();
     let mut odometry = corrected_odometry(&run, calibration);
     if let (Some(frame), fusion::Start::Survey) = (surveyed.frame_from_odometry, request.start) {
@@ -341,7 +344,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         (!surveyed.walls.is_empty() || surveyed.returns.is_some()).then_some(&run.meta.robot.sonar);
     let filter = surveyed.localizer(io::load_fuse_config(request.config)?, request.start, layout);
     let matches_scans = filter.matches_scans();
-    let mut warnings = Warnings(surveyed.warnings.clone());
+    let mut warnings = Warnings(surveyed.warnings.iter().cloned().chain(read).collect());
     let lidar = run.meta.robot.sonar.beam == BeamModel::Ray && !run.sonar.is_empty();
     if lidar && !matches_scans && !surveyed.walls.is_empty() {
         warnings.warn(format!(
@@ -349,7 +352,10 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             request.survey.display()
         ));
     }
-    let world = load_world_of_run(request.world, request.run_dir, &run)?;
+    let (world, read) =
+        super::capturing_warnings(|| load_world_of_run(request.world, request.run_dir, &run));
+    let world = world?;
+    warnings.0.extend(read);
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
         &request.recording,

@@ -45,6 +45,9 @@ pub struct MapOutput {
     pub poses: PoseSource,
     /// The range sensor mapped with (`ranging.lidar` in `metrics`).
     pub ranging: crate::dataset::RangeSensor,
+    /// What reading the run warned of, as printed then (`report.json`'s `warnings` begin with
+    /// them; [`MapOutput::warnings`] are the map's own).
+    pub read_warnings: Vec<String>,
 }
 
 /// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
@@ -70,20 +73,26 @@ pub struct MapOutput {
 /// # Ok::<(), stereotag::workflow::Error>(())
 /// ```
 pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
-    let run = load_run(request.run_dir)?;
-    let given = match request.config {
-        Some(p) => Some(io::load_mapping_config(p)?),
-        None => None,
-    };
-    let config = super::mapping_of_run(&run, given);
-    let world = match world_of_run(request.world, request.run_dir, &run) {
-        Some(w) => Some(io::load_world(&w)?.world),
-        None => None,
-    };
+    // What reading the run warned of goes into report.json with the rest.
+    let (loaded, read) = super::capturing_warnings(|| -> Result<_> {
+        let run = load_run(request.run_dir)?;
+        let given = match request.config {
+            Some(p) => Some(io::load_mapping_config(p)?),
+            None => None,
+        };
+        let config = super::mapping_of_run(&run, given);
+        let world = match world_of_run(request.world, request.run_dir, &run) {
+            Some(w) => Some(io::load_world(&w)?.world),
+            None => None,
+        };
+        Ok((run, config, world))
+    });
+    let (run, config, world) = loaded?;
     let dir = OutputDir::create(request.out, request.force)?;
     // Opened before the work, so that a sink that cannot be used fails at once.
     let recorder = Recorder::open(&request.recording, Recording::Map, &dir.path("map.rrd"))?;
     let mut output = map_and_score(&run, request.poses, &config, world.as_ref())?;
+    output.read_warnings = read;
     if let Some(rec) = recorder {
         let started = std::time::Instant::now();
         record(&rec, &run, &output, &config, world.as_ref())?;
@@ -201,6 +210,7 @@ pub fn map_and_score(
         scores,
         ranging,
         poses,
+        read_warnings: Vec::new(),
     })
 }
 
@@ -241,7 +251,7 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         "poses": output.poses.as_str(),
         "metrics": finite,
         "timings_s": map.timings_s,
-        "warnings": output.warnings(),
+        "warnings": output.read_warnings.iter().cloned().chain(output.warnings()).collect::<Vec<_>>(),
     });
     io::save_json(&dir.join("report.json"), &report)?;
     Ok(())

@@ -247,6 +247,101 @@ pub fn load_world_of_run(
         .map(|w| w.world))
 }
 
+/// Runs `f`, passing every event on to the subscriber in use as before, and returns with its
+/// result the warnings `f` printed on this thread: what reading a run's files warned of (rows
+/// re-ordered, an odometry jump, a world named but missing), which the readers print rather
+/// than return, for `report.json`. Warnings printed on other threads are not kept.
+pub(crate) fn capturing_warnings<T>(f: impl FnOnce() -> T) -> (T, Vec<String>) {
+    let kept = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let capture = tracing::Dispatch::new(Capture {
+        inner: tracing::dispatcher::get_default(Clone::clone),
+        kept: kept.clone(),
+        level: tracing::level_filters::LevelFilter::current(),
+    });
+    let out = tracing::dispatcher::with_default(&capture, f);
+    let kept = kept.lock().map(|k| k.clone()).unwrap_or_default();
+    (out, kept)
+}
+
+/// A subscriber that hands everything to `inner` and keeps the message of each warning.
+struct Capture {
+    inner: tracing::Dispatch,
+    kept: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+    /// The most verbose level any subscriber takes, as it was (`inner`'s own hint is not public).
+    level: tracing::level_filters::LevelFilter,
+}
+
+/// Whether an event is a warning (not an error: a workflow returns its errors).
+fn is_warning(metadata: &tracing::Metadata<'_>) -> bool {
+    metadata.is_event() && *metadata.level() == tracing::Level::WARN
+}
+
+/// The `message` field of an event.
+#[derive(Default)]
+struct Message(String);
+
+impl tracing::field::Visit for Message {
+    fn record_debug(&mut self, field: &tracing::field::Field, value: &dyn std::fmt::Debug) {
+        if field.name() == "message" {
+            self.0 = format!("{value:?}");
+        }
+    }
+}
+
+impl tracing::Subscriber for Capture {
+    fn register_callsite(
+        &self,
+        metadata: &'static tracing::Metadata<'static>,
+    ) -> tracing::subscriber::Interest {
+        match self.inner.register_callsite(metadata) {
+            never if never.is_never() && is_warning(metadata) => {
+                tracing::subscriber::Interest::sometimes()
+            }
+            interest => interest,
+        }
+    }
+    fn max_level_hint(&self) -> Option<tracing::level_filters::LevelFilter> {
+        Some(self.level.max(tracing::level_filters::LevelFilter::WARN))
+    }
+    fn enabled(&self, metadata: &tracing::Metadata<'_>) -> bool {
+        is_warning(metadata) || self.inner.enabled(metadata)
+    }
+    fn new_span(&self, span: &tracing::span::Attributes<'_>) -> tracing::span::Id {
+        self.inner.new_span(span)
+    }
+    fn record(&self, span: &tracing::span::Id, values: &tracing::span::Record<'_>) {
+        self.inner.record(span, values)
+    }
+    fn record_follows_from(&self, span: &tracing::span::Id, follows: &tracing::span::Id) {
+        self.inner.record_follows_from(span, follows)
+    }
+    fn event(&self, event: &tracing::Event<'_>) {
+        if is_warning(event.metadata()) {
+            let mut message = Message::default();
+            event.record(&mut message);
+            if let Ok(mut kept) = self.kept.lock() {
+                kept.push(message.0);
+            }
+        }
+        // Kept even when nothing prints it (no subscriber, or one that leaves warnings out).
+        if self.inner.enabled(event.metadata()) {
+            self.inner.event(event)
+        }
+    }
+    fn enter(&self, span: &tracing::span::Id) {
+        self.inner.enter(span)
+    }
+    fn exit(&self, span: &tracing::span::Id) {
+        self.inner.exit(span)
+    }
+    fn clone_span(&self, id: &tracing::span::Id) -> tracing::span::Id {
+        self.inner.clone_span(id)
+    }
+    fn try_close(&self, id: tracing::span::Id) -> bool {
+        self.inner.try_close(id)
+    }
+}
+
 /// The warnings a workflow prints as it runs, kept for its recording and its caller.
 #[derive(Debug, Default)]
 pub(crate) struct Warnings(pub(crate) Vec<String>);
@@ -274,4 +369,60 @@ pub(crate) fn relative_path(to: &Path, from_dir: &Path) -> PathBuf {
         out.push(c);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The warnings printed while reading come back with the result, once each, whether or not
+    /// a subscriber prints them; everything still reaches the subscriber in use.
+    #[test]
+    fn the_warnings_printed_while_reading_are_kept() {
+        // No subscriber: nothing prints, the warnings are kept all the same.
+        let (out, kept) = capturing_warnings(|| {
+            tracing::warn!("rows re-ordered");
+            tracing::info!("a grid fitted");
+            7
+        });
+        assert_eq!((out, kept), (7, vec!["rows re-ordered".to_string()]));
+        // A subscriber that prints warnings and information: it gets both, as before.
+        let printed = std::sync::Arc::new(std::sync::Mutex::new(Vec::<u8>::new()));
+        let sink = printed.clone();
+        let subscriber = tracing_subscriber::fmt()
+            .with_max_level(tracing::Level::INFO)
+            .with_ansi(false)
+            .with_writer(move || Writer(sink.clone()))
+            .finish();
+        let kept = tracing::subscriber::with_default(subscriber, || {
+            capturing_warnings(|| {
+                tracing::warn!("an odometry jump at t = {:.1} s", 12.0);
+                tracing::info!("ranges from the lidar");
+                tracing::debug!("not printed");
+            })
+            .1
+        });
+        assert_eq!(kept, ["an odometry jump at t = 12.0 s"]);
+        let printed = String::from_utf8(printed.lock().unwrap().clone()).unwrap();
+        assert!(
+            printed.contains("an odometry jump at t = 12.0 s"),
+            "{printed}"
+        );
+        assert!(printed.contains("ranges from the lidar"), "{printed}");
+        assert!(!printed.contains("not printed"), "{printed}");
+        assert_eq!(printed.matches("odometry jump").count(), 1, "{printed}");
+    }
+
+    /// A shared buffer the test's subscriber writes to.
+    struct Writer(std::sync::Arc<std::sync::Mutex<Vec<u8>>>);
+
+    impl std::io::Write for Writer {
+        fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(bytes);
+            Ok(bytes.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
 }

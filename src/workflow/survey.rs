@@ -131,8 +131,9 @@ pub struct SurveyOutput {
     /// The scores against the run's ground truth and the world, where known (none for a survey
     /// in a tag's frame).
     pub scores: SurveyScores,
-    /// The warnings about what the survey found, as printed on stderr: a run without stereo
-    /// pairs, what the raw map hid or left out, tags the filter would not fuse, sizes the
+    /// The warnings the survey printed on stderr: what reading the run warned of (rows
+    /// re-ordered, an odometry jump, a world named but missing, a rig with no mounting), a run
+    /// without stereo pairs, what the raw map hid or left out, tags the filter would not fuse, sizes the
     /// sightings disagree about, sightings mostly gated out, what the offline pass did not keep
     /// ([`fusion::OfflineResult::notes`]), ranges scattering far off the walls, anchors far
     /// from their surveyed tags, a mounting off or not estimated.
@@ -270,18 +271,24 @@ pub fn survey_into(
     progress: &dyn Progress,
 ) -> Result<SurveyOutput> {
     let started = std::time::Instant::now();
-    let mut inputs = Inputs::load(request)?;
+    // What reading the run warned of goes into report.json with the rest.
+    let (inputs, mut read) = super::capturing_warnings(|| Inputs::load(request));
+    let mut inputs = inputs?;
     let recorder = Recorder::open(
         &request.recording,
         Recording::Survey,
         &dir.path("survey.rrd"),
     )?;
-    let rig = load_run_rig(
-        request.run_dir,
-        &inputs.run,
-        request.detect.default_mounting,
-    )?;
-    let mut warnings = Warnings::default();
+    let (rig, rig_read) = super::capturing_warnings(|| {
+        load_run_rig(
+            request.run_dir,
+            &inputs.run,
+            request.detect.default_mounting,
+        )
+    });
+    let rig = rig?;
+    read.extend(rig_read);
+    let mut warnings = Warnings(read);
     if rig.is_none() {
         warnings.warn(NO_STEREO_PAIRS.into());
     }
