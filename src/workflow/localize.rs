@@ -326,8 +326,12 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         },
     )?;
     // What reading the run warned of goes into report.json with the rest.
-    let (run, read) = super::capturing_warnings(|| load_run(request.run_dir));
-    let run = run?;
+    let (loaded, read) = super::capturing_warnings(|| -> Result<_> {
+        let run = load_run(request.run_dir)?;
+        let world = load_world_of_run(request.world, request.run_dir, &run)?;
+        Ok((run, world))
+    });
+    let (run, world) = loaded?;
     let calibration = surveyed.calibration.as_ref();
     let mut odometry = corrected_odometry(&run, calibration);
     if let (Some(frame), fusion::Start::Survey) = (surveyed.frame_from_odometry, request.start) {
@@ -352,10 +356,6 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             request.survey.display()
         ));
     }
-    let (world, read) =
-        super::capturing_warnings(|| load_world_of_run(request.world, request.run_dir, &run));
-    let world = world?;
-    warnings.0.extend(read);
     let dir = OutputDir::create(request.out, request.force)?;
     let recorder = Recorder::open(
         &request.recording,

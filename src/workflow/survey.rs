@@ -133,8 +133,8 @@ pub struct SurveyOutput {
     pub scores: SurveyScores,
     /// The warnings the survey printed on stderr: what reading the run warned of (rows
     /// re-ordered, an odometry jump, a world named but missing, a rig with no mounting), a run
-    /// without stereo pairs, what the raw map hid or left out, tags the filter would not fuse, sizes the
-    /// sightings disagree about, sightings mostly gated out, what the offline pass did not keep
+    /// without stereo pairs, what the raw map hid or left out, tags the filter would not fuse,
+    /// sizes the sightings disagree about, sightings mostly gated out, what the offline pass did not keep
     /// ([`fusion::OfflineResult::notes`]), ranges scattering far off the walls, anchors far
     /// from their surveyed tags, a mounting off or not estimated.
     pub warnings: Vec<String>,
@@ -238,6 +238,8 @@ pub fn load_run_rig(
 /// A run and what surveying it needs, loaded.
 struct Inputs {
     run: RunDataset,
+    /// The stereo rig ([`load_run_rig`]).
+    rig: Option<StereoRig>,
     world: Option<World>,
     fuse: fusion::FuseConfig,
     calibration: Option<OdometryCalibration>,
@@ -248,6 +250,7 @@ struct Inputs {
 impl Inputs {
     fn load(request: &SurveyRequest<'_>) -> Result<Self> {
         let run = load_run(request.run_dir)?;
+        let rig = load_run_rig(request.run_dir, &run, request.detect.default_mounting)?;
         let world = load_world_of_run(request.world, request.run_dir, &run)?;
         let mut fuse = io::load_fuse_config(request.config)?;
         fuse.estimate_mounting |= request.estimate_mounting;
@@ -255,6 +258,7 @@ impl Inputs {
         let mapping = super::mapping_of_run(&run, None);
         Ok(Self {
             run,
+            rig,
             world,
             fuse,
             calibration,
@@ -272,22 +276,14 @@ pub fn survey_into(
 ) -> Result<SurveyOutput> {
     let started = std::time::Instant::now();
     // What reading the run warned of goes into report.json with the rest.
-    let (inputs, mut read) = super::capturing_warnings(|| Inputs::load(request));
+    let (inputs, read) = super::capturing_warnings(|| Inputs::load(request));
     let mut inputs = inputs?;
     let recorder = Recorder::open(
         &request.recording,
         Recording::Survey,
         &dir.path("survey.rrd"),
     )?;
-    let (rig, rig_read) = super::capturing_warnings(|| {
-        load_run_rig(
-            request.run_dir,
-            &inputs.run,
-            request.detect.default_mounting,
-        )
-    });
-    let rig = rig?;
-    read.extend(rig_read);
+    let rig = inputs.rig.take();
     let mut warnings = Warnings(read);
     if rig.is_none() {
         warnings.warn(NO_STEREO_PAIRS.into());
