@@ -57,12 +57,9 @@ impl Map {
     }
 }
 
-/// Prints the off-grid warning, the counts and, with a world, the scores.
+/// Prints the counts and, with a world, the scores (the warnings were printed as they came).
 fn print_summary(output: &MapOutput) {
     let map = &output.map;
-    for w in output.warnings() {
-        tracing::warn!("{w}");
-    }
     tracing::info!(
         "{} readings; {} features offline, {} online; mapped in {:.3} s",
         map.readings,

@@ -45,9 +45,11 @@ pub struct MapOutput {
     pub poses: PoseSource,
     /// The range sensor mapped with (`ranging.lidar` in `metrics`).
     pub ranging: crate::dataset::RangeSensor,
-    /// What reading the run warned of, as printed then (`report.json`'s `warnings` begin with
-    /// them; [`MapOutput::warnings`] are the map's own).
-    pub read_warnings: Vec<String>,
+    /// What a user should know of, as printed on stderr and kept in `report.json` and the
+    /// recording: what reading the run warned of, then what the map leaves out or hides
+    /// (readings off the grid or outside the trajectory's span, knobs that hid most of the map).
+    /// [`map_and_score`] gives the map's own alone, without printing them.
+    pub warnings: Vec<String>,
 }
 
 /// Maps a run and writes `map.pgm`/`map.yaml`, `map.png`, `map_log_odds.*`, `hough.png`,
@@ -92,7 +94,11 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     // Opened before the work, so that a sink that cannot be used fails at once.
     let recorder = Recorder::open(&request.recording, Recording::Map, &dir.path("map.rrd"))?;
     let mut output = map_and_score(&run, request.poses, &config, world.as_ref())?;
-    output.read_warnings = read;
+    let mut warnings = super::Warnings(read);
+    for w in std::mem::take(&mut output.warnings) {
+        warnings.warn(w);
+    }
+    output.warnings = warnings.0;
     if let Some(rec) = recorder {
         let started = std::time::Instant::now();
         record(&rec, &run, &output, &config, world.as_ref())?;
@@ -107,16 +113,14 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     Ok(output)
 }
 
-impl MapOutput {
-    /// What the map leaves out or hides that a user should know of: readings off the grid or
-    /// outside the trajectory's span, and knobs that hid most of the map.
-    pub fn warnings(&self) -> Vec<String> {
-        [self.map.off_grid_warning(), self.map.unplaced_warning()]
-            .into_iter()
-            .flatten()
-            .chain(self.map.hidden_warnings())
-            .collect()
-    }
+/// What the map leaves out or hides that a user should know of: readings off the grid or
+/// outside the trajectory's span, and knobs that hid most of the map.
+fn map_warnings(map: &SonarMap) -> Vec<String> {
+    [map.off_grid_warning(), map.unplaced_warning()]
+        .into_iter()
+        .flatten()
+        .chain(map.hidden_warnings())
+        .collect()
 }
 
 /// Logs the map to the recording.
@@ -146,14 +150,14 @@ fn record(
         grid: &grid,
         metrics: &output.metrics,
         scores: output.scores.as_ref(),
-        warnings: &output.warnings(),
+        warnings: &output.warnings,
     })?;
     Ok(())
 }
 
 /// Maps a run and scores it against the world when one is given; with the run's ground truth, the
 /// trajectory mapped on is scored against it (`ate_m.trajectory`: the odometry's error, or 0
-/// with `--poses ground-truth`).
+/// with `--poses ground-truth`). Its `warnings` are the map's own, not printed.
 pub fn map_and_score(
     run: &RunDataset,
     poses: PoseSource,
@@ -205,12 +209,12 @@ pub fn map_and_score(
         crate::geometry::path_length_m(&run.odometry),
     );
     Ok(MapOutput {
+        warnings: map_warnings(&map),
         map,
         metrics,
         scores,
         ranging,
         poses,
-        read_warnings: Vec::new(),
     })
 }
 
@@ -251,7 +255,7 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         "poses": output.poses.as_str(),
         "metrics": finite,
         "timings_s": map.timings_s,
-        "warnings": output.read_warnings.iter().cloned().chain(output.warnings()).collect::<Vec<_>>(),
+        "warnings": output.warnings,
     });
     io::save_json(&dir.join("report.json"), &report)?;
     Ok(())
