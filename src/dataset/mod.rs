@@ -149,6 +149,16 @@ pub enum RangeSensor {
     Lidar,
 }
 
+impl RangeSensor {
+    /// The sensor's name in messages: "sonar" or "lidar".
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Sonar => "sonar",
+            Self::Lidar => "lidar",
+        }
+    }
+}
+
 /// The robot as `run.yaml` describes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]

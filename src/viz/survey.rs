@@ -597,17 +597,19 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
     if let Some([before, after]) = offline.sonar_agreement {
         md.push_str(&if offline.kept == crate::fusion::OfflineKept::Nothing {
             format!(
-                "No tags and no visual turns: the ranges' own correction (sonar or lidar) made \
-                 them agree with one another only {:.0}% → {:.0}%, so it is not kept: the \
-                 offline trajectory is the odometry.\n\n",
+                "No tags and no visual turns: the {}'s own correction made its ranges agree \
+                 with one another only {:.0}% → {:.0}%, so it is not kept: the offline \
+                 trajectory is the odometry.\n\n",
+                scene.run.ranging().name(),
                 100.0 * before,
                 100.0 * after
             )
         } else {
             format!(
-                "No tags and no visual turns: the ranges (sonar or lidar) corrected the \
-                 odometry ({}; they agree with one another {:.0}% along the odometry, {:.0}% \
-                 along the correction{}).\n\n",
+                "No tags and no visual turns: the {} corrected the odometry ({}; its ranges \
+                 agree with one another {:.0}% along the odometry, {:.0}% along the \
+                 correction{}).\n\n",
+                scene.run.ranging().name(),
                 match offline.sonar_matches {
                     0 => format!(
                         "the walls' directions alone: a sonar slid along a wall at {} of {} \
@@ -633,8 +635,8 @@ fn at_a_glance(scene: &SurveyScene<'_>) -> String {
                 100.0 * before,
                 100.0 * after,
                 if offline.sonar_wheel_distance && offline.sonar_matches > 0 {
-                    ", which takes the wheels' distance as right: the echoes agreed better so \
-                     than with the distance scale estimated"
+                    ", which takes the wheels' distance as right: the distance scale estimated \
+                     did not make the ranges agree clearly better"
                 } else {
                     ""
                 }

@@ -389,7 +389,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             progress,
         )?,
         None => {
-            warnings.warn(super::survey::NO_STEREO_PAIRS.into());
+            warnings.warn(super::survey::no_stereo_pairs(&run));
             RunSightings::default()
         }
     };

@@ -227,10 +227,7 @@ fn save_map(dir: &Path, output: &MapOutput) -> Result<()> {
         mark_legend: vec![("Hough corner", crate::picture::colours::CORNER)],
         ..Default::default()
     };
-    let sensor = match output.ranging {
-        crate::dataset::RangeSensor::Lidar => "laser",
-        crate::dataset::RangeSensor::Sonar => "sonar",
-    };
+    let sensor = output.ranging.name();
     io::save_map_png(
         &dir.join("map.png"),
         &map.counting,

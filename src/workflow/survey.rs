@@ -187,9 +187,13 @@ fn size_landmarks(
     }
 }
 
-/// What a survey says of a run without stereo pairs.
-pub(super) const NO_STEREO_PAIRS: &str =
-    "the run has no stereo pairs (stereo.csv is empty): its ranges (sonar or lidar) and odometry only";
+/// What a survey or a localisation says of a run without stereo pairs.
+pub(super) fn no_stereo_pairs(run: &RunDataset) -> String {
+    format!(
+        "the run has no stereo pairs (stereo.csv is empty): its {} ranges and odometry only",
+        run.ranging().name()
+    )
+}
 
 /// The odometry calibration an earlier survey found, from its `landmarks.json`.
 fn calibration_of(survey_dir: &Path) -> Result<OdometryCalibration> {
@@ -286,7 +290,7 @@ pub fn survey_into(
     let rig = inputs.rig.take();
     let mut warnings = Warnings(read);
     if rig.is_none() {
-        warnings.warn(NO_STEREO_PAIRS.into());
+        warnings.warn(no_stereo_pairs(&inputs.run));
     }
     let options = DetectOptions {
         keep_images: recorder.is_some(),

@@ -473,6 +473,10 @@ pub fn run_offline_sonar(
     let mut tries = vec![(score(&estimated), estimated), (score(&wheels), wheels)];
     tries.extend(directions.map(|d| (directions_agreement, d)));
     let best = taken(&tries.iter().map(|t| t.0).collect::<Vec<_>>());
+    let sensor = match sonar.layout.beam {
+        crate::sonar::BeamModel::Cone => "sonar",
+        crate::sonar::BeamModel::Ray => "lidar",
+    };
     let names = [
         "the distance scale estimated",
         "the wheels' distance taken as right",
@@ -485,7 +489,7 @@ pub fn run_offline_sonar(
         .collect();
     if scored.len() > 1 {
         tracing::info!(
-            "the sonar's corrections tried, by how well the echoes agree with one another along them: {}; taken: {}",
+            "the {sensor}'s corrections tried, by how well its ranges agree with one another along them: {}; taken: {}",
             scored.join(", "),
             names[best]
         );
@@ -498,7 +502,7 @@ pub fn run_offline_sonar(
             result.keyframes
         ),
         matches => tracing::info!(
-            "no tag sightings and no visual turns: the latest ranges (sonar or lidar) matched the older readings at {matches} of {} keyframes{}{}",
+            "no tag sightings and no visual turns: the {sensor}'s latest ranges matched its older readings at {matches} of {} keyframes{}{}",
             result.keyframes,
             match result.sonar_wall_directions {
                 0 => String::new(),
@@ -516,10 +520,6 @@ pub fn run_offline_sonar(
     }
     result.sonar_silent_start = scan_match::first_echo_s(sonar.readings, sonar.layout)
         .map(|t| SilentStart::of(obs.odometry, t, config));
-    let sensor = match sonar.layout.beam {
-        crate::sonar::BeamModel::Cone => "sonar",
-        crate::sonar::BeamModel::Ray => "lidar",
-    };
     // Kept only when the run's ranges agree with one another clearly better along it than along
     // the odometry: matches off a biased grid can bend an already good odometry.
     if let Some(after) = after {
