@@ -368,39 +368,34 @@ pub fn run_offline_sonar(
     // seeds 1-5). Either way can be the better one: the scale is estimated only when the run's
     // echoes agree with one another clearly better along that correction ([`SCALE_MIN_GAIN`];
     // docs/RESULTS.md, "How good the judge between the tries is").
-    // First the walls' directions alone (a laser's beams give none here, see
+    // First the walls' directions alone (a sonar sliding along a wall, a laser's straight pieces:
     // `wall_directions`). When the echoes agree clearly better along their correction than along
     // the odometry, the building's axes it found correct the headings the matches are predicted
     // along: a match's grid is placed along the trajectory corrected so far, and where the sonar
     // heard nothing for a while (the simulated museum's hall) the odometry's heading has drifted
     // and the matches pull the run onto a bent map.
-    let directions = (sonar.layout.beam == crate::sonar::BeamModel::Cone).then(|| {
-        sonar_passes(
-            obs,
-            online,
-            config,
-            SonarTry {
-                sonar,
-                grid,
-                hold: SonarHold::Directions,
-                first: None,
-                axes: None,
-                turns_held: false,
-            },
-        )
-    });
+    let directions = sonar_passes(
+        obs,
+        online,
+        config,
+        SonarTry {
+            sonar,
+            grid,
+            hold: SonarHold::Directions,
+            first: None,
+            axes: None,
+            turns_held: false,
+        },
+    );
     let agreement = |trajectory: &[StampedPose]| {
         scan_match::agreement(trajectory, sonar.readings, sonar.layout, grid).unwrap_or(0.0)
     };
     let odometry_agreement = agreement(obs.odometry);
     // A try's axes and calibration are given only when its solution is kept.
-    let directions_agreement = directions
-        .as_ref()
-        .filter(|d| d.kept == OfflineKept::Solution)
-        .map(|d| agreement(&d.trajectory));
+    let directions_agreement =
+        (directions.kept == OfflineKept::Solution).then(|| agreement(&directions.trajectory));
     let axes = directions
-        .as_ref()
-        .and_then(|d| d.wall_axes_rad)
+        .wall_axes_rad
         .filter(|_| directions_agreement.is_some_and(|a| a >= odometry_agreement + SONAR_MIN_GAIN));
     // The directions hold every heading of the run against the building's axes, silent
     // stretches included, so their turn scale and heading drift are the run's: the matched tries
@@ -408,9 +403,8 @@ pub fn run_offline_sonar(
     // turn scale their predictions were made with, the odometry's where the sonar heard nothing
     // (docs/RESULTS.md, "The walls' turns").
     let turns = directions
-        .as_ref()
-        .filter(|d| d.wall_axes_rad.is_some())
-        .and_then(|d| d.odometry_calibration)
+        .odometry_calibration
+        .filter(|_| directions.wall_axes_rad.is_some())
         .filter(graph::within_prior);
     let turned = turns.map(|c| c.apply(obs.odometry));
     let matched = Observations {
@@ -471,7 +465,7 @@ pub fn run_offline_sonar(
     let score =
         |r: &OfflineResult| (r.kept == OfflineKept::Solution).then(|| agreement(&r.trajectory));
     let mut tries = vec![(score(&estimated), estimated), (score(&wheels), wheels)];
-    tries.extend(directions.map(|d| (directions_agreement, d)));
+    tries.push((directions_agreement, directions));
     let best = taken(&tries.iter().map(|t| t.0).collect::<Vec<_>>());
     let sensor = match sonar.layout.beam {
         crate::sonar::BeamModel::Cone => "sonar",

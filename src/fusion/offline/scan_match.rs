@@ -60,6 +60,13 @@ const MAX_MATCH_SIGMA_M: f64 = 0.12;
 const ARC_STEP_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// The distance table's cells per grid cell along each axis.
 const FIELD_SUBCELLS: f64 = 4.0;
+/// How far a laser scan's time stamp may be from when the scan was taken against the odometry's,
+/// seconds: its match is as unsure as the robot's motion over it ([`timing_covariance`]). aces'
+/// scans turn against its logged odometry by 1-3 degrees more, scan to scan, where the robot turns
+/// than where it drives straight, and agree best with it shifted by 0.1 s; matched as if taken
+/// exactly when stamped, a scan taken while turning put its keyframe's heading several degrees
+/// off and held it there (docs/RESULTS.md, "The walls' directions for a laser").
+const SCAN_TIME_SIGMA_S: f64 = 0.1;
 
 /// What the sequential matching gave: every keyframe's pose (the odometry's prediction from the
 /// one before, updated by its match when it has one) and the matches: keyframe, pose, covariance.
@@ -168,6 +175,11 @@ pub(super) fn sequential(
                 }
             })
             .flatten();
+        // A laser's match is as unsure as the motion over its scan's time stamp's own sigma.
+        let pose = pose.map(|(z, r)| match (layout.beam, window.first()) {
+            (BeamModel::Ray, Some(scan)) => (z, r + timing_covariance(odometry, scan.t_s)),
+            _ => (z, r),
+        });
         match pose {
             Some((z, r))
                 if {
@@ -307,6 +319,17 @@ fn arc(at: Pose2, range: f64, layout: &SonarLayout) -> impl Iterator<Item = (f64
         let a = at.theta + half * k as f64 / steps.max(1) as f64;
         (at.x + range * a.cos(), at.y + range * a.sin())
     })
+}
+
+/// What a scan stamped at `t_s` adds to its match's covariance: the robot's turn and travel (by
+/// the odometry, over the second about `t_s`) in [`SCAN_TIME_SIGMA_S`].
+fn timing_covariance(odometry: &[StampedPose], t_s: f64) -> Matrix3<f64> {
+    let Some((a, b)) = pose_at(odometry, t_s - 0.5).zip(pose_at(odometry, t_s + 0.5)) else {
+        return Matrix3::zeros();
+    };
+    let turn = wrap_angle(b.theta - a.theta) * SCAN_TIME_SIGMA_S;
+    let travel = (b.x - a.x).hypot(b.y - a.y) * SCAN_TIME_SIGMA_S;
+    Matrix3::from_diagonal(&Vector3::new(travel.powi(2), travel.powi(2), turn.powi(2)))
 }
 
 /// The covariance of `pose ∘ delta` from `pose`'s and the odometry's over `delta`.

@@ -3,7 +3,10 @@
 //! along a straight wall gives ranges that lie on one line (each echo comes back along the wall's
 //! normal, from the foot of the perpendicular, when that lies in the cone); the line's normal, in
 //! the keyframe's frame, is a measurement of the keyframe's heading modulo a quarter turn once
-//! the building's wall direction is known. The graph estimates that direction with the poses
+//! the building's wall direction is known. A laser sees such walls whole: a straight piece of
+//! one scan gives its normal directly ([`scan_directions`]), and holds the heading of a run whose
+//! scans match their older returns only now and then (aces, a scan every 3 s: drifted five ways,
+//! 0.5-0.9 m offline where the matches alone left 1.8-3.6 m). The graph estimates that direction with the poses
 //! ([`super::graph::add_wall_directions`]); a run whose walls do not mostly run along two
 //! directions at right angles gets none of these factors.
 
@@ -166,7 +169,8 @@ pub(super) fn heading_corrections(
 }
 
 /// The walls sonars slid along near the keyframes, one a keyframe at most (the surest), each
-/// stretch of readings used once. A laser's beams (points, not cones) give none here.
+/// stretch of readings used once; for a laser, the straight pieces of its scans
+/// ([`scan_directions`]).
 pub(super) fn wall_directions(
     frames: &[Keyframe],
     odometry: &[StampedPose],
@@ -174,8 +178,11 @@ pub(super) fn wall_directions(
     layout: &SonarLayout,
     config: &FuseConfig,
 ) -> Vec<WallDirection> {
-    if layout.beam == BeamModel::Ray || odometry.len() < 2 {
+    if odometry.len() < 2 {
         return Vec::new();
+    }
+    if layout.beam == BeamModel::Ray {
+        return scan_directions(frames, odometry, readings, layout);
     }
     let path = crate::geometry::distance_travelled(odometry);
     let mut found = Vec::new();
@@ -228,6 +235,158 @@ pub(super) fn wall_directions(
         }
     }
     found
+}
+
+/// A laser's straight pieces: returns of one scan, neighbours by beam, each within this of the
+/// line through its piece (aces' ranges come in 5 cm steps) ...
+const SCAN_SPLIT_M: f64 = 0.08;
+/// ... a piece ends where the next return is further than this from the last, over the beams'
+/// spacing at its range (a door, a gap, another wall behind) ...
+const SCAN_GAP_BEAMS: f64 = 3.0;
+/// ... and makes a wall with this many returns over this length, metres, whose spread about its
+/// line is at most this, metres.
+const SCAN_MIN_RETURNS: usize = 8;
+const SCAN_MIN_SPAN_M: f64 = 1.0;
+const SCAN_MAX_RMS_M: f64 = 0.04;
+/// The returns' own noise about a wall, metres, at least: aces' 5 cm steps give 1.4 cm.
+const SCAN_NOISE_FLOOR_M: f64 = 0.015;
+
+/// The walls a laser's scans see: at each keyframe, of its latest scan (each scan once), the
+/// straight piece that fixes its direction best. The scan's returns are split at gaps and where
+/// they leave the chord between a piece's ends ([`SCAN_SPLIT_M`]); a piece long and straight
+/// enough is a wall, whose normal's direction (sensor to wall, in the keyframe's frame) has the
+/// sigma of a line fitted to its returns.
+fn scan_directions(
+    frames: &[Keyframe],
+    odometry: &[StampedPose],
+    readings: &[SonarReading],
+    layout: &SonarLayout,
+) -> Vec<WallDirection> {
+    let spacing = layout
+        .sensors
+        .windows(2)
+        .map(|w| wrap_angle(w[1].bearing_rad - w[0].bearing_rad).abs())
+        .fold(f64::INFINITY, f64::min);
+    let spacing = if spacing.is_finite() { spacing } else { 0.0 };
+    let mut found = Vec::new();
+    let mut used = f64::NEG_INFINITY;
+    for (k, frame) in frames.iter().enumerate() {
+        let last = readings.partition_point(|r| r.t_s <= frame.t_s);
+        let Some(t) = last.checked_sub(1).map(|i| readings[i].t_s) else {
+            continue;
+        };
+        if t <= used {
+            continue;
+        }
+        used = t;
+        let Some(robot) = pose_at(odometry, t) else {
+            continue;
+        };
+        let at = frame.odom.between(&robot);
+        let first = readings[..last].partition_point(|r| r.t_s < t);
+        let mut scan: Vec<(usize, f64, (f64, f64))> = readings[first..last]
+            .iter()
+            .filter_map(|r| {
+                let range = r.range_m.filter(|&m| layout.measures(m))?;
+                let beam = at.compose(&layout.sensors.get(r.sensor)?.robot_from_sensor());
+                let (s, c) = beam.theta.sin_cos();
+                Some((r.sensor, range, (beam.x + range * c, beam.y + range * s)))
+            })
+            .collect();
+        scan.sort_by_key(|p| p.0);
+        let mut pieces = Vec::new();
+        let mut start = 0;
+        for i in 1..=scan.len() {
+            let gap = i == scan.len() || {
+                let (a, b) = (scan[i - 1], scan[i]);
+                let reach = SCAN_GAP_BEAMS * spacing * a.1.max(b.1) * (b.0 - a.0) as f64;
+                (b.2 .0 - a.2 .0).hypot(b.2 .1 - a.2 .1) > reach.max(0.05)
+            };
+            if gap {
+                split(&scan[start..i], &mut pieces);
+                start = i;
+            }
+        }
+        let best = pieces
+            .iter()
+            .filter_map(|piece| wall_of(piece, (at.x, at.y)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((normal_rad, sigma_rad)) = best {
+            found.push(WallDirection {
+                keyframe: k,
+                normal_rad,
+                sigma_rad,
+            });
+        }
+    }
+    found
+}
+
+/// Splits a run of neighbouring returns where they leave the chord between its ends by more than
+/// [`SCAN_SPLIT_M`], into `pieces` of [`SCAN_MIN_RETURNS`] or more.
+fn split(run: &[(usize, f64, (f64, f64))], pieces: &mut Vec<Vec<(f64, f64)>>) {
+    if run.len() < SCAN_MIN_RETURNS {
+        return;
+    }
+    let (a, b) = (run[0].2, run[run.len() - 1].2);
+    let length = (b.0 - a.0).hypot(b.1 - a.1).max(1e-9);
+    let off =
+        |p: (f64, f64)| ((b.0 - a.0) * (a.1 - p.1) - (a.0 - p.0) * (b.1 - a.1)).abs() / length;
+    let (i, worst) = run
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i, off(p.2)))
+        .fold((0, 0.0), |m, x| if x.1 > m.1 { x } else { m });
+    if worst > SCAN_SPLIT_M && i > 0 && i + 1 < run.len() {
+        split(&run[..=i], pieces);
+        split(&run[i..], pieces);
+    } else {
+        pieces.push(run.iter().map(|p| p.2).collect());
+    }
+}
+
+/// A straight piece as a wall seen from `sensor`: its normal's direction (sensor to wall) and
+/// that direction's sigma, when long and straight enough ([`SCAN_MIN_SPAN_M`],
+/// [`SCAN_MAX_RMS_M`]).
+fn wall_of(piece: &[(f64, f64)], sensor: (f64, f64)) -> Option<(f64, f64)> {
+    let n = piece.len() as f64;
+    let (mx, my) = piece
+        .iter()
+        .fold((0.0, 0.0), |(x, y), p| (x + p.0 / n, y + p.1 / n));
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in piece {
+        let (dx, dy) = (p.0 - mx, p.1 - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    // The line's direction is the scatter's major axis; its normal the minor one.
+    let along = 0.5 * f64::atan2(2.0 * sxy, sxx - syy);
+    let (s, c) = along.sin_cos();
+    let spread: f64 = piece
+        .iter()
+        .map(|p| (c * (p.0 - mx) + s * (p.1 - my)).powi(2))
+        .sum();
+    let across: f64 = piece
+        .iter()
+        .map(|p| (-s * (p.0 - mx) + c * (p.1 - my)).powi(2))
+        .sum();
+    let rms = (across / n).sqrt();
+    let span = piece
+        .iter()
+        .map(|p| c * (p.0 - mx) + s * (p.1 - my))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+    if span.1 - span.0 < SCAN_MIN_SPAN_M || rms > SCAN_MAX_RMS_M {
+        return None;
+    }
+    let mut normal = along + std::f64::consts::FRAC_PI_2;
+    if normal.cos() * (mx - sensor.0) + normal.sin() * (my - sensor.1) < 0.0 {
+        normal += std::f64::consts::PI;
+    }
+    let sigma = (rms.max(SCAN_NOISE_FLOOR_M) / spread.sqrt()).max(SIGMA_FLOOR_RAD);
+    Some((wrap_angle(normal), sigma))
 }
 
 /// The span of time around `frame` within [`REACH_M`] of travel and [`MAX_TURN_RAD`] of heading
@@ -451,6 +610,113 @@ mod tests {
             .collect();
         let axes = along_axes(&seen).expect("along axes");
         assert!(axes.sigma_scale > 2.0, "{}", axes.sigma_scale);
+    }
+
+    /// A laser of 180 beams a degree apart in a 6 x 4 m room with a round pillar, at `at` (the
+    /// odometry's pose and the keyframe's), its ranges in 5 cm steps as aces logs them; one scan.
+    fn laser_in_a_room(
+        at: Pose2,
+    ) -> (
+        Vec<Keyframe>,
+        Vec<StampedPose>,
+        Vec<SonarReading>,
+        SonarLayout,
+    ) {
+        let sensors = (0..180)
+            .map(|k| crate::sonar::SonarSensor {
+                x_m: 0.0,
+                y_m: 0.0,
+                bearing_rad: (k as f64 - 90.0).to_radians(),
+            })
+            .collect();
+        let layout = SonarLayout {
+            name: "lidar".into(),
+            beam: BeamModel::Ray,
+            cone_rad: 1f64.to_radians(),
+            max_range_m: 20.0,
+            min_range_m: 0.0,
+            sensors,
+        };
+        let range = |bearing: f64| {
+            let (s, c) = (at.theta + bearing).sin_cos();
+            let walls = [
+                (3.0 - at.x) / c,
+                (-3.0 - at.x) / c,
+                (2.0 - at.y) / s,
+                (-2.0 - at.y) / s,
+            ];
+            let wall = walls
+                .into_iter()
+                .filter(|t| *t > 0.0)
+                .fold(f64::INFINITY, f64::min);
+            // The pillar: 0.3 m across, at (1.5, 1.0).
+            let (px, py) = (1.5 - at.x, 1.0 - at.y);
+            let along = px * c + py * s;
+            let miss = (px * s - py * c).abs();
+            let pillar = if along > 0.0 && miss < 0.15 {
+                along - (0.15f64.powi(2) - miss * miss).sqrt()
+            } else {
+                f64::INFINITY
+            };
+            (wall.min(pillar) / 0.05).round() * 0.05
+        };
+        let readings = layout
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(sensor, s)| SonarReading {
+                t_s: 0.5,
+                sensor,
+                range_m: Some(range(s.bearing_rad)),
+            })
+            .collect();
+        let odometry = vec![
+            StampedPose { t_s: 0.0, pose: at },
+            StampedPose { t_s: 1.0, pose: at },
+        ];
+        let frames = vec![Keyframe {
+            t_s: 1.0,
+            odom: at,
+            init: at,
+        }];
+        (frames, odometry, readings, layout)
+    }
+
+    #[test]
+    fn a_laser_scan_gives_a_walls_normal_in_the_keyframes_frame() {
+        let heading = 20f64.to_radians();
+        let (frames, odometry, readings, layout) = laser_in_a_room(Pose2::new(0.5, -0.3, heading));
+        let config = FuseConfig::default();
+        let found = wall_directions(&frames, &odometry, &readings, &layout, &config);
+        assert_eq!(found.len(), 1, "one direction a scan: {found:?}");
+        let d = found[0];
+        // The room's walls' normals lie along the world's axes: in the robot's frame, a quarter
+        // turn apart from minus the heading.
+        let off = wrap_angle(4.0 * (d.normal_rad + heading)) / 4.0;
+        assert!(
+            off.abs() < (3.0 * d.sigma_rad).max(0.2f64.to_radians()),
+            "{} deg off, sigma {} deg",
+            off.to_degrees(),
+            d.sigma_rad.to_degrees()
+        );
+        assert!(
+            d.sigma_rad < 0.5f64.to_radians(),
+            "{}",
+            d.sigma_rad.to_degrees()
+        );
+        // Another keyframe on the same scan does not measure it again.
+        let at = frames[0].odom;
+        let twice: Vec<Keyframe> = [0.8, 1.0]
+            .map(|t_s| Keyframe {
+                t_s,
+                odom: at,
+                init: at,
+            })
+            .into();
+        assert_eq!(
+            wall_directions(&twice, &odometry, &readings, &layout, &config).len(),
+            1
+        );
     }
 
     #[test]
