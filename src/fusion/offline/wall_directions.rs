@@ -307,9 +307,14 @@ fn scan_directions(
                 start = i;
             }
         }
+        // Where the laser was (every beam leaves from its mounting).
+        let laser = layout
+            .sensors
+            .first()
+            .map_or(at, |s| at.compose(&s.robot_from_sensor()));
         let best = pieces
             .iter()
-            .filter_map(|piece| wall_of(piece, (at.x, at.y)))
+            .filter_map(|piece| wall_of(piece, (laser.x, laser.y)))
             .min_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((normal_rad, sigma_rad)) = best {
             found.push(WallDirection {
