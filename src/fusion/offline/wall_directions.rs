@@ -5,10 +5,10 @@
 //! the keyframe's frame, is a measurement of the keyframe's heading modulo a quarter turn once
 //! the building's wall direction is known. A laser sees such walls whole: a straight piece of
 //! one scan gives its normal directly ([`scan_directions`]), and holds the heading of a run whose
-//! scans match their older returns only now and then (aces, a scan every 3 s: drifted five ways,
-//! 0.5-0.9 m offline where the matches alone left 1.8-3.6 m). The graph estimates that direction with the poses
-//! ([`super::graph::add_wall_directions`]); a run whose walls do not mostly run along two
-//! directions at right angles gets none of these factors.
+//! scans match their older returns only now and then (aces, a scan every 3 s: drifted six ways,
+//! 0.5-0.9 m offline where the matches alone left 1.8-3.8 m). The graph estimates that direction
+//! with the poses ([`super::graph::add_wall_directions`]); a run whose walls do not mostly run
+//! along two directions at right angles gets none of these factors.
 
 use super::keyframes::Keyframe;
 use crate::fusion::FuseConfig;
@@ -243,10 +243,11 @@ const SCAN_SPLIT_M: f64 = 0.08;
 /// ... a piece ends where the next return is further than this from the last, over the beams'
 /// spacing at its range (a door, a gap, another wall behind) ...
 const SCAN_GAP_BEAMS: f64 = 3.0;
-/// ... and makes a wall with this many returns over this length, metres, whose spread about its
-/// line is at most this, metres.
+/// ... and makes a wall with this many returns ...
 const SCAN_MIN_RETURNS: usize = 8;
+/// ... over this length, metres ...
 const SCAN_MIN_SPAN_M: f64 = 1.0;
+/// ... whose spread about its line is at most this, metres.
 const SCAN_MAX_RMS_M: f64 = 0.04;
 /// The returns' own noise about a wall, metres, at least: aces' 5 cm steps give 1.4 cm.
 const SCAN_NOISE_FLOOR_M: f64 = 0.015;
