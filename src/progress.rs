@@ -8,7 +8,8 @@
 
 /// Receives a workflow's progress. Every method does nothing by default.
 pub trait Progress: Sync {
-    /// A stage of `total` steps starts (e.g. `"detect"`, 779 stereo pairs).
+    /// A stage of `total` steps starts (e.g. `"detect"`, 779 stereo pairs); 0 for a stage whose
+    /// steps are not counted (the command line shows its name and the time it has taken).
     fn start(&self, _stage: &str, _total: u64) {}
     /// `steps` more steps of the current stage are done.
     fn advance(&self, _steps: u64) {}
@@ -23,6 +24,14 @@ pub trait Progress: Sync {
 pub struct Silent;
 
 impl Progress for Silent {}
+
+/// Runs `f` as an uncounted stage `name` of `progress` ([`Progress::start`] with no total).
+pub(crate) fn staged<T>(progress: &dyn Progress, name: &str, f: impl FnOnce() -> T) -> T {
+    progress.start(name, 0);
+    let out = f();
+    progress.finish();
+    out
+}
 
 /// Runs `f`, noting its wall-clock time in seconds under `name` (a stage of a report's
 /// `timings_s`).

@@ -268,12 +268,18 @@ impl stereotag::progress::Progress for Bars {
             return;
         }
         let bar = indicatif::ProgressBar::new(total);
-        let style = indicatif::ProgressStyle::with_template(
-            "{msg:>10} [{bar:40}] {pos}/{len} ({eta} left)",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-        .progress_chars("=> ");
+        // A stage whose steps are not counted shows that it runs and for how long.
+        let template = match total {
+            0 => "{msg:>10} {spinner} {elapsed}",
+            _ => "{msg:>10} [{bar:40}] {pos}/{len} ({eta} left)",
+        };
+        let style = indicatif::ProgressStyle::with_template(template)
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> ");
         bar.set_style(style);
+        if total == 0 {
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
+        }
         bar.set_message(stage.to_string());
         if let Some(old) = self
             .bar

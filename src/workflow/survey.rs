@@ -11,7 +11,7 @@ use crate::fusion::{self, OdometryCalibration, Survey};
 use crate::geometry::Pose2;
 use crate::io::{self, OutputDir};
 use crate::metrics::{score_survey, survey_metrics, SurveyScores};
-use crate::progress::{timed, Progress};
+use crate::progress::{staged, timed, Progress};
 use crate::sonar::grid::GridError;
 use crate::sonar::map::{map_trajectory, SonarMap};
 use crate::viz::{Recorder, Recording, RecordingRequest, SurveyScene};
@@ -353,21 +353,23 @@ pub fn survey_into(
     let (run, world, mapping) = (&inputs.run, inputs.world.as_ref(), &inputs.mapping);
     // The pairs are compressed for the recording while the survey runs: it is mostly one thread
     // (grids, Hough, pose graph), which leaves the other core to the JPEG encoder.
-    let ((images, compress_s), result) = rayon::join(
-        || {
-            let t = std::time::Instant::now();
-            (compress_pairs(seen.images), t.elapsed().as_secs_f64())
-        },
-        || {
-            let settings = fusion::SurveySettings {
-                mapping,
-                fuse: &inputs.fuse,
-                calibration: inputs.calibration,
-                anchors: &inputs.anchors,
-            };
-            fusion::survey(run, raw, &seen.sightings, &seen.visual, &settings)
-        },
-    );
+    let ((images, compress_s), result) = staged(progress, "fuse", || {
+        rayon::join(
+            || {
+                let t = std::time::Instant::now();
+                (compress_pairs(seen.images), t.elapsed().as_secs_f64())
+            },
+            || {
+                let settings = fusion::SurveySettings {
+                    mapping,
+                    fuse: &inputs.fuse,
+                    calibration: inputs.calibration,
+                    anchors: &inputs.anchors,
+                };
+                fusion::survey(run, raw, &seen.sightings, &seen.visual, &settings)
+            },
+        )
+    });
     let mut result = result?;
     result.frame_from_odometry = frame_from_odometry;
     // What the raw map hid or left out, the tags the filter would not fuse, and what follows.
@@ -476,8 +478,10 @@ pub fn survey_into(
             rig: survey_rig.as_ref(),
             images: &images,
         };
-        timed("record", &mut timings, || rec.log_survey(&scene))
-            .map_err(|e| Error::from(e).during("recording the survey"))?;
+        timed("record", &mut timings, || {
+            staged(progress, "record", || rec.log_survey(&scene))
+        })
+        .map_err(|e| Error::from(e).during("recording the survey"))?;
     }
     timings.insert("total".into(), started.elapsed().as_secs_f64());
     io::save_survey(
@@ -547,6 +551,10 @@ fn detect_and_map(
     progress: &dyn Progress,
 ) -> (Result<RunSightings>, Option<RawMap>, f64) {
     let run = &inputs.run;
+    // Without pictures the raw map is all there is to wait for.
+    if rig.is_none() {
+        progress.start("map", 0);
+    }
     let (seen, (raw, seconds)) = rayon::join(
         || match rig {
             Some(rig) => detect_run(options, run_dir, run, rig, inputs.world.as_ref(), progress),
@@ -561,6 +569,9 @@ fn detect_and_map(
             (Some(raw), t.elapsed().as_secs_f64())
         },
     );
+    if rig.is_none() {
+        progress.finish();
+    }
     (seen, raw, seconds)
 }
 
