@@ -1000,7 +1000,21 @@ fn a_sonar_only_survey_corrects_with_the_sonar_or_claims_nothing() {
         ..stereotag::workflow::survey::SurveyRequest::new(&run, out)
     };
     let out = dir.path().join("survey");
-    let output = stereotag::workflow::survey::survey(&request(&out, None), &Silent).unwrap();
+    // The stages a user waits through are said, though a run without pictures has no steps to
+    // count: the raw map, the fusion and maps.
+    struct Stages(std::sync::Mutex<Vec<String>>);
+    impl stereotag::progress::Progress for Stages {
+        fn start(&self, stage: &str, total: u64) {
+            self.0.lock().unwrap().push(format!("{stage} {total}"));
+        }
+    }
+    let stages = Stages(Default::default());
+    let output = stereotag::workflow::survey::survey(&request(&out, None), &stages).unwrap();
+    let stages = stages.0.into_inner().unwrap();
+    assert!(
+        stages.starts_with(&["map 0".to_string(), "fuse 0".to_string()]),
+        "{stages:?}"
+    );
     // The offline pass's note is kept with the survey's warnings (and so in its recording).
     let said = "the offline pass has nothing to correct the odometry against";
     assert!(output
