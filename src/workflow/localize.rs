@@ -15,7 +15,7 @@ use crate::metrics::{
     error_growth, localization_metrics, score_localization, GrowthBin, LocalizationCounts,
     LocalizationScores, Located,
 };
-use crate::progress::Progress;
+use crate::progress::{staged, Progress};
 use crate::sonar::grid::OccupancyMap;
 use crate::sonar::walls::WallSegment;
 use crate::sonar::BeamModel;
@@ -400,7 +400,9 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
         sightings: &seen.sightings,
         visual: &seen.visual,
     };
-    let result = fusion::track(filter, &obs, &run.sonar);
+    let result = staged(progress, "localize", || {
+        fusion::track(filter, &obs, &run.sonar)
+    });
     for t in &result.relocalised_t_s {
         warnings.warn(format!(
             "lost at t = {t:.1} s: {} sightings in a row were gated out and agreed among \
@@ -483,7 +485,7 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             summary: &summary,
             warnings: &warnings.0,
         };
-        rec.log_localization(&scene)
+        staged(progress, "record", || rec.log_localization(&scene))
             .map_err(|e| Error::from(e).during("recording the localisation"))?;
         rec.finish()
             .map_err(|e| Error::from(e).during("finishing the recording"))?;
