@@ -241,6 +241,17 @@ impl SonarMap {
         out
     }
 
+    /// What the map leaves out or hides that a user should know of: readings off the grid
+    /// ([`Self::off_grid_warning`]) or outside the trajectory's span
+    /// ([`Self::unplaced_warning`]), and knobs that hid most of it ([`Self::hidden_warnings`]).
+    pub fn warnings(&self) -> Vec<String> {
+        [self.off_grid_warning(), self.unplaced_warning()]
+            .into_iter()
+            .flatten()
+            .chain(self.hidden_warnings())
+            .collect()
+    }
+
     /// What to tell the user when the grid does not cover the run (more than [`OFF_GRID_WARN`]
     /// of the echoes fell outside it and are lost): how many, where the grid lies, what to set.
     pub fn off_grid_warning(&self) -> Option<String> {

@@ -113,16 +113,6 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     Ok(output)
 }
 
-/// What the map leaves out or hides that a user should know of: readings off the grid or
-/// outside the trajectory's span, and knobs that hid most of the map.
-fn map_warnings(map: &SonarMap) -> Vec<String> {
-    [map.off_grid_warning(), map.unplaced_warning()]
-        .into_iter()
-        .flatten()
-        .chain(map.hidden_warnings())
-        .collect()
-}
-
 /// Logs the map to the recording.
 fn record(
     rec: &Recorder,
@@ -209,7 +199,7 @@ pub fn map_and_score(
         crate::geometry::path_length_m(&run.odometry),
     );
     Ok(MapOutput {
-        warnings: map_warnings(&map),
+        warnings: map.warnings(),
         map,
         metrics,
         scores,

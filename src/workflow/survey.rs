@@ -134,8 +134,8 @@ pub struct SurveyOutput {
     /// The warnings the survey printed on stderr: what reading the run warned of (rows
     /// re-ordered, an odometry jump, a world named but missing, a rig with no mounting), a run
     /// without stereo pairs, what the raw map hid or left out, tags the filter would not fuse,
-    /// sizes the sightings disagree about, sightings mostly gated out, what the offline pass did not keep
-    /// ([`fusion::OfflineResult::notes`]), ranges scattering far off the walls, anchors far
+    /// sizes the sightings disagree about, sightings mostly gated out, what the offline pass did
+    /// not keep ([`fusion::OfflineResult::notes`]), ranges scattering far off the walls, anchors far
     /// from their surveyed tags, a mounting off or not estimated.
     pub warnings: Vec<String>,
     /// Tag sightings in the run's stereo pairs, fused or not.
@@ -374,11 +374,7 @@ pub fn survey_into(
     result.frame_from_odometry = frame_from_odometry;
     // What the raw map hid or left out, the tags the filter would not fuse, and what follows.
     let raw = &result.raw;
-    for w in [raw.off_grid_warning(), raw.unplaced_warning()]
-        .into_iter()
-        .flatten()
-        .chain(raw.hidden_warnings())
-    {
+    for w in raw.warnings() {
         warnings.warn(w);
     }
     for c in &result.online.conflicts {
