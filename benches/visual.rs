@@ -108,15 +108,18 @@ fn building_world(dir: &Path) -> Option<stereotag::world::World> {
     })
     .expect("import freiburg-079");
     let map = dir.join("map");
-    stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
-        run_dir: &run,
-        out: &map,
-        poses: stereotag::dataset::PoseSource::GroundTruth,
-        world: None,
-        config: None,
-        force: false,
-        recording: stereotag::viz::RecordingRequest::none(),
-    })
+    stereotag::workflow::map::map(
+        &stereotag::workflow::map::MapRequest {
+            run_dir: &run,
+            out: &map,
+            poses: stereotag::dataset::PoseSource::GroundTruth,
+            world: None,
+            config: None,
+            force: false,
+            recording: stereotag::viz::RecordingRequest::none(),
+        },
+        &stereotag::progress::Silent,
+    )
     .expect("map freiburg-079");
     let world = dir.join("world.yaml");
     std::fs::write(

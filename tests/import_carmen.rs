@@ -260,16 +260,28 @@ fn radish_map_score(log: &str, as_sonar: Option<&str>) -> (f64, f64, usize, Valu
     let (code, err) = import_carmen(&data, as_sonar, &run);
     assert_eq!(code, 0, "{log}: {err}");
     let out = dir.path().join("map");
-    let mapped = stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
-        run_dir: &run,
-        out: &out,
-        poses: stereotag::dataset::PoseSource::GroundTruth,
-        world: None,
-        config: None,
-        force: false,
-        recording: stereotag::viz::RecordingRequest::none(),
-    })
+    // The wait (seconds for a lidar log) is said as a stage, its steps uncounted.
+    struct Stages(std::sync::Mutex<Vec<String>>);
+    impl stereotag::progress::Progress for Stages {
+        fn start(&self, stage: &str, total: u64) {
+            self.0.lock().unwrap().push(format!("{stage} {total}"));
+        }
+    }
+    let stages = Stages(Default::default());
+    let mapped = stereotag::workflow::map::map(
+        &stereotag::workflow::map::MapRequest {
+            run_dir: &run,
+            out: &out,
+            poses: stereotag::dataset::PoseSource::GroundTruth,
+            world: None,
+            config: None,
+            force: false,
+            recording: stereotag::viz::RecordingRequest::none(),
+        },
+        &stages,
+    )
     .unwrap();
+    assert_eq!(stages.0.into_inner().unwrap(), ["map 0"]);
     let grid = stereotag::io::load_run(&run)
         .unwrap()
         .meta

@@ -168,15 +168,18 @@ fn survey_run(run: &Path, out: &Path) -> stereotag::workflow::survey::SurveyOutp
 
 /// The sonar map of `run` into `out`, with its recording (`map.rrd`).
 fn map(run: &Path, out: &Path, poses: PoseSource) {
-    stereotag::workflow::map::map(&stereotag::workflow::map::MapRequest {
-        run_dir: run,
-        out,
-        poses,
-        world: None,
-        config: None,
-        force: false,
-        recording: stereotag::viz::RecordingRequest::default(),
-    })
+    stereotag::workflow::map::map(
+        &stereotag::workflow::map::MapRequest {
+            run_dir: run,
+            out,
+            poses,
+            world: None,
+            config: None,
+            force: false,
+            recording: stereotag::viz::RecordingRequest::default(),
+        },
+        &stereotag::progress::Silent,
+    )
     .expect("the map is made");
 }
 

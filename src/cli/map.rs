@@ -1,3 +1,4 @@
+use super::Bars;
 use std::path::PathBuf;
 use stereotag::dataset::PoseSource;
 use stereotag::workflow::map::{map, MapOutput, MapRequest};
@@ -39,19 +40,22 @@ pub struct Map {
 }
 
 impl Map {
-    pub fn run(&self) -> anyhow::Result<()> {
-        let output = map(&MapRequest {
-            run_dir: &self.run,
-            out: &self.out,
-            poses: match self.poses {
-                Poses::Odometry => PoseSource::Odometry,
-                Poses::GroundTruth => PoseSource::GroundTruth,
+    pub fn run(&self, quiet: bool) -> anyhow::Result<()> {
+        let output = map(
+            &MapRequest {
+                run_dir: &self.run,
+                out: &self.out,
+                poses: match self.poses {
+                    Poses::Odometry => PoseSource::Odometry,
+                    Poses::GroundTruth => PoseSource::GroundTruth,
+                },
+                world: self.world.as_deref(),
+                config: self.config.as_deref(),
+                force: self.force,
+                recording: self.rerun.request()?,
             },
-            world: self.world.as_deref(),
-            config: self.config.as_deref(),
-            force: self.force,
-            recording: self.rerun.request()?,
-        })?;
+            &Bars::new(quiet),
+        )?;
         print_summary(&output);
         Ok(())
     }

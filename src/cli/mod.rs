@@ -205,7 +205,7 @@ pub fn main() -> i32 {
         Command::Samples(c) => c.run(cli.quiet),
         Command::Simulate(c) => c.run(cli.quiet),
         Command::Import(c) => c.run(cli.quiet),
-        Command::Map(c) => c.run(),
+        Command::Map(c) => c.run(cli.quiet),
         Command::Survey(c) => c.run(cli.quiet),
         Command::Localize(c) => c.run(cli.quiet),
         Command::Calibrate(c) => c.run(cli.quiet),

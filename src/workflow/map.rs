@@ -6,6 +6,7 @@ use super::{load_run, world_of_run, Error, Result};
 use crate::dataset::{PoseSource, RunDataset};
 use crate::io::{self, OutputDir};
 use crate::metrics::score_sonar_map;
+use crate::progress::{staged, Progress};
 use crate::sonar::grid::GridConfig;
 use crate::sonar::map::{map_trajectory, MappingConfig, SonarMap};
 use crate::viz::{MapScene, Recorder, Recording, RecordingRequest};
@@ -60,6 +61,7 @@ pub struct MapOutput {
 /// use std::path::Path;
 /// use stereotag::dataset::PoseSource;
 /// use stereotag::viz::RecordingRequest;
+/// use stereotag::progress::Silent;
 /// use stereotag::workflow::map::{map, MapRequest};
 ///
 /// let out = map(&MapRequest {
@@ -70,11 +72,11 @@ pub struct MapOutput {
 ///     config: None,
 ///     force: false,
 ///     recording: RecordingRequest::default(),
-/// })?;
+/// }, &Silent)?;
 /// println!("{} corners", out.map.features_offline.len());
 /// # Ok::<(), stereotag::workflow::Error>(())
 /// ```
-pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
+pub fn map(request: &MapRequest<'_>, progress: &dyn Progress) -> Result<MapOutput> {
     // What reading the run warned of goes into report.json with the rest.
     let (loaded, read) = super::capturing_warnings(|| -> Result<_> {
         let run = load_run(request.run_dir)?;
@@ -93,7 +95,9 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     let dir = OutputDir::create(request.out, request.force)?;
     // Opened before the work, so that a sink that cannot be used fails at once.
     let recorder = Recorder::open(&request.recording, Recording::Map, &dir.path("map.rrd"))?;
-    let mut output = map_and_score(&run, request.poses, &config, world.as_ref())?;
+    let mut output = staged(progress, "map", || {
+        map_and_score(&run, request.poses, &config, world.as_ref())
+    })?;
     let mut warnings = super::Warnings(read);
     for w in std::mem::take(&mut output.warnings) {
         warnings.warn(w);
@@ -101,8 +105,10 @@ pub fn map(request: &MapRequest<'_>) -> Result<MapOutput> {
     output.warnings = warnings.0;
     if let Some(rec) = recorder {
         let started = std::time::Instant::now();
-        record(&rec, &run, &output, &config, world.as_ref())?;
-        rec.finish()?;
+        staged(progress, "record", || -> Result<()> {
+            record(&rec, &run, &output, &config, world.as_ref())?;
+            Ok(rec.finish()?)
+        })?;
         output
             .map
             .timings_s
