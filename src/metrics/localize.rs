@@ -1,8 +1,8 @@
 //! How a localised run's error grows with the distance travelled since the last sighting.
 
 use crate::fusion::LocalizeResult;
-use crate::geometry::{pose_within, StampedPose};
-use crate::metrics::ate_m;
+use crate::geometry::StampedPose;
+use crate::metrics::{at_truth, ate_m};
 use serde::Serialize;
 
 /// Error statistics of a localised run over one band of distance since the last sighting.
@@ -36,24 +36,37 @@ pub fn error_growth(result: &LocalizeResult, truth: Option<&[StampedPose]>) -> V
             rms_error_m: truth.map(|_| 0.0),
         })
         .collect();
-    for (i, p) in result.trajectory.iter().enumerate() {
+    let band = |i: usize| {
         let d = result.since_sighting_m.get(i).copied().unwrap_or(0.0);
-        let Some(bin) = bins.iter_mut().find(|b| d >= b.from_m && d < b.to_m) else {
+        GROWTH_BANDS_M.iter().rposition(|&from| d >= from)
+    };
+    for i in 0..result.trajectory.len() {
+        let Some(bin) = band(i).map(|b| &mut bins[b]) else {
             continue;
         };
         bin.samples += 1;
         bin.mean_sigma_m += result.sigma_m.get(i).copied().unwrap_or(0.0);
-        if let (Some(sum), Some(gt)) = (
-            bin.rms_error_m.as_mut(),
-            truth.and_then(|t| pose_within(t, p.t_s)),
-        ) {
-            *sum += (p.pose.x - gt.x).powi(2) + (p.pose.y - gt.y).powi(2);
+    }
+    // The error where the truth was measured, in the band of the estimate's pose nearest then.
+    let mut scored = vec![0usize; bins.len()];
+    for s in truth
+        .into_iter()
+        .flat_map(|t| at_truth(&result.trajectory, t))
+    {
+        if let Some(b) = band(s.index) {
+            let e = &mut bins[b].rms_error_m;
+            *e = e.map(|sum| {
+                sum + (s.estimate.x - s.truth.x).powi(2) + (s.estimate.y - s.truth.y).powi(2)
+            });
+            scored[b] += 1;
         }
     }
-    for b in &mut bins {
-        let n = b.samples.max(1) as f64;
-        b.mean_sigma_m /= n;
-        b.rms_error_m = b.rms_error_m.map(|s| (s / n).sqrt());
+    for (b, n) in bins.iter_mut().zip(scored) {
+        b.mean_sigma_m /= b.samples.max(1) as f64;
+        b.rms_error_m = b
+            .rms_error_m
+            .filter(|_| n > 0)
+            .map(|s| (s / n as f64).sqrt());
     }
     bins.retain(|b| b.samples > 0);
     bins
@@ -204,11 +217,9 @@ struct Consistency {
 fn sigma_consistency(result: &LocalizeResult, truth: &[StampedPose]) -> Consistency {
     let (mut all, mut n_all, mut located, mut n_located, mut worst) =
         (0.0, 0usize, 0.0, 0usize, 0.0f64);
-    for (i, p) in result.trajectory.iter().enumerate() {
-        let Some(gt) = pose_within(truth, p.t_s) else {
-            continue;
-        };
-        let (ex, ey) = (p.pose.x - gt.x, p.pose.y - gt.y);
+    for s in at_truth(&result.trajectory, truth) {
+        let i = s.index;
+        let (ex, ey) = (s.estimate.x - s.truth.x, s.estimate.y - s.truth.y);
         let nees = position_nees([ex, ey], result.position_covariance[i]);
         all += nees;
         n_all += 1;

@@ -14,4 +14,4 @@ pub use survey::{
     score_sonar_map, score_survey, survey_metrics, LandmarkErrors, SonarScores, SurveyScores,
     TrajectoryErrors, TruthScores, TurnErrors, WorldScores,
 };
-pub use trajectory::{align_se2, ate_m};
+pub use trajectory::{align_se2, at_truth, ate_m, Scored};
