@@ -159,6 +159,16 @@ impl RangeSensor {
     }
 }
 
+impl From<BeamModel> for RangeSensor {
+    /// The sensor whose beams a layout models: a cone is a sonar's, a ray a laser's.
+    fn from(beam: BeamModel) -> Self {
+        match beam {
+            BeamModel::Cone => Self::Sonar,
+            BeamModel::Ray => Self::Lidar,
+        }
+    }
+}
+
 /// The robot as `run.yaml` describes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]

@@ -467,10 +467,7 @@ pub fn run_offline_sonar(
     let mut tries = vec![(score(&estimated), estimated), (score(&wheels), wheels)];
     tries.push((directions_agreement, directions));
     let best = taken(&tries.iter().map(|t| t.0).collect::<Vec<_>>());
-    let sensor = match sonar.layout.beam {
-        crate::sonar::BeamModel::Cone => "sonar",
-        crate::sonar::BeamModel::Ray => "lidar",
-    };
+    let sensor = crate::dataset::RangeSensor::from(sonar.layout.beam).name();
     let names = [
         "the distance scale estimated",
         "the wheels' distance taken as right",
