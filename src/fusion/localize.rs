@@ -2277,6 +2277,20 @@ mod tests {
         partition.unwrap_or(f64::INFINITY).min(tx.min(ty))
     }
 
+    /// The scan a laser of `layout` takes at `p` in [`lidar_room`]'s room ([`room_cast`]).
+    fn room_scan(layout: &SonarLayout, p: &StampedPose) -> Vec<SonarReading> {
+        layout
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| SonarReading {
+                t_s: p.t_s,
+                sensor: i,
+                range_m: Some(room_cast(p.pose, s.bearing_rad)),
+            })
+            .collect()
+    }
+
     /// A laser's survey of an 8 m by 5 m room with a 2 m partition at x = 5 m: the scans (180
     /// beams) of a robot driven along the room's middle, its odometry turning half a degree a
     /// metre too many and overstating its travel by 3%, and the returns map of the scans on the
@@ -2316,20 +2330,8 @@ mod tests {
             let turned = Pose2::new(1.03 * delta.x, delta.y, delta.theta + 0.05f64.to_radians());
             odometry.push(stamped(k, odometry[k - 1].pose.compose(&turned)));
         }
-        let readings: Vec<SonarReading> = truth
-            .iter()
-            .flat_map(|p| {
-                layout
-                    .sensors
-                    .iter()
-                    .enumerate()
-                    .map(|(i, s)| SonarReading {
-                        t_s: p.t_s,
-                        sensor: i,
-                        range_m: Some(room_cast(p.pose, s.bearing_rad)),
-                    })
-            })
-            .collect();
+        let readings: Vec<SonarReading> =
+            truth.iter().flat_map(|p| room_scan(&layout, p)).collect();
         let extent = GridGeometry {
             width: 50,
             height: 35,
@@ -2366,22 +2368,10 @@ mod tests {
             })
             .collect();
         // The scans, matched with the returns map of lidar_room's straight run.
-        let cast_readings = |p: &StampedPose| {
-            layout
-                .sensors
-                .iter()
-                .enumerate()
-                .map(|(i, sensor)| SonarReading {
-                    t_s: p.t_s,
-                    sensor: i,
-                    range_m: Some(room_cast(p.pose, sensor.bearing_rad)),
-                })
-                .collect::<Vec<_>>()
-        };
         let readings: Vec<SonarReading> = truth
             .iter()
             .filter(|p| p.t_s.fract() != 0.0)
-            .flat_map(cast_readings)
+            .flat_map(|p| room_scan(&layout, p))
             .collect();
         let filter = Localizer::new(Vec::new(), FuseConfig::default(), Start::Survey)
             .with_returns(&returns, layout);
