@@ -16,7 +16,8 @@ pub struct GrowthBin {
     pub samples: usize,
     /// Mean filter sigma, metres.
     pub mean_sigma_m: f64,
-    /// RMS position error against ground truth, metres (`None` without ground truth).
+    /// RMS position error against ground truth at its stamps whose nearest pose lies in the
+    /// band, metres (`None` without ground truth, or with none of its stamps in the band).
     pub rms_error_m: Option<f64>,
 }
 
