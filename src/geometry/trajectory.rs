@@ -12,6 +12,18 @@ pub struct StampedPose {
     pub pose: Pose2,
 }
 
+impl StampedPose {
+    /// The pose `x` metres along the x axis, heading along it, at `t_s` (for tests of
+    /// trajectories against each other).
+    #[cfg(test)]
+    pub(crate) fn along_x(t_s: f64, x: f64) -> Self {
+        Self {
+            t_s,
+            pose: Pose2::new(x, 0.0, 0.0),
+        }
+    }
+}
+
 /// Pose at time `t_s` by linear interpolation (clamped at the ends); `None` for an empty trajectory.
 pub fn pose_at(trajectory: &[StampedPose], t_s: f64) -> Option<Pose2> {
     let first = trajectory.first()?;

@@ -638,24 +638,25 @@ pub fn load_tag_sizes(path: &Path) -> Result<crate::visual::sightings::TagSizes,
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Pose2;
-
-    fn at(t_s: f64, x: f64) -> StampedPose {
-        StampedPose {
-            t_s,
-            pose: Pose2::new(x, 0.0, 0.0),
-        }
-    }
 
     /// A truth whose stamps are among the estimate's is written at those alone (where the
     /// reports score); one whose stamps are not, interpolated at the estimate's within its span.
     #[test]
     fn the_truth_is_written_where_it_was_measured_when_the_estimate_has_those_times() {
-        let estimate: Vec<StampedPose> = (0..=4).map(|k| at(0.5 * k as f64, 9.0)).collect();
-        let truth = [at(0.0, 0.0), at(1.0, 1.0), at(2.0, 2.0)];
+        let estimate: Vec<StampedPose> = (0..=4)
+            .map(|k| StampedPose::along_x(0.5 * k as f64, 9.0))
+            .collect();
+        let truth = [
+            StampedPose::along_x(0.0, 0.0),
+            StampedPose::along_x(1.0, 1.0),
+            StampedPose::along_x(2.0, 2.0),
+        ];
         let written = truth_at(&truth, &estimate);
         assert_eq!(written, truth);
-        let between = [at(0.25, 0.0), at(1.25, 1.0)];
+        let between = [
+            StampedPose::along_x(0.25, 0.0),
+            StampedPose::along_x(1.25, 1.0),
+        ];
         let written = truth_at(&between, &estimate);
         let times: Vec<f64> = written.iter().map(|p| p.t_s).collect();
         assert_eq!(times, [0.5, 1.0]);

@@ -95,25 +95,21 @@ pub fn ate_m(estimate: &[StampedPose], truth: &[StampedPose]) -> Option<f64> {
 mod tests {
     use super::*;
 
-    fn at(t_s: f64, x: f64) -> StampedPose {
-        StampedPose {
-            t_s,
-            pose: Pose2::new(x, 0.0, 0.0),
-        }
-    }
-
     /// A truth that starts after the run and ends before it (a real log's corrected poses)
     /// scores only the estimate's poses it covers: none is compared with a held end pose.
     #[test]
     fn the_ate_counts_only_where_the_truth_is() {
-        let truth = [at(10.0, 1.0), at(20.0, 2.0)];
+        let truth = [
+            StampedPose::along_x(10.0, 1.0),
+            StampedPose::along_x(20.0, 2.0),
+        ];
         // 3 m off before the truth starts, 0.5 m within it, 3 m off after it ends.
         let estimate = [
-            at(0.0, 4.0),
-            at(10.0, 1.5),
-            at(15.0, 2.0),
-            at(20.0, 2.5),
-            at(30.0, 5.0),
+            StampedPose::along_x(0.0, 4.0),
+            StampedPose::along_x(10.0, 1.5),
+            StampedPose::along_x(15.0, 2.0),
+            StampedPose::along_x(20.0, 2.5),
+            StampedPose::along_x(30.0, 5.0),
         ];
         assert!((ate_m(&estimate, &truth).unwrap() - 0.5).abs() < 1e-12);
         assert_eq!(ate_m(&estimate[..1], &truth), None);
