@@ -51,7 +51,7 @@ pub use config::{FuseConfig, FuseConfigError, OdometryNoiseScale};
 pub use landmark::{associate, surveyed_tag_sizes, Conflict, CornerMatch, Landmark};
 pub use localize::{
     hold_tail_to_walls, localize, localize_from, range_scatter, scatter_too_wide, track,
-    wall_in_beam, wall_misfits, LocalizeResult, Localizer, PoseEstimate, RangeScatter,
+    wall_in_beam, wall_misfits, LocalizeResult, Localizer, PoseEstimate, RangeScatter, ScanOutcome,
     SightingOutcome, SonarInput, Start, WallMatch, RANGE_OFF_M, RANGE_OFF_WARN, RANGE_SCATTER_MIN,
     RAY_BEAM_SPACING_RAD, RAY_MATCH_RAD, RELOCALISE_AFTER, RELOCALISE_AGREE_M,
     RELOCALISE_AGREE_RAD, UNKNOWN_START_SIGMA_M, WALL_CONE_MARGIN_RAD, WALL_INSET_M, WALL_PARTS,

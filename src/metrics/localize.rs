@@ -178,8 +178,11 @@ pub fn localization_metrics(
         let gated_out = result.scan_outcomes.len() - fused;
         metrics.insert("scans.gated_out".into(), gated_out.into());
         metrics.insert("scans.unmatched".into(), result.scans_unmatched.into());
+        let relocalised = result.relocalised_by_scans_t_s.len();
+        metrics.insert("scans.relocalised".into(), relocalised.into());
     }
-    metrics.insert("relocalised".into(), result.relocalised_t_s.len().into());
+    let relocalised = result.relocalised_t_s.len() + result.relocalised_by_scans_t_s.len();
+    metrics.insert("relocalised".into(), relocalised.into());
     metrics.insert("wall_fixes".into(), result.wall_fixed_t_s.len().into());
     metrics.insert("visual.turns".into(), counts.visual_turns.into());
     metrics.insert("visual.fused".into(), result.visual_fused.into());

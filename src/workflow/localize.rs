@@ -410,6 +410,14 @@ pub fn localize(request: &LocalizeRequest<'_>, progress: &dyn Progress) -> Resul
             fusion::RELOCALISE_AFTER
         ));
     }
+    for t in &result.relocalised_by_scans_t_s {
+        warnings.warn(format!(
+            "lost at t = {t:.1} s: {} times in a row the latest scans, found in the whole map, \
+             put the robot away from the pose held and agreed among themselves; started again \
+             from them",
+            fusion::RELOCALISE_AFTER
+        ));
+    }
     let SurveyedMap {
         landmarks,
         walls,
