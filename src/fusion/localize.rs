@@ -1251,7 +1251,8 @@ impl Localizer {
         let now = self.estimate();
         if now.position_sigma_m() > SCAN_LOST_SIGMA_M {
             // Too unsure to search around the pose held: the scans are looked for in the whole
-            // map, and the pose found fused when it agrees with the one held.
+            // map, and the pose found fused when it agrees with the one held, else kept towards
+            // a restart.
             let (z, r) = self.search_window()?;
             if self.fuse_scan_pose(&z, &r) {
                 return Some(ScanOutcome::Fused);
