@@ -38,6 +38,26 @@ fn survey(run: &Path, out: &Path) -> (i32, String) {
     ])
 }
 
+/// `stereotag localize` of `run` against `survey` into `out` (replaced) from `start`, which must
+/// succeed: the report's metrics and stderr.
+fn localize(survey: &Path, run: &Path, out: &Path, start: &str) -> (Value, String) {
+    let (code, err) = stereotag(&[
+        "localize",
+        "--survey",
+        survey.to_str().unwrap(),
+        "--run",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--start",
+        start,
+        "--no-rerun",
+        "--force",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    (json(&out.join("report.json"))["metrics"].clone(), err)
+}
+
 /// `stereotag import --carmen LOG [--as-sonar LAYOUT] --out RUN`.
 fn import_carmen(log: &Path, as_sonar: Option<&str>, run: &Path) -> (i32, String) {
     let mut args = vec!["import", "--carmen", log.to_str().unwrap()];
@@ -641,23 +661,7 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
     let returns = dir.path().join("survey/returns_corrected.pgm");
     assert!(returns.exists(), "no {}", returns.display());
     let localized = dir.path().join("localized");
-    let localize = |start: &str| -> (Value, String) {
-        let (code, err) = stereotag(&[
-            "localize",
-            "--survey",
-            dir.path().join("survey").to_str().unwrap(),
-            "--run",
-            drifted.to_str().unwrap(),
-            "--out",
-            localized.to_str().unwrap(),
-            "--start",
-            start,
-            "--no-rerun",
-            "--force",
-        ]);
-        assert_eq!(code, 0, "{err}");
-        (json(&localized.join("report.json"))["metrics"].clone(), err)
-    };
+    let localize = |start: &str| localize(&dir.path().join("survey"), &drifted, &localized, start);
     let (m, err) = localize("survey");
     assert!(get(&m, "ate_m.odometry") > 1.5, "{m}");
     assert!(get(&m, "ate_m.localized") < 0.1, "{m}\n{err}");
@@ -724,20 +728,7 @@ fn a_sparse_lidar_survey_is_held_by_its_walls_directions() {
     let (code, err) = survey(&on_truth, &surveyed);
     assert_eq!(code, 0, "{err}");
     let localized = dir.path().join("localized");
-    let (code, err) = stereotag(&[
-        "localize",
-        "--survey",
-        surveyed.to_str().unwrap(),
-        "--run",
-        drifted.to_str().unwrap(),
-        "--out",
-        localized.to_str().unwrap(),
-        "--start",
-        "unknown",
-        "--no-rerun",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let m = json(&localized.join("report.json"))["metrics"].clone();
+    let (m, err) = localize(&surveyed, &drifted, &localized, "unknown");
     let get = |k: &str| m[k].as_f64().unwrap_or(f64::NAN);
     assert!(get("ate_m.located") < 0.8, "{m}\n{err}");
 }
