@@ -124,6 +124,16 @@ fn radish_buildings_import_and_map_with_every_reading_on_the_grid() {
         let scans = summary["scans"].as_u64().unwrap();
         assert!(scans > 400, "{log}: {summary}");
         assert!(summary["ground_truth"].as_bool().unwrap());
+        // A corrected log's ODOM lines are reset to its corrected poses at each scan: its
+        // odometry follows them within centimetres as no wheels do, and the import says so.
+        let against = &summary["odometry_against_ground_truth"];
+        assert_eq!(against["follows"].as_bool(), Some(true), "{log}: {summary}");
+        assert!(against["rms_m"].as_f64().unwrap() < 0.1, "{log}: {summary}");
+        assert!(
+            against["path_m"].as_f64().unwrap() > 300.0,
+            "{log}: {summary}"
+        );
+        assert!(err.contains("does not drift as wheels do"), "{log}: {err}");
         // Each scan gives one reading per sonar the laser sees (pioneer16: the ten facing the
         // front half-plane, the six behind are listed as unseen).
         assert_eq!(

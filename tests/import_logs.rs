@@ -180,6 +180,11 @@ fn a_bag_of_the_office_imports_as_its_run_and_surveys_alike() {
     assert!(mounting < 1e-8, "robot_from_left differs by {mounting:e}");
     let summary = json(&imported.join("import.json"));
     assert_eq!(summary["unmatched_left"], 0);
+    // The simulated wheels drift from the ground truth (0.28 m RMS over 55 m): no warning that
+    // the odometry follows it.
+    let against = &summary["odometry_against_ground_truth"];
+    assert_eq!(against["follows"].as_bool(), Some(false), "{summary}");
+    assert!(against["rms_m"].as_f64().unwrap() > 0.1, "{summary}");
     assert_eq!(
         summary["pairs"].as_u64().unwrap() as usize,
         text(&run.join("stereo.csv")).lines().count() - 1
@@ -632,6 +637,33 @@ fn an_asl_folder_imports_as_its_run_and_surveys_alike() {
         "--out",
         s(&imported),
     ]);
+    // The simulated wheels drift from the truth: nothing said. The ground truth itself given
+    // as the odometry (a shortcut that tests nothing) is warned about, and import.json says so.
+    let against = &json(&imported.join("import.json"))["odometry_against_ground_truth"];
+    assert_eq!(against["follows"].as_bool(), Some(false), "{against}");
+    let truth_tum = dir.path().join("truth.tum");
+    let truth: Vec<stereotag::geometry::StampedPose> = csv_numbers(&run.join("ground_truth.csv"))
+        .iter()
+        .map(|r| stereotag::geometry::StampedPose {
+            t_s: 1.7e9 + r[0],
+            pose: stereotag::geometry::Pose2::new(r[1], r[2], r[3]),
+        })
+        .collect();
+    stereotag::io::save_tum(&truth_tum, &truth).unwrap();
+    let on_truth = dir.path().join("on_truth");
+    let (code, err) = stereotag(&[
+        "import",
+        "--asl",
+        s(&asl),
+        "--odometry",
+        s(&truth_tum),
+        "--out",
+        s(&on_truth),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("as no wheel odometry does"), "{err}");
+    let against = &json(&on_truth.join("import.json"))["odometry_against_ground_truth"];
+    assert_eq!(against["follows"].as_bool(), Some(true), "{against}");
     let times = |p: &Path| -> Vec<f64> {
         csv_numbers(&p.join("stereo.csv"))
             .iter()

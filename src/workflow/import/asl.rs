@@ -52,6 +52,9 @@ pub struct AslSummary {
     pub odometry_poses: usize,
     /// Whether a ground truth was written.
     pub ground_truth: bool,
+    /// With a ground truth, how far the odometry strays from it
+    /// ([`crate::workflow::import::OdometryAgainstTruth`]).
+    pub odometry_against_ground_truth: Option<crate::workflow::import::OdometryAgainstTruth>,
     /// How the run's frame was fixed.
     pub frame: String,
     /// How the pictures were brought in: hard links, or copies where a link cannot be made.
@@ -234,6 +237,16 @@ pub fn import_asl(
         ..SonarLayout::frontal5()
     };
     let ground_truth = (!truth.is_empty()).then_some(truth);
+    let against_truth = super::check_odometry_against_truth(
+        (
+            &trajectory,
+            &format!("{}: the odometry", odometry_path.display()),
+        ),
+        ground_truth
+            .as_deref()
+            .map(|truth| (truth, "the folder's ground truth")),
+        "is it the ground truth itself, or an estimate aligned to it?",
+    );
     let grid = GridConfig::fitted(ground_truth.as_deref().unwrap_or(&trajectory), &layout)
         .unwrap_or_default();
     let summary = AslSummary {
@@ -245,6 +258,7 @@ pub fn import_asl(
         duration_s: (t1 - t0) as f64 * 1e-9,
         odometry_poses: trajectory.len(),
         ground_truth: ground_truth.is_some(),
+        odometry_against_ground_truth: against_truth,
         frame: frame.clone(),
         linked,
         copied: 2 * stereo.len() - linked,

@@ -1,7 +1,10 @@
 //! CARMEN logs (Radish and the classic 2D SLAM data sets) as runs: their laser as the run's
 //! lidar, or turned into sonar-like readings so the paper's method runs on real buildings.
 
-use super::{lidar_of, sonar_readings, time_ordered, LidarImport};
+use super::{
+    check_odometry_against_truth, lidar_of, sonar_readings, time_ordered, LidarImport,
+    OdometryAgainstTruth,
+};
 use crate::dataset::{RobotDescription, RunDataset, RunMeta, RUN_FORMAT};
 use crate::geometry::StampedPose;
 use crate::io::carmen::{read_carmen, LaserScan};
@@ -56,6 +59,8 @@ pub struct CarmenSummary {
     pub lidar: Option<LidarImport>,
     /// Whether the scans' poses were written as the ground truth (a `*-corrected` log).
     pub ground_truth: bool,
+    /// With a ground truth, how far the odometry strays from it: [`OdometryAgainstTruth`].
+    pub odometry_against_ground_truth: Option<OdometryAgainstTruth>,
     /// The grid fitted to the run: lower-left corner (m) and size (cells).
     pub grid_origin_m: [f64; 2],
     /// Cells across and up.
@@ -157,6 +162,18 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
         .is_some_and(|n| n.to_string_lossy().contains("corrected"));
     let ground_truth = corrected.then(|| shift(poses_of(&scans)));
     let odometry = shift(odometry);
+    let against_truth = check_odometry_against_truth(
+        (
+            &odometry,
+            &format!("{}: the odometry", request.carmen.display()),
+        ),
+        ground_truth
+            .as_deref()
+            .map(|truth| (truth, "the corrected poses")),
+        "a corrected log's ODOM lines are reset to the corrected pose at each scan, so this \
+         odometry does not drift as wheels do, and its steps carry the correction's jitter from \
+         scan to scan (scripts/drift_odometry.py RUN OUT drifts it as wheels would)",
+    );
     let ranging = match &lidar {
         Some((l, _, _)) => l.beam_layout(),
         None => layout.clone(),
@@ -183,6 +200,7 @@ pub fn import_carmen(request: &CarmenRequest<'_>) -> Result<(RunDataset, CarmenS
         sensors_unseen: unseen,
         lidar: lidar.as_ref().map(|l| l.2.clone()),
         ground_truth: ground_truth.is_some(),
+        odometry_against_ground_truth: against_truth,
         grid_origin_m: grid.origin_m,
         grid_cells: [grid.width_cells, grid.height_cells],
     };

@@ -147,6 +147,9 @@ pub struct BagSummary {
     pub lidar: Option<crate::workflow::import::LidarImport>,
     /// Whether a ground truth was written.
     pub ground_truth: bool,
+    /// With a ground truth, how far the odometry strays from it
+    /// ([`crate::workflow::import::OdometryAgainstTruth`]).
+    pub odometry_against_ground_truth: Option<crate::workflow::import::OdometryAgainstTruth>,
     /// The grid fitted to the run: lower-left corner (m).
     pub grid_origin_m: [f64; 2],
     /// Cells across and up.
@@ -651,6 +654,19 @@ impl Gathered {
             .collect();
         stereo.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
         let ground_truth = (!truth.is_empty()).then_some(truth);
+        let against_truth = super::check_odometry_against_truth(
+            (
+                &trajectory,
+                &format!("{}: the odometry ({})", path.display(), roles.odom),
+            ),
+            ground_truth.as_deref().map(|truth| {
+                (
+                    truth,
+                    roles.ground_truth.as_deref().unwrap_or("the ground truth"),
+                )
+            }),
+            "is it the ground truth's topic, or a simulator's odometry without noise?",
+        );
         let ranging = match &lidar {
             Some((l, _, _)) => l.beam_layout(),
             None => layout.clone(),
@@ -686,6 +702,7 @@ impl Gathered {
             scans: self.scans.len(),
             lidar: lidar.as_ref().map(|l| l.2.clone()),
             ground_truth: ground_truth.is_some(),
+            odometry_against_ground_truth: against_truth,
             grid_origin_m: grid.origin_m,
             grid_cells: [grid.width_cells, grid.height_cells],
         };
