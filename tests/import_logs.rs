@@ -606,16 +606,21 @@ fn write_asl(run: &Path, out: &Path) -> PathBuf {
         );
     }
     std::fs::write(truth.join("data.csv"), gt).unwrap();
-    let odometry: Vec<stereotag::geometry::StampedPose> = csv_numbers(&run.join("odometry.csv"))
+    let tum = out.join("odometry.tum");
+    poses_as_tum(&run.join("odometry.csv"), &tum);
+    tum
+}
+
+/// A run's poses (`odometry.csv`, `ground_truth.csv`) as a TUM file, stamped from 1.7e9 s.
+fn poses_as_tum(csv: &Path, tum: &Path) {
+    let poses: Vec<stereotag::geometry::StampedPose> = csv_numbers(csv)
         .iter()
         .map(|r| stereotag::geometry::StampedPose {
             t_s: 1.7e9 + r[0],
             pose: stereotag::geometry::Pose2::new(r[1], r[2], r[3]),
         })
         .collect();
-    let tum = out.join("odometry.tum");
-    stereotag::io::save_tum(&tum, &odometry).unwrap();
-    tum
+    stereotag::io::save_tum(tum, &poses).unwrap();
 }
 
 #[test]
@@ -642,14 +647,7 @@ fn an_asl_folder_imports_as_its_run_and_surveys_alike() {
     let against = &json(&imported.join("import.json"))["odometry_against_ground_truth"];
     assert_eq!(against["follows"].as_bool(), Some(false), "{against}");
     let truth_tum = dir.path().join("truth.tum");
-    let truth: Vec<stereotag::geometry::StampedPose> = csv_numbers(&run.join("ground_truth.csv"))
-        .iter()
-        .map(|r| stereotag::geometry::StampedPose {
-            t_s: 1.7e9 + r[0],
-            pose: stereotag::geometry::Pose2::new(r[1], r[2], r[3]),
-        })
-        .collect();
-    stereotag::io::save_tum(&truth_tum, &truth).unwrap();
+    poses_as_tum(&run.join("ground_truth.csv"), &truth_tum);
     let on_truth = dir.path().join("on_truth");
     let (code, err) = stereotag(&[
         "import",
