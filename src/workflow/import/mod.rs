@@ -187,27 +187,14 @@ const FOLLOWS_SHARE: f64 = 0.001;
 /// ... over at least this path, metres.
 const FOLLOWS_PATH_M: f64 = 50.0;
 
-/// How far `odometry` strays from `truth` (the same frame; the odometry interpolated to the
-/// truth's stamps); `None` when either is empty.
+/// How far `odometry` strays from `truth` (the same frame): its RMS error at the truth's stamps
+/// ([`crate::metrics::ate_m`]) against the truth's path; `None` when they share no time.
 pub(crate) fn odometry_against_truth(
     odometry: &[StampedPose],
     truth: &[StampedPose],
 ) -> Option<OdometryAgainstTruth> {
-    if odometry.is_empty() || truth.is_empty() {
-        return None;
-    }
-    let squares: f64 = truth
-        .iter()
-        .filter_map(|t| {
-            let o = crate::geometry::pose_at(odometry, t.t_s)?;
-            Some((o.x - t.pose.x).powi(2) + (o.y - t.pose.y).powi(2))
-        })
-        .sum();
-    let rms_m = (squares / truth.len() as f64).sqrt();
-    let path_m = truth
-        .windows(2)
-        .map(|w| (w[1].pose.x - w[0].pose.x).hypot(w[1].pose.y - w[0].pose.y))
-        .sum::<f64>();
+    let rms_m = crate::metrics::ate_m(odometry, truth)?;
+    let path_m = crate::geometry::path_length_m(truth);
     Some(OdometryAgainstTruth {
         rms_m,
         path_m,
