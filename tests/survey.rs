@@ -564,6 +564,8 @@ fn a_later_run_localises_against_the_survey() {
             output.summary
         );
         assert_eq!(said("sonar ranges fused against"), walls);
+        // An honest sigma (NEES near 1) gets no hint why it would be overconfident.
+        assert!(!said("overconfident: either"), "{:?}", output.summary);
         // Nothing to warn of but, for the run moved away from its world, that the world is gone.
         assert!(
             output

@@ -608,5 +608,20 @@ pub fn summary(
         "position NEES {nees} (near 1: the sigma reported is honest; well above it: overconfident); largest error {:.1} sigmas",
         scores.worst_error_over_sigma
     ));
+    if scores.nees_located > NEES_OVERCONFIDENT {
+        lines.push(
+            "overconfident: either the odometry is noisier than the filter predicts with (a \
+             corrected log's odometry, reset at each scan, is: its import warns), which \
+             `localize --config` with the odometry sigmas of `stereotag config --default fuse` \
+             scaled up tests, or the survey's own map is off the truth, which no sigma here \
+             knows (docs/RESULTS.md, \"What the real logs' localisation NEES measures\")"
+                .into(),
+        );
+    }
     lines
 }
+
+/// A run's position NEES (its mean, per degree of freedom) over this says the sigma reported is
+/// too small for the error, and the summary says why it may be (an honest filter's stays near 1:
+/// 0.8-1.4 on the simulated homes; the real Radish logs' as logged 4-6).
+const NEES_OVERCONFIDENT: f64 = 3.0;
