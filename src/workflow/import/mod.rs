@@ -215,7 +215,8 @@ pub(crate) fn check_odometry_against_truth(
     if against.follows {
         tracing::warn!(
             "{named} follows {truth_named} within {:.3} m RMS over {:.0} m, as no wheel odometry \
-             does: {why}; a survey or localisation scored on it tests little of what it corrects",
+             does, so a survey or localisation scored on it tests little of what it corrects: \
+             {why}",
             against.rms_m,
             against.path_m
         );
