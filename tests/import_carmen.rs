@@ -38,10 +38,10 @@ fn survey(run: &Path, out: &Path) -> (i32, String) {
     ])
 }
 
-/// `stereotag localize` of `run` against `survey` into `out` (replaced) from `start`, which must
-/// succeed: the report's metrics and stderr.
-fn localize(survey: &Path, run: &Path, out: &Path, start: &str) -> (Value, String) {
-    let (code, err) = stereotag(&[
+/// `stereotag localize` of `run` against `survey` into `out` (replaced) from `start`, with the
+/// `extra` arguments, which must succeed: the report's metrics and stderr.
+fn localize(survey: &Path, run: &Path, out: &Path, start: &str, extra: &[&str]) -> (Value, String) {
+    let args = [
         "localize",
         "--survey",
         survey.to_str().unwrap(),
@@ -53,7 +53,8 @@ fn localize(survey: &Path, run: &Path, out: &Path, start: &str) -> (Value, Strin
         start,
         "--no-rerun",
         "--force",
-    ]);
+    ];
+    let (code, err) = stereotag(&[&args[..], extra].concat());
     assert_eq!(code, 0, "{err}");
     (json(&out.join("report.json"))["metrics"].clone(), err)
 }
@@ -568,26 +569,11 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
     // alone it keeps the start's error.
     let error_from_30_to_200_s = |walls: bool| -> (Vec<f64>, Value) {
         let loc = dir.path().join(format!("loc_{walls}"));
-        let mut args = vec![
-            "localize",
-            "--survey",
-            out.to_str().unwrap(),
-            "--run",
-            run.to_str().unwrap(),
-            "--out",
-            loc.to_str().unwrap(),
-            "--start=0.3,0.2,0.1",
-            "--start-sigma-m",
-            "0.5",
-            "--start-sigma-deg",
-            "10",
-            "--no-rerun",
-        ];
+        let mut extra = vec!["--start-sigma-m", "0.5", "--start-sigma-deg", "10"];
         if !walls {
-            args.push("--no-walls");
+            extra.push("--no-walls");
         }
-        let (code, err) = stereotag(&args);
-        assert_eq!(code, 0, "{err}");
+        let (metrics, _) = localize(&out, &run, &loc, "0.3,0.2,0.1", &extra);
         let text = std::fs::read_to_string(loc.join("localization.csv")).unwrap();
         let mut lines = text.lines();
         let header: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -608,11 +594,10 @@ fn a_real_logs_ranges_off_its_walls_are_reported_and_warned_about() {
             .filter(|v| (30.0..=200.0).contains(&v[t]))
             .map(|v| (v[x] - v[gx]).hypot(v[y] - v[gy]))
             .collect();
-        let report = json(&loc.join("report.json"));
         // The run has no pictures, and its report says so as stderr did.
-        let warnings = report["warnings"].to_string();
+        let warnings = json(&loc.join("report.json"))["warnings"].to_string();
         assert!(warnings.contains("no stereo pairs"), "{warnings}");
-        (errors, report["metrics"].clone())
+        (errors, metrics)
     };
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
@@ -671,7 +656,8 @@ fn a_lidar_survey_corrects_a_drifting_odometry_with_its_scans() {
     let returns = dir.path().join("survey/returns_corrected.pgm");
     assert!(returns.exists(), "no {}", returns.display());
     let localized = dir.path().join("localized");
-    let localize = |start: &str| localize(&dir.path().join("survey"), &drifted, &localized, start);
+    let localize =
+        |start: &str| localize(&dir.path().join("survey"), &drifted, &localized, start, &[]);
     let (m, err) = localize("survey");
     assert!(get(&m, "ate_m.odometry") > 1.5, "{m}");
     assert!(get(&m, "ate_m.localized") < 0.1, "{m}\n{err}");
@@ -743,7 +729,7 @@ fn a_sparse_lidar_survey_is_held_by_its_walls_directions() {
     let (code, err) = survey(&on_truth, &surveyed);
     assert_eq!(code, 0, "{err}");
     let localized = dir.path().join("localized");
-    let (m, err) = localize(&surveyed, &drifted, &localized, "unknown");
+    let (m, err) = localize(&surveyed, &drifted, &localized, "unknown", &[]);
     let get = |k: &str| m[k].as_f64().unwrap_or(f64::NAN);
     assert!(get("ate_m.located") < 0.8, "{m}\n{err}");
 }
