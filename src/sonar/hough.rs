@@ -132,6 +132,71 @@ impl FeatureKind {
 /// Sectors used for the spread rule.
 const SPREAD_SECTORS: usize = 72;
 
+/// How clearly inside a cell a point must lie for [`CellRun::holds`] to say so: a billionth of
+/// the cell's outer radius, far above the rounding of [`Accumulator::cell`]'s own arithmetic.
+const CELL_MARGIN: f64 = 1e-9;
+
+/// The bit of the spread sector a vote at arc direction `a` comes from (the direction from the
+/// voted point back to the sensor).
+fn sector_of(a: f64) -> u128 {
+    let back = (a + std::f64::consts::PI) / std::f64::consts::TAU * SPREAD_SECTORS as f64;
+    1u128 << (back.floor() as i64).rem_euclid(SPREAD_SECTORS as i64)
+}
+
+/// One accumulator cell while an arc runs through it: its bounds, to tell cheaply whether the
+/// next sample lies in it too, and its sums so far.
+#[derive(Debug, Clone, Copy)]
+struct CellRun {
+    i: usize,
+    /// Squared radii the cell spans, shrunk by the margin.
+    r2_lo: f64,
+    r2_hi: f64,
+    /// Unit vectors along the cell's low and high angular edges.
+    lo: (f64, f64),
+    hi: (f64, f64),
+    /// The margin as a distance from either angular edge, metres.
+    margin_m: f64,
+    votes: u32,
+    sum_x: f32,
+    sum_y: f32,
+    sectors: u128,
+}
+
+impl CellRun {
+    /// A run over cell `i` with no bounds (holds nothing), its sums as the accumulator has them.
+    fn of(acc: &Accumulator, i: usize) -> Self {
+        Self {
+            i,
+            r2_lo: f64::INFINITY,
+            r2_hi: f64::NEG_INFINITY,
+            lo: (1.0, 0.0),
+            hi: (1.0, 0.0),
+            margin_m: 0.0,
+            votes: acc.votes[i],
+            sum_x: acc.sum_x[i],
+            sum_y: acc.sum_y[i],
+            sectors: acc.sectors[i],
+        }
+    }
+
+    /// Whether `(x, y)` lies in the cell by more than the margin: within its radii, and on the
+    /// inner side of both angular edges (a cell spans under half a turn).
+    fn holds(&self, x: f64, y: f64) -> bool {
+        let r2 = x * x + y * y;
+        r2 > self.r2_lo
+            && r2 < self.r2_hi
+            && self.lo.0 * y - self.lo.1 * x > self.margin_m
+            && self.hi.0 * y - self.hi.1 * x < -self.margin_m
+    }
+
+    fn add(&mut self, x: f64, y: f64, sector_bit: u128) {
+        self.votes += 1;
+        self.sum_x += x as f32;
+        self.sum_y += y as f32;
+        self.sectors |= sector_bit;
+    }
+}
+
 /// The polar vote accumulator.
 #[derive(Debug, Clone)]
 pub struct Accumulator {
@@ -147,6 +212,9 @@ pub struct Accumulator {
     touched: Vec<usize>,
     rho_step: f64,
     phi_step: f64,
+    /// Unit vectors (cos, sin) along the angular cells' edges: cell `ip` spans `edges[ip]` to
+    /// `edges[ip + 1]`, the last up to a whole turn (as [`Self::cell`] clamps).
+    edges: Vec<(f64, f64)>,
 }
 
 impl Accumulator {
@@ -155,6 +223,7 @@ impl Accumulator {
         let n_rho = (config.rho_max_m / config.rho_step_m).ceil().max(1.0) as usize;
         let n_phi = (360.0 / config.phi_step_deg).round().max(1.0) as usize;
         let n = n_rho * n_phi;
+        let phi_step = config.phi_step_deg.to_radians();
         Self {
             n_rho,
             n_phi,
@@ -164,7 +233,18 @@ impl Accumulator {
             sectors: vec![0; n],
             touched: Vec::new(),
             rho_step: config.rho_step_m,
-            phi_step: config.phi_step_deg.to_radians(),
+            phi_step,
+            edges: (0..=n_phi)
+                .map(|ip| {
+                    let a = if ip == n_phi {
+                        std::f64::consts::TAU
+                    } else {
+                        ip as f64 * phi_step
+                    };
+                    let (s, c) = a.sin_cos();
+                    (c, s)
+                })
+                .collect(),
         }
     }
 
@@ -218,7 +298,45 @@ impl Accumulator {
         Some(ir * self.n_phi + ip)
     }
 
-    /// Votes along the arc of one reading.
+    /// The bounds of cell `i` that [`CellRun::holds`] tests, or `None` when the cells are too
+    /// wide for its test (an angular cell of a radian or more).
+    fn cell_run(&self, i: usize) -> Option<CellRun> {
+        if self.phi_step >= 1.0 {
+            return None;
+        }
+        let (ir, ip) = (i / self.n_phi, i % self.n_phi);
+        let (r_lo, r_hi) = (ir as f64 * self.rho_step, (ir + 1) as f64 * self.rho_step);
+        // The last angular cell also takes the angles up to a whole turn (`cell`'s clamp).
+        Some(CellRun {
+            i,
+            r2_lo: r_lo * r_lo * (1.0 + CELL_MARGIN),
+            r2_hi: r_hi * r_hi * (1.0 - CELL_MARGIN),
+            lo: self.edges[ip],
+            hi: self.edges[ip + 1],
+            margin_m: CELL_MARGIN * r_hi,
+            votes: self.votes[i],
+            sum_x: self.sum_x[i],
+            sum_y: self.sum_y[i],
+            sectors: self.sectors[i],
+        })
+    }
+
+    /// Writes a run's sums back to its cell.
+    fn flush(&mut self, run: &CellRun) {
+        let i = run.i;
+        if self.votes[i] == 0 && run.votes > 0 {
+            self.touched.push(i);
+        }
+        self.votes[i] = run.votes;
+        self.sum_x[i] = run.sum_x;
+        self.sum_y[i] = run.sum_y;
+        self.sectors[i] = run.sectors;
+    }
+
+    /// Votes along the arc of one reading. Consecutive samples mostly fall in the same cell, so
+    /// the cell is found afresh ([`Self::cell_fast`]) only where a sample is not clearly inside
+    /// the previous one's, and its sums are held until the arc leaves it (the same additions in
+    /// the same order: the same sums).
     pub fn vote(&mut self, reading: &PlacedReading, half_cone_rad: f64, arc_sample_m: f64) {
         let Some(range) = reading.range_m else { return };
         if !(range.is_finite() && range >= 0.0) {
@@ -233,23 +351,41 @@ impl Accumulator {
         let (a0, da) = (p.theta - half_cone_rad, 2.0 * half_cone_rad / n as f64);
         let (mut s, mut c) = a0.sin_cos();
         let (ds, dc) = da.sin_cos();
+        let mut run: Option<CellRun> = None;
+        // The sector of the last sample (the floor of its `back`, below) and its bit.
+        let (mut sector_floor, mut sector_bit) = (f64::NAN, 0u128);
         for k in 0..=last {
             let a = a0 + da * k as f64;
             let (x, y) = (p.x + range * c, p.y + range * s);
             (s, c) = (s * dc + c * ds, c * dc - s * ds);
-            let Some(i) = self.cell_fast(x, y) else {
-                continue;
-            };
-            if self.votes[i] == 0 {
-                self.touched.push(i);
+            if !run.as_ref().is_some_and(|r| r.holds(x, y)) {
+                if let Some(r) = run.take() {
+                    self.flush(&r);
+                }
+                let Some(i) = self.cell_fast(x, y) else {
+                    continue;
+                };
+                run = self.cell_run(i);
+                if run.is_none() {
+                    // Cells too wide to hold: one sample at a time.
+                    let mut single = CellRun::of(self, i);
+                    single.add(x, y, sector_of(a));
+                    self.flush(&single);
+                    continue;
+                }
             }
-            self.votes[i] += 1;
-            self.sum_x[i] += x as f32;
-            self.sum_y[i] += y as f32;
             // Direction from the voted point back to the sensor.
             let back = (a + std::f64::consts::PI) / std::f64::consts::TAU * SPREAD_SECTORS as f64;
-            let sector = (back.floor() as i64).rem_euclid(SPREAD_SECTORS as i64);
-            self.sectors[i] |= 1u128 << sector;
+            if !(back >= sector_floor && back < sector_floor + 1.0) {
+                sector_floor = back.floor();
+                sector_bit = 1u128 << (sector_floor as i64).rem_euclid(SPREAD_SECTORS as i64);
+            }
+            if let Some(r) = run.as_mut() {
+                r.add(x, y, sector_bit);
+            }
+        }
+        if let Some(r) = run {
+            self.flush(&r);
         }
     }
 
@@ -729,6 +865,62 @@ mod tests {
                 (k as f64 * 0.91).cos() * 12.0,
             );
             assert_eq!(acc.cell_fast(x, y), acc.cell(x, y), "{x} {y}");
+        }
+    }
+
+    #[test]
+    fn an_arcs_votes_are_those_of_its_samples_one_by_one() {
+        // The reference: every sample's cell found exactly and added at once.
+        fn vote_sample_by_sample(acc: &mut Accumulator, r: &PlacedReading, half: f64, step: f64) {
+            let (range, p) = (r.range_m.unwrap(), r.world_from_sensor);
+            let n = ((2.0 * half * range / step).ceil() as usize).max(1);
+            let (a0, da) = (p.theta - half, 2.0 * half / n as f64);
+            let (mut s, mut c) = a0.sin_cos();
+            let (ds, dc) = da.sin_cos();
+            for k in 0..=n {
+                let a = a0 + da * k as f64;
+                let (x, y) = (p.x + range * c, p.y + range * s);
+                (s, c) = (s * dc + c * ds, c * dc - s * ds);
+                let Some(i) = acc.cell(x, y) else { continue };
+                if acc.votes[i] == 0 {
+                    acc.touched.push(i);
+                }
+                acc.votes[i] += 1;
+                acc.sum_x[i] += x as f32;
+                acc.sum_y[i] += y as f32;
+                acc.sectors[i] |= sector_of(a);
+            }
+        }
+        for config in [
+            HoughConfig::default(),
+            HoughConfig {
+                rho_step_m: 0.07,
+                phi_step_deg: 1.3,
+                ..HoughConfig::default()
+            },
+        ] {
+            let (mut fast, mut exact) = (Accumulator::new(&config), Accumulator::new(&config));
+            for k in 0..3000 {
+                let f = k as f64;
+                let r = PlacedReading {
+                    t_s: f,
+                    // Sensors all round the origin (through it too), ranges up to 5 m.
+                    world_from_sensor: Pose2::new(
+                        (f * 0.37).sin() * 9.0,
+                        (f * 0.91).cos() * 9.0,
+                        f * 0.731,
+                    ),
+                    range_m: Some(0.05 + (k % 50) as f64 * 0.1),
+                };
+                fast.vote(&r, 15f64.to_radians(), config.arc_sample_m);
+                vote_sample_by_sample(&mut exact, &r, 15f64.to_radians(), config.arc_sample_m);
+            }
+            assert_eq!(fast.touched, exact.touched);
+            assert_eq!(fast.votes, exact.votes);
+            assert_eq!(fast.sectors, exact.sectors);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fast.sum_x), bits(&exact.sum_x));
+            assert_eq!(bits(&fast.sum_y), bits(&exact.sum_y));
         }
     }
 
