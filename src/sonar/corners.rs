@@ -60,6 +60,7 @@ pub struct LocalWall {
 /// [0, pi), offset from the centre) and the point.
 fn push_tangents(
     r: &PlacedReading,
+    beam: &Beam,
     half_cone_rad: f64,
     centre: (f64, f64),
     out: &mut Vec<Tangent>,
@@ -69,7 +70,7 @@ fn push_tangents(
         return;
     }
     let step = ANGLE_STEP_DEG.to_radians();
-    for cs in steps_between(near_steps(r, range, half_cone_rad, centre)) {
+    for cs in steps_between(near_steps(r, beam, range, half_cone_rad, centre)) {
         let (s, c) = (cs.sin, cs.cos);
         let t = (p.x + range * c, p.y + range * s);
         let (dx, dy) = (t.0 - centre.0, t.1 - centre.1);
@@ -99,13 +100,14 @@ fn push_tangents(
 /// the exact test.
 fn near_steps(
     r: &PlacedReading,
+    beam: &Beam,
     range: f64,
     half_cone_rad: f64,
     centre: (f64, f64),
 ) -> std::ops::RangeInclusive<i64> {
     let step = ANGLE_STEP_DEG.to_radians();
     let p = r.world_from_sensor;
-    let cone = cone_range(p.theta, half_cone_rad);
+    let cone = beam.cone.clone();
     let (dx, dy) = (centre.0 - p.x, centre.1 - p.y);
     let d = (dx * dx + dy * dy).sqrt();
     if (range * d <= 1e-9) || (range * d).is_nan() {
@@ -119,7 +121,7 @@ fn near_steps(
     }
     // The centre's direction seen from the beam's axis (to within 2e-5 rad: the step more each
     // side covers it).
-    let (sin, cos) = p.theta.sin_cos();
+    let (sin, cos) = beam.sin_cos;
     let phi = p.theta + fast_atan2(cos * dy - sin * dx, cos * dx + sin * dy);
     let lo = ((phi - half_window) / step).floor() as i64 - 1;
     let hi = ((phi + half_window) / step).ceil() as i64 + 1;
@@ -163,6 +165,16 @@ pub struct Arcs<'a> {
     reach_m: f64,
     /// Indices of the readings whose sensor lies in each bucket, ascending.
     sensors: HashMap<(i64, i64), Vec<usize>>,
+    /// Each reading's cone and beam direction, worked out once rather than at every peak.
+    beams: Vec<Beam>,
+}
+
+/// What every placement needs of a reading's beam: its cone's whole steps ([`cone_range`]) and
+/// the sine and cosine of its direction.
+#[derive(Debug, Clone)]
+struct Beam {
+    cone: std::ops::RangeInclusive<i64>,
+    sin_cos: (f64, f64),
 }
 
 /// A robot that passed through a wall's line this far beyond a peak on it (metres, along the
@@ -195,12 +207,20 @@ impl<'a> Arcs<'a> {
                 buckets.entry(bucket_of(middle)).or_default().push(i);
             }
         }
+        let beams = readings
+            .iter()
+            .map(|r| Beam {
+                cone: cone_range(r.world_from_sensor.theta, half_cone_rad),
+                sin_cos: r.world_from_sensor.theta.sin_cos(),
+            })
+            .collect();
         Self {
             readings,
             half_cone_rad,
             buckets,
             reach_m,
             sensors,
+            beams,
         }
     }
 
@@ -263,16 +283,15 @@ impl<'a> Arcs<'a> {
     }
 
     /// The tangents of the readings among the first `upto` within [`SEARCH_RADIUS_M`] of
-    /// `centre`, in the readings' order.
-    fn tangents_near(&self, centre: (f64, f64), upto: usize) -> Vec<Tangent> {
-        let mut out = Vec::new();
+    /// `centre`, in the readings' order, into `out` (cleared first).
+    fn tangents_near(&self, centre: (f64, f64), upto: usize, out: &mut Vec<Tangent>) {
+        out.clear();
         for i in self.near(centre, upto) {
             let r = &self.readings[i];
             if may_touch(r, centre) {
-                push_tangents(r, self.half_cone_rad, centre, &mut out);
+                push_tangents(r, &self.beams[i], self.half_cone_rad, centre, out);
             }
         }
-        out
     }
 }
 
@@ -289,7 +308,31 @@ fn may_touch(r: &PlacedReading, centre: (f64, f64)) -> bool {
 
 /// Walls near `centre`, strongest first, from the readings' tangent lines.
 pub fn local_walls(arcs: &Arcs<'_>, centre: (f64, f64)) -> Vec<LocalWall> {
-    walls_from(&arcs.tangents_near(centre, arcs.readings.len()))
+    with_tangents(arcs, centre, arcs.readings.len(), |tangents| {
+        walls_from(tangents)
+    })
+}
+
+thread_local! {
+    /// The tangents of the last placement on this thread: a placement reads thousands, and
+    /// growing a new list each time was a tenth of the tangents' cost.
+    static TANGENTS: std::cell::Cell<Vec<Tangent>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
+/// `f` of the tangents of the first `upto` readings within [`SEARCH_RADIUS_M`] of `centre`
+/// ([`Arcs::tangents_near`]), in this thread's kept list.
+fn with_tangents<T>(
+    arcs: &Arcs<'_>,
+    centre: (f64, f64),
+    upto: usize,
+    f: impl FnOnce(&[Tangent]) -> T,
+) -> T {
+    // Taken out while in use: a nested call would find an empty list and grow its own.
+    let mut tangents = TANGENTS.take();
+    arcs.tangents_near(centre, upto, &mut tangents);
+    let out = f(&tangents);
+    TANGENTS.set(tangents);
+    out
 }
 
 /// The line grid of [`walls_from`] with the offsets summed per cell and the cells voted for, kept
@@ -298,7 +341,11 @@ pub fn local_walls(arcs: &Arcs<'_>, centre: (f64, f64)) -> Vec<LocalWall> {
 struct LocalGrid {
     votes: LineVotes,
     sum_offset: Vec<f64>,
+    /// The cells voted for, in the order first voted for: the first `n_touched` (one slot more
+    /// than the cells, so that a vote writes its cell there before knowing whether it is new,
+    /// without a branch the processor mispredicts half the time).
     touched: Vec<usize>,
+    n_touched: usize,
 }
 
 impl LocalGrid {
@@ -310,16 +357,17 @@ impl LocalGrid {
         Self {
             votes: LineVotes::new(n_angle, n_dist, reach),
             sum_offset: vec![0.0; n_angle * n_dist],
-            touched: Vec::new(),
+            touched: vec![0; n_angle * n_dist + 1],
+            n_touched: 0,
         }
     }
 
     fn clear(&mut self) {
-        for &i in &self.touched {
+        for &i in &self.touched[..self.n_touched] {
             self.votes.counts[i] = 0;
             self.sum_offset[i] = 0.0;
         }
-        self.touched.clear();
+        self.n_touched = 0;
     }
 }
 
@@ -343,9 +391,14 @@ fn walls_on(local: &mut LocalGrid, tangents: &[Tangent]) -> Vec<LocalWall> {
         votes: grid,
         sum_offset,
         touched,
+        n_touched,
     } = local;
     let (n_angle, n_dist, reach) = (grid.n_angle, grid.n_dist, grid.reach_m);
     let step = ANGLE_STEP_DEG.to_radians();
+    // The grid's parts as plain slices and the count in a local, so that the loop keeps them in
+    // registers.
+    let (counts, sums, cells) = (&mut grid.counts[..], &mut sum_offset[..], &mut touched[..]);
+    let mut n = *n_touched;
     for t in tangents {
         // A normal that rounds to 180 degrees is the 0 degree cell, seen from the other side.
         let (ia, offset) = if t.cell >= n_angle {
@@ -355,14 +408,14 @@ fn walls_on(local: &mut LocalGrid, tangents: &[Tangent]) -> Vec<LocalWall> {
         };
         let id = (((offset + reach) / DIST_STEP_M) as usize).min(n_dist - 1);
         let i = ia * n_dist + id;
-        if grid.counts[i] == 0 {
-            touched.push(i);
-        }
-        grid.counts[i] += 1;
-        sum_offset[i] += offset;
+        cells[n] = i;
+        n += usize::from(counts[i] == 0);
+        counts[i] += 1;
+        sums[i] += offset;
     }
+    *n_touched = n;
     let mut walls: Vec<LocalWall> = Vec::new();
-    let mut strongest = Strongest::of_cells(grid, touched, MIN_WALL_VOTES);
+    let mut strongest = Strongest::of_cells(grid, &touched[..*n_touched], MIN_WALL_VOTES);
     while walls.len() < MAX_WALLS {
         // The most votes, the first cell with them on a tie.
         let Some((best, v)) = strongest.next(grid) else {
@@ -544,9 +597,21 @@ pub fn place_peak(
     centre: (f64, f64),
     map: &OccupancyMap,
 ) -> PeakPlace {
-    let tangents = arcs.tangents_near(centre, upto);
-    let walls = walls_from(&tangents);
-    if let Some((x, y)) = corner(&tangents, centre, map, &walls) {
+    with_tangents(arcs, centre, upto, |tangents| {
+        place_among(arcs, upto, centre, map, tangents)
+    })
+}
+
+/// [`place_peak`] with the tangents near the peak found.
+fn place_among(
+    arcs: &Arcs<'_>,
+    upto: usize,
+    centre: (f64, f64),
+    map: &OccupancyMap,
+    tangents: &[Tangent],
+) -> PeakPlace {
+    let walls = walls_from(tangents);
+    if let Some((x, y)) = corner(tangents, centre, map, &walls) {
         return PeakPlace::Corner(x, y);
     }
     let Some(wall) = walls
@@ -565,7 +630,7 @@ pub fn place_peak(
             // echoes' tangent points) just past the peak on the other side only: a doorway the
             // cone painted closed, and the peak is its jamb.
             let dirs = [1.0, -1.0].map(|sign| (-s * sign, c * sign));
-            let seen = dirs.map(|dir| match seen_near(&tangents, wall, foot, dir) {
+            let seen = dirs.map(|dir| match seen_near(tangents, wall, foot, dir) {
                 0 => Some(false),
                 n if n >= JAMB_WALL_POINTS => Some(true),
                 _ => None,
