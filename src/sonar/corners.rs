@@ -18,7 +18,8 @@
 
 use crate::sonar::grid::OccupancyMap;
 use crate::sonar::tangent::{
-    cone_range, fast_atan2, steps_between, LineVotes, Strongest, ANGLE_STEP_DEG, DIST_STEP_M,
+    cone_range, fast_acos, fast_atan2, steps_between, LineVotes, Strongest, ANGLE_STEP_DEG,
+    DIST_STEP_M, FAST_ACOS_ERROR,
 };
 use crate::sonar::PlacedReading;
 use std::collections::HashMap;
@@ -114,7 +115,9 @@ fn near_steps(
         return cone;
     }
     let q = (d * d + range * range - SEARCH_RADIUS_M * SEARCH_RADIUS_M) / (2.0 * range * d);
-    let half_window = q.clamp(-1.0, 1.0).acos();
+    // Any window holding the near steps will do (the exact test follows), so the arccosine
+    // need not be exact: widened by its error, a cheap one serves.
+    let half_window = fast_acos(q.clamp(-1.0, 1.0)) + FAST_ACOS_ERROR;
     // Past half a turn between the cone and the window, the window would wrap: take the cone.
     if half_window + half_cone_rad + 2.0 * step >= std::f64::consts::PI {
         return cone;
