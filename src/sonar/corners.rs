@@ -70,7 +70,6 @@ fn push_tangents(
     if !(range.is_finite() && range >= 0.0) {
         return;
     }
-    let step = ANGLE_STEP_DEG.to_radians();
     for cs in steps_between(near_steps(r, beam, range, half_cone_rad, centre)) {
         let (s, c) = (cs.sin, cs.cos);
         let t = (p.x + range * c, p.y + range * s);
@@ -78,17 +77,11 @@ fn push_tangents(
         if dx * dx + dy * dy > SEARCH_RADIUS_M * SEARCH_RADIUS_M {
             continue;
         }
-        let mut offset = c * (t.0 - centre.0) + s * (t.1 - centre.1);
-        let mut normal = cs.wrapped;
-        if normal >= std::f64::consts::PI {
-            normal -= std::f64::consts::PI;
-            offset = -offset;
-        }
+        let offset = c * (t.0 - centre.0) + s * (t.1 - centre.1);
         out.push(Tangent {
-            normal,
-            // `round` (the normal lies within rounding of a whole step, far from a half).
-            cell: (normal / step + 0.5) as usize,
-            offset,
+            normal: cs.normal,
+            cell: cs.normal_cell,
+            offset: if cs.flipped { -offset } else { offset },
             point: t,
         });
     }

@@ -31,6 +31,12 @@ pub struct ConeStep {
     pub cos: f64,
     /// `a` in [0, 2 pi).
     pub wrapped: f64,
+    /// The normal of the tangent line at `a`, in [0, pi): `wrapped`, less pi past it.
+    pub normal: f64,
+    /// Whether `normal` is `wrapped` less pi (the line's offset then changes sign).
+    pub flipped: bool,
+    /// The nearest whole step to `normal` (180 for a normal just short of pi).
+    pub normal_cell: usize,
 }
 
 /// The accumulator's directions inside the cone of half-width `half_cone_rad` around `beam_rad`,
@@ -60,11 +66,21 @@ pub fn steps_between(ks: std::ops::RangeInclusive<i64>) -> impl Iterator<Item = 
         let a = k as f64 * step;
         let (sin, cos) = a.sin_cos();
         let wrapped = a.rem_euclid(std::f64::consts::TAU);
+        let flipped = wrapped >= std::f64::consts::PI;
+        let normal = if flipped {
+            wrapped - std::f64::consts::PI
+        } else {
+            wrapped
+        };
         ConeStep {
             k,
             sin,
             cos,
             wrapped,
+            normal,
+            flipped,
+            // `round` (the normal lies within rounding of a whole step, far from a half).
+            normal_cell: (normal / step + 0.5) as usize,
         }
     };
     let table = TABLE.get_or_init(|| (-TABLE_STEPS..=TABLE_STEPS).map(at).collect());
