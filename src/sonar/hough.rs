@@ -334,7 +334,7 @@ impl Accumulator {
     }
 
     /// Votes along the arc of one reading. Consecutive samples mostly fall in the same cell, so
-    /// the cell is found afresh ([`Self::cell_fast`]) only where a sample is not clearly inside
+    /// the cell is found afresh (`cell_fast`) only where a sample is not clearly inside
     /// the previous one's, and its sums are held until the arc leaves it (the same additions in
     /// the same order: the same sums).
     pub fn vote(&mut self, reading: &PlacedReading, half_cone_rad: f64, arc_sample_m: f64) {
