@@ -136,11 +136,20 @@ const SPREAD_SECTORS: usize = 72;
 /// the cell's outer radius, far above the rounding of [`Accumulator::cell`]'s own arithmetic.
 const CELL_MARGIN: f64 = 1e-9;
 
-/// The bit of the spread sector a vote at arc direction `a` comes from (the direction from the
-/// voted point back to the sensor).
+/// Where the direction from a vote at arc direction `a` back to the sensor lies, in spread
+/// sectors (unwrapped: its floor, taken modulo [`SPREAD_SECTORS`], is the sector).
+fn sector_position(a: f64) -> f64 {
+    (a + std::f64::consts::PI) / std::f64::consts::TAU * SPREAD_SECTORS as f64
+}
+
+/// The bit of the sector whose unwrapped index is `floor` (a whole number).
+fn sector_bit(floor: f64) -> u128 {
+    1u128 << (floor as i64).rem_euclid(SPREAD_SECTORS as i64)
+}
+
+/// The bit of the spread sector a vote at arc direction `a` comes from.
 fn sector_of(a: f64) -> u128 {
-    let back = (a + std::f64::consts::PI) / std::f64::consts::TAU * SPREAD_SECTORS as f64;
-    1u128 << (back.floor() as i64).rem_euclid(SPREAD_SECTORS as i64)
+    sector_bit(sector_position(a).floor())
 }
 
 /// One accumulator cell while an arc runs through it: its bounds, to tell cheaply whether the
@@ -306,7 +315,6 @@ impl Accumulator {
         }
         let (ir, ip) = (i / self.n_phi, i % self.n_phi);
         let (r_lo, r_hi) = (ir as f64 * self.rho_step, (ir + 1) as f64 * self.rho_step);
-        // The last angular cell also takes the angles up to a whole turn (`cell`'s clamp).
         Some(CellRun {
             i,
             r2_lo: r_lo * r_lo * (1.0 + CELL_MARGIN),
@@ -353,7 +361,7 @@ impl Accumulator {
         let (ds, dc) = da.sin_cos();
         let mut run: Option<CellRun> = None;
         // The sector of the last sample (the floor of its `back`, below) and its bit.
-        let (mut sector_floor, mut sector_bit) = (f64::NAN, 0u128);
+        let (mut sector_floor, mut bit) = (f64::NAN, 0u128);
         for k in 0..=last {
             let a = a0 + da * k as f64;
             let (x, y) = (p.x + range * c, p.y + range * s);
@@ -374,14 +382,15 @@ impl Accumulator {
                     continue;
                 }
             }
-            // Direction from the voted point back to the sensor.
-            let back = (a + std::f64::consts::PI) / std::f64::consts::TAU * SPREAD_SECTORS as f64;
+            // Direction from the voted point back to the sensor: the last sample's sector
+            // while it stays in it.
+            let back = sector_position(a);
             if !(back >= sector_floor && back < sector_floor + 1.0) {
                 sector_floor = back.floor();
-                sector_bit = 1u128 << (sector_floor as i64).rem_euclid(SPREAD_SECTORS as i64);
+                bit = sector_bit(sector_floor);
             }
             if let Some(r) = run.as_mut() {
-                r.add(x, y, sector_bit);
+                r.add(x, y, bit);
             }
         }
         if let Some(r) = run {
