@@ -147,11 +147,6 @@ fn sector_bit(floor: f64) -> u128 {
     1u128 << (floor as i64).rem_euclid(SPREAD_SECTORS as i64)
 }
 
-/// The bit of the spread sector a vote at arc direction `a` comes from.
-fn sector_of(a: f64) -> u128 {
-    sector_bit(sector_position(a).floor())
-}
-
 /// One accumulator cell while an arc runs through it: its bounds, to tell cheaply whether the
 /// next sample lies in it too, and its sums so far.
 #[derive(Debug, Clone, Copy)]
@@ -172,22 +167,6 @@ struct CellRun {
 }
 
 impl CellRun {
-    /// A run over cell `i` with no bounds (holds nothing), its sums as the accumulator has them.
-    fn of(acc: &Accumulator, i: usize) -> Self {
-        Self {
-            i,
-            r2_lo: f64::INFINITY,
-            r2_hi: f64::NEG_INFINITY,
-            lo: (1.0, 0.0),
-            hi: (1.0, 0.0),
-            margin_m: 0.0,
-            votes: acc.votes[i],
-            sum_x: acc.sum_x[i],
-            sum_y: acc.sum_y[i],
-            sectors: acc.sectors[i],
-        }
-    }
-
     /// Whether `(x, y)` lies in the cell by more than the margin: within its radii, and on the
     /// inner side of both angular edges (a cell spans under half a turn).
     fn holds(&self, x: f64, y: f64) -> bool {
@@ -307,18 +286,24 @@ impl Accumulator {
         Some(ir * self.n_phi + ip)
     }
 
-    /// The bounds of cell `i` that [`CellRun::holds`] tests, or `None` when the cells are too
-    /// wide for its test (an angular cell of a radian or more).
-    fn cell_run(&self, i: usize) -> Option<CellRun> {
-        if self.phi_step >= 1.0 {
-            return None;
-        }
+    /// A run over cell `i`, its sums as they stand, with the bounds [`CellRun::holds`] tests.
+    /// Cells too wide for that test (an angular cell of a radian or more) get bounds that hold
+    /// nothing, so each sample is looked up afresh.
+    fn cell_run(&self, i: usize) -> CellRun {
         let (ir, ip) = (i / self.n_phi, i % self.n_phi);
         let (r_lo, r_hi) = (ir as f64 * self.rho_step, (ir + 1) as f64 * self.rho_step);
-        Some(CellRun {
+        let (r2_lo, r2_hi) = if self.phi_step < 1.0 {
+            (
+                r_lo * r_lo * (1.0 + CELL_MARGIN),
+                r_hi * r_hi * (1.0 - CELL_MARGIN),
+            )
+        } else {
+            (f64::INFINITY, f64::NEG_INFINITY)
+        };
+        CellRun {
             i,
-            r2_lo: r_lo * r_lo * (1.0 + CELL_MARGIN),
-            r2_hi: r_hi * r_hi * (1.0 - CELL_MARGIN),
+            r2_lo,
+            r2_hi,
             lo: self.edges[ip],
             hi: self.edges[ip + 1],
             margin_m: CELL_MARGIN * r_hi,
@@ -326,7 +311,7 @@ impl Accumulator {
             sum_x: self.sum_x[i],
             sum_y: self.sum_y[i],
             sectors: self.sectors[i],
-        })
+        }
     }
 
     /// Writes a run's sums back to its cell.
@@ -373,14 +358,7 @@ impl Accumulator {
                 let Some(i) = self.cell_fast(x, y) else {
                     continue;
                 };
-                run = self.cell_run(i);
-                if run.is_none() {
-                    // Cells too wide to hold: one sample at a time.
-                    let mut single = CellRun::of(self, i);
-                    single.add(x, y, sector_of(a));
-                    self.flush(&single);
-                    continue;
-                }
+                run = Some(self.cell_run(i));
             }
             // Direction from the voted point back to the sensor: the last sample's sector
             // while it stays in it.
@@ -897,7 +875,7 @@ mod tests {
                 acc.votes[i] += 1;
                 acc.sum_x[i] += x as f32;
                 acc.sum_y[i] += y as f32;
-                acc.sectors[i] |= sector_of(a);
+                acc.sectors[i] |= sector_bit(sector_position(a).floor());
             }
         }
         for config in [
@@ -905,6 +883,11 @@ mod tests {
             HoughConfig {
                 rho_step_m: 0.07,
                 phi_step_deg: 1.3,
+                ..HoughConfig::default()
+            },
+            // Cells too wide for the run's test: every sample looked up.
+            HoughConfig {
+                phi_step_deg: 90.0,
                 ..HoughConfig::default()
             },
         ] {

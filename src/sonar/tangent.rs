@@ -29,11 +29,10 @@ pub struct ConeStep {
     pub sin: f64,
     /// `cos a`.
     pub cos: f64,
-    /// `a` in [0, 2 pi).
-    pub wrapped: f64,
-    /// The normal of the tangent line at `a`, in [0, pi): `wrapped`, less pi past it.
+    /// The normal of the tangent line at `a`, in [0, pi): `a` wrapped into [0, 2 pi), less pi
+    /// past pi.
     pub normal: f64,
-    /// Whether `normal` is `wrapped` less pi (the line's offset then changes sign).
+    /// Whether `normal` is the wrapped `a` less pi (the line's offset then changes sign).
     pub flipped: bool,
     /// The nearest whole step to `normal` (180 for a normal just short of pi).
     pub normal_cell: usize,
@@ -76,7 +75,6 @@ pub fn steps_between(ks: std::ops::RangeInclusive<i64>) -> impl Iterator<Item = 
             k,
             sin,
             cos,
-            wrapped,
             normal,
             flipped,
             // `round` (the normal lies within rounding of a whole step, far from a half).
